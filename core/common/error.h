@@ -1,0 +1,73 @@
+// Errors as values at module boundaries. The server maps ErrorCode to a gRPC status in one place.
+#pragma once
+
+#include <cassert>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <variant>
+#include <vector>
+
+namespace stevi {
+
+enum class ErrorCode {
+  kInvalidArgument,     // bad input: a field, a file, an image
+  kNotFound,            // a file or an id that does not exist
+  kFailedPrecondition,  // e.g. no calibration, no frame yet
+  kUnavailable,         // a camera or source is down
+  kResourceExhausted,   // too large
+  kOutOfRange,          // end of a finite stream (image sequence, video)
+  kInternal,            // a bug or an unexpected library failure
+};
+
+std::string_view ErrorCodeName(ErrorCode code);
+
+struct Error {
+  ErrorCode code = ErrorCode::kInternal;
+  std::string message;
+
+  // Joins a list of problems ("field: problem") into one message.
+  static Error Invalid(const std::vector<std::string>& problems);
+};
+
+// Either a value or an Error. Small on purpose: C++20 has no std::expected.
+template <typename T>
+class [[nodiscard]] Result {
+ public:
+  Result(T value) : v_(std::move(value)) {}          // NOLINT: implicit by design
+  Result(Error error) : v_(std::move(error)) {}      // NOLINT: implicit by design
+
+  bool ok() const { return v_.index() == 0; }
+  explicit operator bool() const { return ok(); }
+
+  T& value() & { assert(ok()); return std::get<0>(v_); }
+  const T& value() const& { assert(ok()); return std::get<0>(v_); }
+  T&& value() && { assert(ok()); return std::get<0>(std::move(v_)); }
+  T* operator->() { return &value(); }
+  const T* operator->() const { return &value(); }
+  T& operator*() & { return value(); }
+  const T& operator*() const& { return value(); }
+
+  const Error& error() const { assert(!ok()); return std::get<1>(v_); }
+
+ private:
+  std::variant<T, Error> v_;
+};
+
+// A Result with no value: success, or an Error.
+class [[nodiscard]] Status {
+ public:
+  Status() = default;
+  Status(Error error) : error_(std::move(error)) {}  // NOLINT: implicit by design
+  static Status Ok() { return {}; }
+
+  bool ok() const { return !error_.has_value(); }
+  explicit operator bool() const { return ok(); }
+  const Error& error() const { assert(!ok()); return *error_; }
+
+ private:
+  std::optional<Error> error_;
+};
+
+}  // namespace stevi

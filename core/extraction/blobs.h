@@ -1,0 +1,27 @@
+// Connected blobs of a binary mask, with their statistics.
+#pragma once
+
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace stevi::extraction {
+
+struct Blob {
+  int label = 0;            // the blob's value in BlobSet::labels
+  cv::Rect bbox;            // pixels, in the image
+  cv::Point2d centroid_px;
+  int area_px = 0;          // pixel count
+  double perimeter_px = 0;  // length of the outer contour
+};
+
+struct BlobSet {
+  cv::Mat1i labels;  // 0 = background, else the blob's label (labels of dropped blobs are kept)
+  std::vector<Blob> blobs;
+};
+
+// Connected components (8-connectivity) of `mask` (non-zero = foreground) with at least
+// min_area_px pixels.
+BlobSet ExtractBlobs(const cv::Mat1b& mask, int min_area_px);
+
+}  // namespace stevi::extraction

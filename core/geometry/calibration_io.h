@@ -1,0 +1,45 @@
+// Stereo calibration files: OpenCV FileStorage YAML with the keys of DESIGN.md.
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/error.h"
+
+namespace stevi::geometry {
+
+// The contents of a calibration file. M1/M2 are 3x3 camera matrices (pixels), D1/D2 distortion
+// (k1 k2 p1 p2 k3, 1x4..1x14), R and T take points from the left camera to the right camera frame
+// (x_right = R x_left + T), T in metres. The rectification terms are optional: when absent they are
+// computed with Bouguet's method (cv::stereoRectify, alpha 0).
+struct StereoCalibration {
+  cv::Size image_size;
+  cv::Matx33d M1, M2;
+  cv::Mat D1, D2;  // CV_64F, one row
+  cv::Matx33d R;
+  cv::Vec3d T;     // metres
+  std::optional<cv::Matx33d> R1, R2, E, F;
+  std::optional<cv::Matx34d> P1, P2;
+  std::optional<cv::Matx44d> Q;
+
+  // Lists every problem: sizes, non-finite values, a zero baseline, a non-rotation R, ...
+  std::vector<std::string> Validate() const;
+};
+
+// Reads a calibration YAML. A missing or malformed file gives an error naming the file and key.
+Result<StereoCalibration> LoadCalibrationYaml(const std::string& path);
+
+// Parses calibration YAML held in memory (same rules as LoadCalibrationYaml).
+Result<StereoCalibration> ParseCalibrationYaml(const std::string& yaml_text);
+
+// Writes a calibration YAML atomically (temporary file, fsync, rename).
+Status SaveCalibrationYaml(const StereoCalibration& calibration, const std::string& path);
+
+// The calibration of an ideal, already rectified rig: identity R, zero distortion,
+// T = (-baseline_m, 0, 0), both cameras with focal f_px and principal point (cx, cy).
+StereoCalibration IdealCalibration(cv::Size image_size, double f_px, double baseline_m, double cx,
+                                   double cy);
+
+}  // namespace stevi::geometry

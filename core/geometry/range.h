@@ -1,0 +1,47 @@
+// Disparity to depth, 3-D point and range, with the quantisation uncertainty.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace stevi::geometry {
+
+// Which disparities and ranges are trusted.
+struct RangeOptions {
+  // Disparities below this floor (pixels) are not trusted (thesis: 5 px, 3 px on a long baseline).
+  double min_disparity_px = 5.0;
+  // Ranges beyond this (metres) are not trusted. 0 means no limit other than the disparity floor.
+  double max_range_m = 0.0;
+  // 1-sigma disparity error used for range_sigma_m (pixels). Block matching with sub-pixel
+  // interpolation is good to about a quarter pixel on textured surfaces.
+  double disparity_sigma_px = 0.25;
+
+  // Lists every problem ("min_disparity_px: must be > 0", ...).
+  std::vector<std::string> Validate() const;
+};
+
+// Depth along the optical axis, Z = f B / d (metres). d must be > 0.
+double DepthFromDisparity(double disparity_px, double f_px, double baseline_m);
+
+// Disparity of a point at depth Z: d = f B / Z (pixels).
+double DisparityFromDepth(double depth_m, double f_px, double baseline_m);
+
+// Depth uncertainty dZ = Z^2 / (f B) * dd (metres).
+double DepthSigma(double depth_m, double f_px, double baseline_m, double disparity_sigma_px);
+
+// 3-D point in the rectified left camera frame (x right, y down, z forward, metres) of pixel
+// (u, v) with disparity d, through Q. nullopt when the point is at infinity (w == 0).
+std::optional<cv::Vec3d> PointFromDisparity(double u_px, double v_px, double disparity_px,
+                                            const cv::Matx44d& Q);
+
+// Euclidean range from the left camera centre (metres).
+double RangeFromPoint(const cv::Vec3d& point_in_cam);
+
+// True when the disparity passes the floor and its range passes max_range_m.
+bool IsTrustedDisparity(double disparity_px, double f_px, double baseline_m,
+                        const RangeOptions& options);
+
+}  // namespace stevi::geometry

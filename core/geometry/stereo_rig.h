@@ -1,0 +1,64 @@
+// The rectified stereo rig: what every stage after rectification needs to know.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/error.h"
+#include "core/geometry/calibration_io.h"
+
+namespace stevi::geometry {
+
+// Immutable after construction; cheap to copy (the remap tables are shared). Thread-safe.
+class StereoRig {
+ public:
+  // Builds the rig from a calibration: Bouguet rectification (cv::stereoRectify, alpha 0, zero
+  // disparity) unless the file carried R1 R2 P1 P2 Q, then the remap tables
+  // (cv::initUndistortRectifyMap, fixed-point CV_16SC2). A rig that is already rectified
+  // (identity R, zero distortion, T along x) needs no remap and Rectify() only converts to grey.
+  static Result<StereoRig> FromCalibration(const StereoCalibration& calibration,
+                                           std::string calibration_id = "");
+
+  // Loads a calibration YAML and builds the rig; calibration_id defaults to the file name.
+  static Result<StereoRig> FromFile(const std::string& path);
+
+  // An ideal rectified rig (no remap).
+  static StereoRig Ideal(cv::Size image_size, double f_px, double baseline_m, double cx, double cy,
+                         std::string calibration_id = "ideal");
+
+  // Rectified focal length (pixels), baseline (metres, > 0), principal point (pixels).
+  double f_px() const { return f_px_; }
+  double baseline_m() const { return baseline_m_; }
+  double cx() const { return cx_; }
+  double cy() const { return cy_; }
+  cv::Size image_size() const { return image_size_; }
+  // Reprojection matrix: [x y z w]^T = Q [u v d 1]^T, point = (x, y, z) / w, metres, cam frame.
+  const cv::Matx44d& Q() const { return Q_; }
+  const StereoCalibration& calibration() const { return calibration_; }
+  const std::string& calibration_id() const { return calibration_id_; }
+  // True when Rectify() remaps (a raw, unrectified rig).
+  bool needs_remap() const { return maps_ != nullptr; }
+
+  // Rectifies a raw pair into 8-bit grey images of image_size(). Inputs are CV_8UC1 or CV_8UC3
+  // of image_size(); anything else gives kInvalidArgument. Output buffers are reused when they
+  // already have the right size and type.
+  Status Rectify(const cv::Mat& raw_left, const cv::Mat& raw_right, cv::Mat& rect_left,
+                 cv::Mat& rect_right) const;
+
+ private:
+  struct Maps {
+    cv::Mat left_x, left_y, right_x, right_y;
+  };
+  StereoRig() = default;
+
+  StereoCalibration calibration_;
+  std::string calibration_id_;
+  cv::Size image_size_;
+  double f_px_ = 0, baseline_m_ = 0, cx_ = 0, cy_ = 0;
+  cv::Matx44d Q_ = cv::Matx44d::eye();
+  std::shared_ptr<const Maps> maps_;
+};
+
+}  // namespace stevi::geometry

@@ -1,0 +1,48 @@
+// The pipeline's configuration: one options struct per stage, validated as a whole.
+#pragma once
+
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/common/error.h"
+#include "core/detection/canonical.h"
+#include "core/geometry/range.h"
+#include "core/stereo/matcher.h"
+
+namespace stevi::pipeline {
+
+enum class Algorithm { kCanonical, kSteViE, kSteViS };
+
+// "canonical", "stevie", "stevis".
+std::string_view AlgorithmName(Algorithm algorithm);
+std::optional<Algorithm> AlgorithmFromName(std::string_view name);
+
+struct PipelineConfig {
+  Algorithm algorithm = Algorithm::kCanonical;
+  stereo::MatcherOptions matcher;
+  geometry::RangeOptions range;
+  detection::CanonicalOptions canonical;
+
+  // Every problem of every stage, each as "field.path: problem".
+  std::vector<std::string> Validate() const;
+};
+
+// Holds the active configuration. Thread-safe. Readers take an immutable snapshot per frame;
+// Set() validates first and leaves the active config untouched when anything is wrong.
+class ConfigStore {
+ public:
+  explicit ConfigStore(PipelineConfig initial = {});
+  std::shared_ptr<const PipelineConfig> Get() const;
+  // Returns the new snapshot, or kInvalidArgument naming every bad field.
+  Result<std::shared_ptr<const PipelineConfig>> Set(PipelineConfig config);
+
+ private:
+  mutable std::mutex mu_;
+  std::shared_ptr<const PipelineConfig> active_;
+};
+
+}  // namespace stevi::pipeline

@@ -1,0 +1,64 @@
+// Assembles the stages: rectify -> disparity -> extract -> detections.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/error.h"
+#include "core/common/stereo_frame.h"
+#include "core/detection/detection.h"
+#include "core/geometry/stereo_rig.h"
+#include "core/pipeline/config.h"
+#include "core/stereo/disparity.h"
+#include "core/stereo/matcher.h"
+
+namespace stevi::pipeline {
+
+struct StageTiming {
+  std::string stage;  // "rectify", "disparity", "extract", "total"
+  double ms = 0;
+};
+
+// Everything one frame produced. Immutable once published.
+struct FrameResult {
+  uint64_t frame_id = 0;          // the pipeline's own count, from 1
+  int64_t capture_time_ns = 0;
+  int64_t capture_unix_time_ns = 0;
+  int64_t source_index = 0;
+  Algorithm algorithm = Algorithm::kCanonical;
+  std::vector<detection::Detection> detections;
+  stereo::DisparityMap disparity;
+  cv::Mat rectified_left;         // 8-bit grey
+  std::vector<StageTiming> timings;
+  std::shared_ptr<const geometry::StereoRig> rig;  // the rig the frame was processed with
+};
+
+// What one frame is processed with: an immutable config and rig.
+struct Snapshot {
+  std::shared_ptr<const PipelineConfig> config;
+  std::shared_ptr<const geometry::StereoRig> rig;
+};
+
+// Thread-compatible: call Process() from one thread at a time.
+class Pipeline {
+ public:
+  Pipeline();
+  ~Pipeline();
+  Pipeline(const Pipeline&) = delete;
+  Pipeline& operator=(const Pipeline&) = delete;
+
+  // Processes one frame. The frame must match the rig's image size (else kInvalidArgument).
+  // The matcher is rebuilt only when the matcher options change.
+  Result<FrameResult> Process(const StereoFrame& frame, const Snapshot& snapshot);
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+  uint64_t next_frame_id_ = 1;
+};
+
+}  // namespace stevi::pipeline

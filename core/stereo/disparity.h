@@ -1,0 +1,44 @@
+// The disparity map shared by matchers, detectors and the snapshot.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+
+#include <opencv2/core.hpp>
+
+namespace stevi::stereo {
+
+// Fixed-point disparity of the rectified left image: value = disparity_px * kScale.
+// x_right = x_left - d, d >= 0. Any negative value means "no disparity" (unmatched).
+struct DisparityMap {
+  static constexpr int kScale = 16;
+  static constexpr int16_t kInvalid = -1;
+
+  cv::Mat1s fixed;         // CV_16SC1, the left image's size
+  int min_disparity = 0;   // search range used, pixels
+  int num_disparities = 0;
+
+  bool empty() const { return fixed.empty(); }
+  // Disparity in pixels at (x, y), or nullopt when unmatched.
+  std::optional<float> At(int x, int y) const {
+    const int16_t v = fixed(y, x);
+    if (v < 0) return std::nullopt;
+    return static_cast<float>(v) / kScale;
+  }
+};
+
+// Median of the valid disparities (pixels) of `disparity` at the pixels where
+// labels(y, x) == label, inside `box` (the label's bounding box, to keep it cheap).
+// Values below min_disparity_px are not counted as valid. nullopt when there are none.
+// `valid_count`, when given, receives the number of valid disparities used.
+std::optional<double> MedianDisparityInMask(const DisparityMap& disparity, const cv::Mat1i& labels,
+                                            int label, const cv::Rect& box,
+                                            double min_disparity_px, int* valid_count = nullptr);
+
+// 16-bit image of the raw fixed-point disparity (value = d * 16, 0 = unmatched), for PNG output.
+cv::Mat1w ToFixedPoint16U(const DisparityMap& disparity);
+
+// 8-bit colour-mapped picture of the disparity (near = warm), black where unmatched.
+cv::Mat3b ToColour(const DisparityMap& disparity);
+
+}  // namespace stevi::stereo

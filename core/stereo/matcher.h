@@ -1,0 +1,94 @@
+// Stereo matchers: SAD block matching and semi-global matching behind one interface.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/stereo/disparity.h"
+
+namespace stevi::stereo {
+
+// SAD block matching (cv::StereoBM) with every parameter the thesis tunes.
+struct BlockMatchingOptions {
+  // Pre-filter: normalized response (cv::StereoBM::PREFILTER_NORMALIZED_RESPONSE) window, odd, 5..255.
+  int prefilter_size = 9;
+  // Pre-filter output cap, 1..63.
+  int prefilter_cap = 31;
+  // SAD window (block) size in pixels, odd, 5..255.
+  int block_size = 15;
+  // Number of disparities searched, a positive multiple of 16.
+  int num_disparities = 64;
+  // Smallest disparity searched, pixels, >= 0.
+  int min_disparity = 0;
+  // Minimum texture (sum of pre-filtered absolute values) for a match, >= 0.
+  int texture_threshold = 10;
+  // Margin in percent by which the best cost must beat the second best, 0..100.
+  int uniqueness_ratio = 15;
+  // Speckle filter: largest region (pixels) treated as speckle, 0 disables; and the largest
+  // disparity variation within a region (pixels), >= 0.
+  int speckle_window_size = 100;
+  int speckle_range = 32;
+  // Pad the images on the left by num_disparities columns so that the leftmost columns get
+  // disparities too (OpenCV leaves them unmatched otherwise).
+  bool pad_left = true;
+
+  std::vector<std::string> Validate() const;
+};
+
+// Semi-global matching (cv::StereoSGBM).
+struct SemiGlobalOptions {
+  enum class Mode { kSgbm5Path, kFull8Path, kThreeWay, kHH4 };
+
+  // Matched block size, odd, 1..11.
+  int block_size = 5;
+  int num_disparities = 64;  // a positive multiple of 16
+  int min_disparity = 0;     // >= 0
+  // Smoothness penalties; 0 picks OpenCV's usual 8 * cn * block^2 and 32 * cn * block^2.
+  // When given, P2 must be greater than P1.
+  int p1 = 0;
+  int p2 = 0;
+  // Left-right check: maximum allowed difference in pixels, -1 disables.
+  int disp12_max_diff = 1;
+  int prefilter_cap = 63;       // 1..63
+  int uniqueness_ratio = 10;    // 0..100
+  int speckle_window_size = 100;
+  int speckle_range = 2;        // pixels
+  Mode mode = Mode::kThreeWay;
+  bool pad_left = true;
+
+  std::vector<std::string> Validate() const;
+};
+
+enum class MatcherKind { kBlockMatching, kSemiGlobal };
+
+std::string_view MatcherKindName(MatcherKind kind);
+
+struct MatcherOptions {
+  MatcherKind kind = MatcherKind::kBlockMatching;
+  BlockMatchingOptions block_matching;
+  SemiGlobalOptions semi_global;
+
+  // Validates the options of the selected kind only, with field names prefixed
+  // ("block_matching.num_disparities: ...").
+  std::vector<std::string> Validate() const;
+  int num_disparities() const;
+  int min_disparity() const;
+};
+
+// Thread-compatible: one instance per thread (OpenCV matchers keep state between calls).
+class DisparityMatcher {
+ public:
+  virtual ~DisparityMatcher() = default;
+  // Computes the disparity of rectified 8-bit grey images of the same size.
+  virtual DisparityMap Compute(const cv::Mat& left_rect, const cv::Mat& right_rect) = 0;
+  virtual const MatcherOptions& options() const = 0;
+};
+
+// Builds the matcher for valid options (call Validate() first; invalid options are a bug).
+std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options);
+
+}  // namespace stevi::stereo

@@ -1,0 +1,2 @@
+// PLACEHOLDER: being implemented this session.
+#include "drivers/synthetic/synthetic_source.h"

@@ -1,0 +1,90 @@
+// The built-in synthetic rig: renders a rectified stereo pair of a scene, with exact truth.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "drivers/stereo_source.h"
+#include "drivers/synthetic/scene.h"
+
+namespace stevi::drivers {
+
+struct SyntheticOptions {
+  int width = 640;
+  int height = 480;
+  double f_px = 700.0;       // rectified focal length, pixels
+  double baseline_m = 0.6;   // metres
+  double fps = 10.0;         // the scene's clock: frame k is rendered at t = k / fps
+  double noise_sigma = 2.0;  // Gaussian pixel noise, grey levels (0 disables)
+  uint64_t seed = 1;         // seeds the pixel noise (frame k uses seed and k) and the textures
+  Scene scene = DefaultScene();
+
+  std::vector<std::string> Validate() const;
+};
+
+// What was really there in one frame.
+struct ObstacleTruth {
+  int id = 0;                  // stable over the sequence
+  std::string name;            // "tower", "hangar", "drone-1", ...
+  cv::Rect bbox;               // visible pixels in the left image (empty when not visible)
+  int visible_px = 0;          // visible pixel count in the left image
+  cv::Vec3d position_cam_m;    // centre of the face towards the camera, cam frame
+  double depth_m = 0;          // z of that face (fronto-parallel faces: every pixel of it)
+  double range_m = 0;          // |position_cam_m|
+};
+
+struct FrameTruth {
+  int64_t index = 0;
+  double t_s = 0;
+  std::vector<ObstacleTruth> obstacles;  // every obstacle of the scene, visible or not
+  cv::Mat1f disparity_px;   // exact disparity of the left image; 0 for the sky
+  cv::Mat1i object_id;      // per left pixel: obstacle id, 0 = ground, -1 = sky
+};
+
+// Renders frames of the scene. Pure function of (options, index): deterministic.
+class SyntheticRenderer {
+ public:
+  explicit SyntheticRenderer(SyntheticOptions options);
+  ~SyntheticRenderer();
+  SyntheticRenderer(SyntheticRenderer&&) noexcept;
+  SyntheticRenderer& operator=(SyntheticRenderer&&) noexcept;
+
+  const SyntheticOptions& options() const;
+  geometry::StereoRig Rig() const;
+  // Renders frame `index` (rectified grey pair, t_ns = index / fps) and its truth.
+  StereoFrame Render(int64_t index, FrameTruth* truth = nullptr) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// The synthetic source: an endless sequence of rendered frames. The frame's t_ns is the scene time.
+class SyntheticSource : public StereoSource {
+ public:
+  // options must be valid (see OpenSyntheticSource).
+  explicit SyntheticSource(SyntheticOptions options);
+  std::string Describe() const override;
+  std::shared_ptr<const geometry::StereoRig> Rig() const override;
+  Result<StereoFrame> Next() override;
+  double NominalFps() const override;
+
+  // Truth of the frame last returned by Next().
+  const FrameTruth& last_truth() const { return truth_; }
+  const SyntheticRenderer& renderer() const { return renderer_; }
+
+ private:
+  SyntheticRenderer renderer_;
+  std::shared_ptr<const geometry::StereoRig> rig_;
+  FrameTruth truth_;
+  int64_t next_index_ = 0;
+};
+
+// Validates the options (every problem listed) and builds the source.
+Result<std::unique_ptr<SyntheticSource>> OpenSyntheticSource(SyntheticOptions options);
+
+}  // namespace stevi::drivers
