@@ -20,6 +20,9 @@ struct CanonicalOptions {
   double max_width_fraction = 0.8;
   // Morphological opening (square, pixels, odd; 1 disables) to cut thin bridges between blobs.
   int open_size_px = 3;
+  // Neighbouring pixels whose disparities differ by more than this (pixels) belong to different
+  // blobs, so that touching obstacles at different ranges separate. 0 joins every neighbour.
+  double max_disparity_step_px = 1.0;
   // Blobs whose mask has fewer trusted disparities than this fraction are dropped.
   double min_valid_fraction = 0.3;
 

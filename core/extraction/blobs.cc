@@ -1,1 +1,144 @@
-// PLACEHOLDER: being implemented this session.
+#include "core/extraction/blobs.h"
+
+#include <cstdlib>
+#include <numeric>
+#include <vector>
+
+#include <opencv2/imgproc.hpp>
+
+namespace stevi::extraction {
+namespace {
+
+// Length of the outer contour of `label` inside `bbox` of `labels`. Works on the ROI only, padded
+// by one pixel so that contours touching the box's edge are closed like any other.
+double OuterPerimeter(const cv::Mat1i& labels, int label, const cv::Rect& bbox) {
+  cv::Mat1b roi_mask(bbox.height + 2, bbox.width + 2, uchar{0});
+  const cv::Mat1i roi = labels(bbox);
+  for (int y = 0; y < roi.rows; ++y) {
+    const int* src = roi[y];
+    uchar* dst = roi_mask[y + 1] + 1;
+    for (int x = 0; x < roi.cols; ++x) dst[x] = src[x] == label ? 255 : 0;
+  }
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(roi_mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  // One 8-connected component gives one outer contour; take the longest to be safe.
+  double longest = 0;
+  for (const auto& contour : contours) {
+    const double length = contour.size() == 1 ? 0.0 : cv::arcLength(contour, /*closed=*/true);
+    if (length > longest) longest = length;
+  }
+  return longest;
+}
+
+// Union-find over pixel indices, with path halving.
+int Find(std::vector<int>& parent, int i) {
+  while (parent[i] != i) {
+    parent[i] = parent[parent[i]];
+    i = parent[i];
+  }
+  return i;
+}
+
+void Union(std::vector<int>& parent, int a, int b) {
+  a = Find(parent, a);
+  b = Find(parent, b);
+  if (a != b) parent[std::max(a, b)] = std::min(a, b);
+}
+
+}  // namespace
+
+BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity, int max_step,
+                              int min_area_px) {
+  BlobSet set;
+  if (mask.empty()) return set;
+  CV_Assert(disparity.size() == mask.size());
+  const int w = mask.cols, h = mask.rows;
+  std::vector<int> parent(static_cast<size_t>(w) * h);
+  std::iota(parent.begin(), parent.end(), 0);
+  const auto joins = [&](int16_t a, int16_t b) { return std::abs(a - b) <= max_step; };
+  for (int y = 0; y < h; ++y) {
+    const uchar* m = mask[y];
+    const int16_t* d = disparity[y];
+    const uchar* m_up = y > 0 ? mask[y - 1] : nullptr;
+    const int16_t* d_up = y > 0 ? disparity[y - 1] : nullptr;
+    for (int x = 0; x < w; ++x) {
+      if (m[x] == 0) continue;
+      const int i = y * w + x;
+      if (x > 0 && m[x - 1] != 0 && joins(d[x], d[x - 1])) Union(parent, i, i - 1);
+      if (m_up == nullptr) continue;
+      for (int dx = -1; dx <= 1; ++dx) {
+        const int xn = x + dx;
+        if (xn < 0 || xn >= w || m_up[xn] == 0 || !joins(d[x], d_up[xn])) continue;
+        Union(parent, i, i - w + dx);
+      }
+    }
+  }
+  // Consecutive labels from 1, with the statistics of each.
+  set.labels = cv::Mat1i(h, w, 0);
+  std::vector<int> label_of_root(parent.size(), 0);
+  struct Acc {
+    int area = 0, x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+    double sx = 0, sy = 0;
+  };
+  std::vector<Acc> acc(1);
+  for (int y = 0; y < h; ++y) {
+    const uchar* m = mask[y];
+    int* lab = set.labels[y];
+    for (int x = 0; x < w; ++x) {
+      if (m[x] == 0) continue;
+      const int root = Find(parent, y * w + x);
+      int& label = label_of_root[root];
+      if (label == 0) {
+        label = static_cast<int>(acc.size());
+        acc.push_back({0, x, y, x, y, 0, 0});
+      }
+      lab[x] = label;
+      Acc& a = acc[label];
+      ++a.area;
+      a.x0 = std::min(a.x0, x);
+      a.x1 = std::max(a.x1, x);
+      a.y1 = y;
+      a.sx += x;
+      a.sy += y;
+    }
+  }
+  for (int label = 1; label < static_cast<int>(acc.size()); ++label) {
+    const Acc& a = acc[label];
+    if (a.area < min_area_px) continue;
+    Blob blob;
+    blob.label = label;
+    blob.bbox = cv::Rect(a.x0, a.y0, a.x1 - a.x0 + 1, a.y1 - a.y0 + 1);
+    blob.centroid_px = cv::Point2d(a.sx / a.area, a.sy / a.area);
+    blob.area_px = a.area;
+    blob.perimeter_px = OuterPerimeter(set.labels, label, blob.bbox);
+    set.blobs.push_back(blob);
+  }
+  return set;
+}
+
+BlobSet ExtractBlobs(const cv::Mat1b& mask, int min_area_px) {
+  BlobSet set;
+  if (mask.empty()) return set;
+  cv::Mat stats;
+  cv::Mat centroids;
+  cv::Mat labels;
+  const int n =
+      cv::connectedComponentsWithStats(mask, labels, stats, centroids, /*connectivity=*/8, CV_32S);
+  set.labels = labels;
+  for (int label = 1; label < n; ++label) {
+    const int area = stats.at<int>(label, cv::CC_STAT_AREA);
+    if (area < min_area_px) continue;
+    Blob blob;
+    blob.label = label;
+    blob.bbox =
+        cv::Rect(stats.at<int>(label, cv::CC_STAT_LEFT), stats.at<int>(label, cv::CC_STAT_TOP),
+                 stats.at<int>(label, cv::CC_STAT_WIDTH), stats.at<int>(label, cv::CC_STAT_HEIGHT));
+    blob.centroid_px = cv::Point2d(centroids.at<double>(label, 0), centroids.at<double>(label, 1));
+    blob.area_px = area;
+    blob.perimeter_px = OuterPerimeter(set.labels, label, blob.bbox);
+    set.blobs.push_back(blob);
+  }
+  return set;
+}
+
+}  // namespace stevi::extraction

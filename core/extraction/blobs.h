@@ -24,4 +24,10 @@ struct BlobSet {
 // min_area_px pixels.
 BlobSet ExtractBlobs(const cv::Mat1b& mask, int min_area_px);
 
+// Like ExtractBlobs, but two 8-neighbours of `mask` join only when their values in `disparity`
+// (fixed point, CV_16S, the mask's size) differ by at most max_step: surfaces at different ranges
+// that touch in the image come out as separate blobs. Mask pixels must hold valid disparities.
+BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity, int max_step,
+                              int min_area_px);
+
 }  // namespace stevi::extraction

@@ -28,13 +28,17 @@ struct StereoCalibration {
   std::vector<std::string> Validate() const;
 };
 
-// Reads a calibration YAML. A missing or malformed file gives an error naming the file and key.
+// Reads a calibration YAML. A missing file gives kNotFound naming it; unparsable YAML, or missing,
+// malformed or invalid keys, give kInvalidArgument naming the file and every bad key
+// ("M1: expected a 3x3 matrix, got 3x2"). Matrices are !!opencv-matrix nodes or plain row-major
+// lists of numbers; T may be 3x1 or 1x3, D1/D2 1xN or Nx1. The result passes Validate().
 Result<StereoCalibration> LoadCalibrationYaml(const std::string& path);
 
 // Parses calibration YAML held in memory (same rules as LoadCalibrationYaml).
 Result<StereoCalibration> ParseCalibrationYaml(const std::string& yaml_text);
 
-// Writes a calibration YAML atomically (temporary file, fsync, rename).
+// Writes a calibration YAML atomically (a temporary file beside it, fsync, rename, fsync of the
+// folder). An invalid calibration is refused and the file left as it was.
 Status SaveCalibrationYaml(const StereoCalibration& calibration, const std::string& path);
 
 // The calibration of an ideal, already rectified rig: identity R, zero distortion,

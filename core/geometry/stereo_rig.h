@@ -17,11 +17,15 @@ class StereoRig {
   // Builds the rig from a calibration: Bouguet rectification (cv::stereoRectify, alpha 0, zero
   // disparity) unless the file carried R1 R2 P1 P2 Q, then the remap tables
   // (cv::initUndistortRectifyMap, fixed-point CV_16SC2). A rig that is already rectified
-  // (identity R, zero distortion, T along x) needs no remap and Rectify() only converts to grey.
+  // (identity R, zero distortion, T along x, equal square-pixel cameras) needs no remap and
+  // Rectify() only converts to grey. kInvalidArgument lists every problem of the calibration; a
+  // rig whose camera named left sits to the right (T_x > 0) is refused with a message saying to
+  // swap left and right. calibration() then also holds the rectification terms used.
   static Result<StereoRig> FromCalibration(const StereoCalibration& calibration,
                                            std::string calibration_id = "");
 
-  // Loads a calibration YAML and builds the rig; calibration_id defaults to the file name.
+  // Loads a calibration YAML and builds the rig; calibration_id is the file's stem (the name
+  // without folder and extension). A missing file gives kNotFound.
   static Result<StereoRig> FromFile(const std::string& path);
 
   // An ideal rectified rig (no remap).

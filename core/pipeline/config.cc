@@ -1,1 +1,85 @@
-// PLACEHOLDER: being implemented this session.
+#include "core/pipeline/config.h"
+
+#include <cctype>
+#include <string>
+#include <utility>
+
+namespace stevi::pipeline {
+namespace {
+
+void AppendPrefixed(std::vector<std::string>& out, std::string_view prefix,
+                    const std::vector<std::string>& problems) {
+  for (const std::string& p : problems) out.push_back(std::string(prefix) + p);
+}
+
+bool EqualsIgnoreCase(std::string_view a, std::string_view b) {
+  if (a.size() != b.size()) return false;
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (std::tolower(static_cast<unsigned char>(a[i])) !=
+        std::tolower(static_cast<unsigned char>(b[i]))) {
+      return false;
+    }
+  }
+  return true;
+}
+
+constexpr Algorithm kAlgorithms[] = {Algorithm::kCanonical, Algorithm::kSteViE, Algorithm::kSteViS};
+
+}  // namespace
+
+std::string_view AlgorithmName(Algorithm algorithm) {
+  switch (algorithm) {
+    case Algorithm::kCanonical:
+      return "canonical";
+    case Algorithm::kSteViE:
+      return "stevie";
+    case Algorithm::kSteViS:
+      return "stevis";
+  }
+  return "unknown";
+}
+
+std::optional<Algorithm> AlgorithmFromName(std::string_view name) {
+  for (Algorithm a : kAlgorithms) {
+    if (EqualsIgnoreCase(name, AlgorithmName(a))) return a;
+  }
+  return std::nullopt;
+}
+
+std::vector<std::string> PipelineConfig::Validate() const {
+  std::vector<std::string> problems;
+  switch (algorithm) {
+    case Algorithm::kCanonical:
+      break;
+    case Algorithm::kSteViE:
+    case Algorithm::kSteViS:
+      problems.push_back("algorithm: '" + std::string(AlgorithmName(algorithm)) +
+                         "' is not available yet (only canonical)");
+      break;
+    default:
+      problems.push_back("algorithm: unknown value " + std::to_string(static_cast<int>(algorithm)));
+  }
+  AppendPrefixed(problems, "matcher.", matcher.Validate());
+  AppendPrefixed(problems, "range.", range.Validate());
+  AppendPrefixed(problems, "canonical.", canonical.Validate());
+  return problems;
+}
+
+ConfigStore::ConfigStore(PipelineConfig initial)
+    : active_(std::make_shared<const PipelineConfig>(std::move(initial))) {}
+
+std::shared_ptr<const PipelineConfig> ConfigStore::Get() const {
+  std::lock_guard lock(mu_);
+  return active_;
+}
+
+Result<std::shared_ptr<const PipelineConfig>> ConfigStore::Set(PipelineConfig config) {
+  const std::vector<std::string> problems = config.Validate();
+  if (!problems.empty()) return Error::Invalid(problems);
+  auto snapshot = std::make_shared<const PipelineConfig>(std::move(config));
+  std::lock_guard lock(mu_);
+  active_ = snapshot;
+  return snapshot;
+}
+
+}  // namespace stevi::pipeline

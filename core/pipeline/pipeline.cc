@@ -1,1 +1,143 @@
-// PLACEHOLDER: being implemented this session.
+#include "core/pipeline/pipeline.h"
+
+#include <chrono>
+#include <string>
+#include <utility>
+
+#include <opencv2/imgproc.hpp>
+
+#include "core/detection/canonical.h"
+
+namespace stevi::pipeline {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double MsSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+std::string SizeText(const cv::Size& size) {
+  return std::to_string(size.width) + "x" + std::to_string(size.height);
+}
+
+// Converts an already rectified 8-bit image to grey into `out` (reused when it fits).
+// Returns false for types other than CV_8UC1 / CV_8UC3 / CV_8UC4.
+bool ToGrey(const cv::Mat& in, cv::Mat& out) {
+  switch (in.type()) {
+    case CV_8UC1:
+      in.copyTo(out);
+      return true;
+    case CV_8UC3:
+      cv::cvtColor(in, out, cv::COLOR_BGR2GRAY);
+      return true;
+    case CV_8UC4:
+      cv::cvtColor(in, out, cv::COLOR_BGRA2GRAY);
+      return true;
+    default:
+      return false;
+  }
+}
+
+Error Invalid(std::string message) {
+  return Error{ErrorCode::kInvalidArgument, std::move(message)};
+}
+
+}  // namespace
+
+struct Pipeline::State {
+  // The matcher and the options it was built with (rebuilt when they change).
+  std::unique_ptr<stereo::DisparityMatcher> matcher;
+  stereo::MatcherOptions matcher_options;
+  // Rectified right image: only read during Process(), so its buffer is reused frame to frame.
+  // (The rectified left image is published in the FrameResult and gets a fresh buffer.)
+  cv::Mat rect_right;
+};
+
+Pipeline::Pipeline() : state_(std::make_unique<State>()) {}
+Pipeline::~Pipeline() = default;
+
+Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& snapshot) {
+  const Clock::time_point start = Clock::now();
+  if (snapshot.config == nullptr) return Invalid("snapshot.config: is null");
+  if (snapshot.rig == nullptr) return Invalid("snapshot.rig: is null (no calibration)");
+  const PipelineConfig& config = *snapshot.config;
+  const geometry::StereoRig& rig = *snapshot.rig;
+
+  const cv::Size want = rig.image_size();
+  if (frame.left.empty()) return Invalid("frame.left: image is empty");
+  if (frame.right.empty()) return Invalid("frame.right: image is empty");
+  if (frame.left.size() != want || frame.right.size() != want) {
+    return Invalid("frame: left image is " + SizeText(frame.left.size()) + " and right image is " +
+                   SizeText(frame.right.size()) + ", but the rig '" + rig.calibration_id() +
+                   "' expects " + SizeText(want));
+  }
+
+  FrameResult result;
+  result.capture_time_ns = frame.t_ns;
+  result.capture_unix_time_ns = frame.unix_time_ns;
+  result.source_index = frame.index;
+  result.algorithm = config.algorithm;
+  result.rig = snapshot.rig;
+  result.timings.reserve(4);
+
+  // Stage: rectify. The left output is a fresh buffer (published with the result).
+  Clock::time_point t = Clock::now();
+  cv::Mat rect_left;
+  cv::Mat rect_right;  // a view of frame.right or of state_->rect_right; never written to
+  if (frame.rectified) {
+    if (!ToGrey(frame.left, rect_left)) {
+      return Invalid("frame.left: unsupported image type " + cv::typeToString(frame.left.type()) +
+                     " (want CV_8UC1 or CV_8UC3)");
+    }
+    if (frame.right.type() == CV_8UC1) {
+      rect_right = frame.right;  // only read: no copy needed
+    } else if (ToGrey(frame.right, state_->rect_right)) {
+      rect_right = state_->rect_right;
+    } else {
+      return Invalid("frame.right: unsupported image type " + cv::typeToString(frame.right.type()) +
+                     " (want CV_8UC1 or CV_8UC3)");
+    }
+  } else {
+    Status status = rig.Rectify(frame.left, frame.right, rect_left, state_->rect_right);
+    if (!status.ok()) return status.error();
+    rect_right = state_->rect_right;
+  }
+  result.timings.push_back({"rectify", MsSince(t)});
+
+  // Stage: disparity.
+  t = Clock::now();
+  if (state_->matcher == nullptr || !(state_->matcher_options == config.matcher)) {
+    const std::vector<std::string> problems = config.matcher.Validate();
+    if (!problems.empty()) {
+      std::vector<std::string> prefixed;
+      for (const std::string& p : problems) prefixed.push_back("matcher." + p);
+      return Error::Invalid(prefixed);
+    }
+    state_->matcher = stereo::MakeMatcher(config.matcher);
+    state_->matcher_options = config.matcher;
+  }
+  result.disparity = state_->matcher->Compute(rect_left, rect_right);
+  result.timings.push_back({"disparity", MsSince(t)});
+
+  // Stage: extract.
+  t = Clock::now();
+  switch (config.algorithm) {
+    case Algorithm::kCanonical:
+      result.detections =
+          detection::DetectCanonical(result.disparity, rig, config.range, config.canonical);
+      break;
+    case Algorithm::kSteViE:
+    case Algorithm::kSteViS:
+      return Invalid("algorithm: '" + std::string(AlgorithmName(config.algorithm)) +
+                     "' is not available yet (only canonical)");
+  }
+  result.timings.push_back({"extract", MsSince(t)});
+
+  result.rectified_left = std::move(rect_left);
+  result.frame_id = next_frame_id_++;
+  result.timings.push_back({"total", MsSince(start)});
+  return result;
+}
+
+}  // namespace stevi::pipeline

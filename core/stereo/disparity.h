@@ -30,6 +30,8 @@ struct DisparityMap {
 // Median of the valid disparities (pixels) of `disparity` at the pixels where
 // labels(y, x) == label, inside `box` (the label's bounding box, to keep it cheap).
 // Values below min_disparity_px are not counted as valid. nullopt when there are none.
+// Exact on the fixed-point values (a histogram); for an even count, the mean of the two middle
+// values.
 // `valid_count`, when given, receives the number of valid disparities used.
 std::optional<double> MedianDisparityInMask(const DisparityMap& disparity, const cv::Mat1i& labels,
                                             int label, const cv::Rect& box,

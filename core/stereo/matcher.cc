@@ -1,1 +1,237 @@
-// PLACEHOLDER: being implemented this session.
+#include "core/stereo/matcher.h"
+
+#include <algorithm>
+#include <cstdint>
+#include <utility>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+
+namespace stevi::stereo {
+namespace {
+
+// Sane upper bounds: far beyond any rig we fly, small enough that buffers stay bounded.
+constexpr int kMaxNumDisparities = 512;
+constexpr int kMaxMinDisparity = 512;
+constexpr int kMaxSpeckleRange = 1024;
+
+std::string Got(int v) { return " (got " + std::to_string(v) + ")"; }
+
+// Appends the problems of an int field that must lie in [lo, hi] and, when `odd`, be odd.
+void CheckRange(std::vector<std::string>& problems, const char* field, int v, int lo, int hi,
+                bool odd = false) {
+  if (odd && v % 2 == 0) problems.push_back(std::string(field) + ": must be odd" + Got(v));
+  if (v < lo || v > hi) {
+    problems.push_back(std::string(field) + ": must be in " + std::to_string(lo) + ".." +
+                       std::to_string(hi) + Got(v));
+  }
+}
+
+void CheckAtLeast(std::vector<std::string>& problems, const char* field, int v, int lo) {
+  if (v < lo) {
+    problems.push_back(std::string(field) + ": must be >= " + std::to_string(lo) + Got(v));
+  }
+}
+
+void CheckDisparityRange(std::vector<std::string>& problems, int num_disparities,
+                         int min_disparity) {
+  if (num_disparities <= 0 || num_disparities % 16 != 0) {
+    problems.push_back("num_disparities: must be a positive multiple of 16" + Got(num_disparities));
+  } else if (num_disparities > kMaxNumDisparities) {
+    problems.push_back("num_disparities: must be at most " + std::to_string(kMaxNumDisparities) +
+                       Got(num_disparities));
+  }
+  CheckRange(problems, "min_disparity", min_disparity, 0, kMaxMinDisparity);
+}
+
+int AutoP1(int block_size) { return 8 * block_size * block_size; }
+int AutoP2(int block_size) { return 32 * block_size * block_size; }
+
+std::vector<std::string> Prefixed(std::vector<std::string> problems, const std::string& prefix) {
+  for (std::string& p : problems) p = prefix + p;
+  return problems;
+}
+
+int ToOpenCvMode(SemiGlobalOptions::Mode mode) {
+  switch (mode) {
+    case SemiGlobalOptions::Mode::kSgbm5Path: return cv::StereoSGBM::MODE_SGBM;
+    case SemiGlobalOptions::Mode::kFull8Path: return cv::StereoSGBM::MODE_HH;
+    case SemiGlobalOptions::Mode::kThreeWay: return cv::StereoSGBM::MODE_SGBM_3WAY;
+    case SemiGlobalOptions::Mode::kHH4: return cv::StereoSGBM::MODE_HH4;
+  }
+  return cv::StereoSGBM::MODE_SGBM_3WAY;
+}
+
+// Both OpenCV matchers behind one implementation: optional left padding, compute, crop, and
+// normalisation of every unmatched value to DisparityMap::kInvalid.
+class OpenCvMatcher final : public DisparityMatcher {
+ public:
+  OpenCvMatcher(MatcherOptions options, cv::Ptr<cv::StereoMatcher> matcher, int pad_columns,
+                int block_size)
+      : options_(std::move(options)),
+        matcher_(std::move(matcher)),
+        pad_columns_(pad_columns),
+        block_size_(block_size) {}
+
+  DisparityMap Compute(const cv::Mat& left_rect, const cv::Mat& right_rect) override {
+    CV_Assert(left_rect.type() == CV_8UC1 && right_rect.type() == CV_8UC1);
+    CV_Assert(left_rect.size() == right_rect.size());
+
+    DisparityMap out;
+    out.min_disparity = options_.min_disparity();
+    out.num_disparities = options_.num_disparities();
+    if (left_rect.empty()) return out;
+    out.fixed.create(left_rect.size());
+    const int width = left_rect.cols + pad_columns_;
+    if (left_rect.rows < block_size_ || width < block_size_) {
+      out.fixed.setTo(DisparityMap::kInvalid);
+      return out;
+    }
+
+    const cv::Mat* left = &left_rect;
+    const cv::Mat* right = &right_rect;
+    if (pad_columns_ > 0) {
+      // Member buffers: copyMakeBorder reallocates only when the size changes.
+      cv::copyMakeBorder(left_rect, left_padded_, 0, 0, pad_columns_, 0, cv::BORDER_REPLICATE);
+      cv::copyMakeBorder(right_rect, right_padded_, 0, 0, pad_columns_, 0, cv::BORDER_REPLICATE);
+      left = &left_padded_;
+      right = &right_padded_;
+    }
+    matcher_->compute(*left, *right, raw_);
+    CV_Assert(raw_.type() == CV_16SC1 && raw_.size() == left->size());
+
+    // Crop the padding and map every value below the search range (OpenCV's (min - 1) * 16
+    // marker, speckles, negatives) to kInvalid in one pass.
+    const int16_t floor_fixed = static_cast<int16_t>(out.min_disparity * DisparityMap::kScale);
+    for (int y = 0; y < out.fixed.rows; ++y) {
+      const int16_t* src = raw_.ptr<int16_t>(y) + pad_columns_;
+      int16_t* dst = out.fixed.ptr<int16_t>(y);
+      for (int x = 0; x < out.fixed.cols; ++x) {
+        dst[x] = src[x] < floor_fixed ? DisparityMap::kInvalid : src[x];
+      }
+    }
+    return out;
+  }
+
+  const MatcherOptions& options() const override { return options_; }
+
+ private:
+  MatcherOptions options_;
+  cv::Ptr<cv::StereoMatcher> matcher_;
+  int pad_columns_;
+  int block_size_;
+  cv::Mat left_padded_, right_padded_, raw_;
+};
+
+}  // namespace
+
+std::vector<std::string> BlockMatchingOptions::Validate() const {
+  std::vector<std::string> problems;
+  if (prefilter_type != PreFilter::kXSobel && prefilter_type != PreFilter::kNormalizedResponse) {
+    problems.push_back("prefilter_type: unknown value" + Got(static_cast<int>(prefilter_type)));
+  }
+  CheckRange(problems, "prefilter_size", prefilter_size, 5, 255, /*odd=*/true);
+  CheckRange(problems, "prefilter_cap", prefilter_cap, 1, 63);
+  CheckRange(problems, "block_size", block_size, 5, 255, /*odd=*/true);
+  CheckDisparityRange(problems, num_disparities, min_disparity);
+  CheckAtLeast(problems, "texture_threshold", texture_threshold, 0);
+  CheckRange(problems, "uniqueness_ratio", uniqueness_ratio, 0, 100);
+  CheckAtLeast(problems, "speckle_window_size", speckle_window_size, 0);
+  CheckRange(problems, "speckle_range", speckle_range, 0, kMaxSpeckleRange);
+  return problems;
+}
+
+std::vector<std::string> SemiGlobalOptions::Validate() const {
+  std::vector<std::string> problems;
+  CheckRange(problems, "block_size", block_size, 1, 11, /*odd=*/true);
+  CheckDisparityRange(problems, num_disparities, min_disparity);
+  CheckAtLeast(problems, "p1", p1, 0);
+  CheckAtLeast(problems, "p2", p2, 0);
+  if (p1 >= 0 && p2 >= 0 && (p1 != 0 || p2 != 0)) {
+    // Compare the penalties actually used: 0 stands for the automatic value.
+    const int used_p1 = p1 != 0 ? p1 : AutoP1(block_size);
+    const int used_p2 = p2 != 0 ? p2 : AutoP2(block_size);
+    if (used_p2 <= used_p1) {
+      if (p2 == 0) {
+        problems.push_back("p1: must be less than the automatic p2 = 32 * block_size^2 = " +
+                           std::to_string(used_p2) + Got(p1));
+      } else if (p1 == 0) {
+        problems.push_back("p2: must be greater than the automatic p1 = 8 * block_size^2 = " +
+                           std::to_string(used_p1) + Got(p2));
+      } else {
+        problems.push_back("p2: must be greater than p1 (got p1=" + std::to_string(p1) +
+                           ", p2=" + std::to_string(p2) + ")");
+      }
+    }
+  }
+  CheckAtLeast(problems, "disp12_max_diff", disp12_max_diff, -1);
+  CheckRange(problems, "prefilter_cap", prefilter_cap, 1, 63);
+  CheckRange(problems, "uniqueness_ratio", uniqueness_ratio, 0, 100);
+  CheckAtLeast(problems, "speckle_window_size", speckle_window_size, 0);
+  CheckRange(problems, "speckle_range", speckle_range, 0, kMaxSpeckleRange);
+  if (mode != Mode::kSgbm5Path && mode != Mode::kFull8Path && mode != Mode::kThreeWay &&
+      mode != Mode::kHH4) {
+    problems.push_back("mode: unknown value" + Got(static_cast<int>(mode)));
+  }
+  return problems;
+}
+
+std::string_view MatcherKindName(MatcherKind kind) {
+  switch (kind) {
+    case MatcherKind::kBlockMatching: return "block_matching";
+    case MatcherKind::kSemiGlobal: return "semi_global";
+  }
+  return "unknown";
+}
+
+std::vector<std::string> MatcherOptions::Validate() const {
+  switch (kind) {
+    case MatcherKind::kBlockMatching: return Prefixed(block_matching.Validate(), "block_matching.");
+    case MatcherKind::kSemiGlobal: return Prefixed(semi_global.Validate(), "semi_global.");
+  }
+  return {"kind: unknown matcher kind" + Got(static_cast<int>(kind))};
+}
+
+int MatcherOptions::num_disparities() const {
+  return kind == MatcherKind::kSemiGlobal ? semi_global.num_disparities
+                                          : block_matching.num_disparities;
+}
+
+int MatcherOptions::min_disparity() const {
+  return kind == MatcherKind::kSemiGlobal ? semi_global.min_disparity
+                                          : block_matching.min_disparity;
+}
+
+std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options) {
+  CV_Assert(options.Validate().empty());
+  if (options.kind == MatcherKind::kSemiGlobal) {
+    const SemiGlobalOptions& o = options.semi_global;
+    // Grey input: cn = 1 in OpenCV's usual 8 * cn * block^2 and 32 * cn * block^2.
+    const int p1 = o.p1 != 0 ? o.p1 : AutoP1(o.block_size);
+    const int p2 = o.p2 != 0 ? o.p2 : AutoP2(o.block_size);
+    cv::Ptr<cv::StereoSGBM> sgbm = cv::StereoSGBM::create(
+        o.min_disparity, o.num_disparities, o.block_size, p1, p2, o.disp12_max_diff,
+        o.prefilter_cap, o.uniqueness_ratio, o.speckle_window_size, o.speckle_range,
+        ToOpenCvMode(o.mode));
+    const int pad = o.pad_left ? o.min_disparity + o.num_disparities : 0;
+    return std::make_unique<OpenCvMatcher>(options, std::move(sgbm), pad, o.block_size);
+  }
+  const BlockMatchingOptions& o = options.block_matching;
+  cv::Ptr<cv::StereoBM> bm = cv::StereoBM::create(o.num_disparities, o.block_size);
+  bm->setPreFilterType(o.prefilter_type == BlockMatchingOptions::PreFilter::kXSobel
+                           ? cv::StereoBM::PREFILTER_XSOBEL
+                           : cv::StereoBM::PREFILTER_NORMALIZED_RESPONSE);
+  bm->setPreFilterSize(o.prefilter_size);
+  bm->setPreFilterCap(o.prefilter_cap);
+  bm->setMinDisparity(o.min_disparity);
+  bm->setTextureThreshold(o.texture_threshold);
+  bm->setUniquenessRatio(o.uniqueness_ratio);
+  bm->setSpeckleWindowSize(o.speckle_window_size);
+  // cv::StereoBM filters speckles on the fixed-point map: its range is in 1/16 pixel.
+  bm->setSpeckleRange(o.speckle_range * DisparityMap::kScale);
+  // StereoBM's first valid column is min + num - 1 + block / 2: pad that far (plus one).
+  const int pad = o.pad_left ? o.min_disparity + o.num_disparities + o.block_size / 2 : 0;
+  return std::make_unique<OpenCvMatcher>(options, std::move(bm), pad, o.block_size);
+}
+
+}  // namespace stevi::stereo

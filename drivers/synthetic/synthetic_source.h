@@ -56,7 +56,11 @@ class SyntheticRenderer {
   const SyntheticOptions& options() const;
   geometry::StereoRig Rig() const;
   // Renders frame `index` (rectified grey pair, t_ns = index / fps) and its truth.
+  // unix_time_ns is left 0: the capture loop stamps it. Thread-safe (const, no shared state).
   StereoFrame Render(int64_t index, FrameTruth* truth = nullptr) const;
+  // The truth of frame `index` alone (no images): identical to Render's truth, several times
+  // cheaper. For scoring long sequences.
+  FrameTruth Truth(int64_t index) const;
 
  private:
   struct Impl;
@@ -70,6 +74,8 @@ class SyntheticSource : public StereoSource {
   explicit SyntheticSource(SyntheticOptions options);
   std::string Describe() const override;
   std::shared_ptr<const geometry::StereoRig> Rig() const override;
+  // Renders the next frame (never ends). t_ns is the scene time; unix_time_ns is left 0 for the
+  // capture loop to stamp.
   Result<StereoFrame> Next() override;
   double NominalFps() const override;
 

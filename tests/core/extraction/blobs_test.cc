@@ -1,1 +1,106 @@
-// PLACEHOLDER: being written this session.
+#include "core/extraction/blobs.h"
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+namespace stevi::extraction {
+namespace {
+
+// The blob whose bounding box contains `p`, if any.
+std::optional<Blob> BlobAt(const BlobSet& set, cv::Point p) {
+  for (const Blob& b : set.blobs) {
+    if (b.bbox.contains(p)) return b;
+  }
+  return std::nullopt;
+}
+
+TEST(ExtractBlobs, RectanglesHaveExactAreaBoxAndCentroid) {
+  cv::Mat1b mask(120, 200, uchar{0});
+  const cv::Rect a(10, 20, 30, 15);   // 30 x 15
+  const cv::Rect b(100, 50, 41, 27);  // odd sizes
+  mask(a).setTo(255);
+  mask(b).setTo(255);
+
+  const BlobSet set = ExtractBlobs(mask, 1);
+  ASSERT_EQ(set.blobs.size(), 2u);
+  ASSERT_EQ(set.labels.size(), mask.size());
+  for (const cv::Rect& r : {a, b}) {
+    std::optional<Blob> blob = BlobAt(set, r.tl());
+    ASSERT_TRUE(blob.has_value()) << r;
+    EXPECT_EQ(blob->bbox, r);
+    EXPECT_EQ(blob->area_px, r.area());
+    EXPECT_DOUBLE_EQ(blob->centroid_px.x, r.x + (r.width - 1) / 2.0);
+    EXPECT_DOUBLE_EQ(blob->centroid_px.y, r.y + (r.height - 1) / 2.0);
+    // The outer contour through the border pixels' centres: 2 (w - 1) + 2 (h - 1).
+    const double want = 2.0 * (r.width + r.height - 2);
+    EXPECT_NEAR(blob->perimeter_px, want, 0.05 * want) << r;
+    // Every pixel of the rectangle carries the blob's label.
+    EXPECT_EQ(cv::countNonZero(set.labels(r) == blob->label), r.area());
+  }
+}
+
+TEST(ExtractBlobs, DiscHasExactAreaAndCentroid) {
+  cv::Mat1b mask(100, 100, uchar{0});
+  cv::circle(mask, cv::Point(60, 40), 20, cv::Scalar(255), cv::FILLED, cv::LINE_8);
+  const int area = cv::countNonZero(mask);
+
+  const BlobSet set = ExtractBlobs(mask, 1);
+  ASSERT_EQ(set.blobs.size(), 1u);
+  const Blob& blob = set.blobs[0];
+  EXPECT_EQ(blob.area_px, area);
+  EXPECT_EQ(blob.bbox, cv::Rect(40, 20, 41, 41));
+  // A symmetric disc: the centroid is its centre.
+  EXPECT_NEAR(blob.centroid_px.x, 60.0, 1e-9);
+  EXPECT_NEAR(blob.centroid_px.y, 40.0, 1e-9);
+  // The circumference 2 pi r, within the digitisation error of a chain code.
+  EXPECT_NEAR(blob.perimeter_px, 2 * CV_PI * 20, 0.1 * 2 * CV_PI * 20);
+}
+
+TEST(ExtractBlobs, MinAreaDropsSmallBlobsButKeepsTheirLabels) {
+  cv::Mat1b mask(50, 50, uchar{0});
+  mask(cv::Rect(2, 2, 3, 3)).setTo(255);      // 9 px: dropped
+  mask(cv::Rect(20, 20, 10, 10)).setTo(255);  // 100 px: kept
+  const BlobSet set = ExtractBlobs(mask, 10);
+  ASSERT_EQ(set.blobs.size(), 1u);
+  EXPECT_EQ(set.blobs[0].area_px, 100);
+  EXPECT_EQ(set.blobs[0].bbox, cv::Rect(20, 20, 10, 10));
+  // The dropped blob's pixels are still labelled (non-zero, different from the kept blob).
+  const int small_label = set.labels(3, 3);
+  EXPECT_NE(small_label, 0);
+  EXPECT_NE(small_label, set.blobs[0].label);
+
+  // At the threshold itself the blob is kept.
+  EXPECT_EQ(ExtractBlobs(mask, 9).blobs.size(), 2u);
+}
+
+TEST(ExtractBlobs, DiagonallyTouchingSquaresAreOneBlob) {
+  cv::Mat1b mask(40, 40, uchar{0});
+  mask(cv::Rect(5, 5, 10, 10)).setTo(255);
+  mask(cv::Rect(15, 15, 10, 10)).setTo(255);  // touches (14,14) at a corner only
+  const BlobSet set = ExtractBlobs(mask, 1);
+  ASSERT_EQ(set.blobs.size(), 1u);
+  EXPECT_EQ(set.blobs[0].area_px, 200);
+  EXPECT_EQ(set.blobs[0].bbox, cv::Rect(5, 5, 20, 20));
+}
+
+TEST(ExtractBlobs, EmptyMaskGivesNoBlobs) {
+  const BlobSet set = ExtractBlobs(cv::Mat1b(30, 30, uchar{0}), 1);
+  EXPECT_TRUE(set.blobs.empty());
+  EXPECT_EQ(set.labels.size(), cv::Size(30, 30));
+  EXPECT_EQ(cv::countNonZero(set.labels), 0);
+}
+
+TEST(ExtractBlobs, BlobAtTheImageBorderHasAClosedPerimeter) {
+  cv::Mat1b mask(30, 30, uchar{0});
+  mask(cv::Rect(0, 0, 12, 8)).setTo(255);
+  const BlobSet set = ExtractBlobs(mask, 1);
+  ASSERT_EQ(set.blobs.size(), 1u);
+  EXPECT_NEAR(set.blobs[0].perimeter_px, 2.0 * (12 + 8 - 2), 0.05 * 2.0 * (12 + 8 - 2));
+}
+
+}  // namespace
+}  // namespace stevi::extraction

@@ -1,1 +1,222 @@
-// PLACEHOLDER: being written this session.
+#include "core/pipeline/pipeline.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include "core/pipeline/config.h"
+#include "drivers/synthetic/synthetic_source.h"
+
+namespace stevi::pipeline {
+namespace {
+
+double IoU(const cv::Rect& a, const cv::Rect& b) {
+  const double inter = (a & b).area();
+  const double uni = a.area() + b.area() - inter;
+  return uni > 0 ? inter / uni : 0.0;
+}
+
+double TruthMedianDisparity(const drivers::FrameTruth& truth, int id) {
+  std::vector<float> values;
+  for (int y = 0; y < truth.object_id.rows; ++y) {
+    for (int x = 0; x < truth.object_id.cols; ++x) {
+      if (truth.object_id(y, x) == id) values.push_back(truth.disparity_px(y, x));
+    }
+  }
+  if (values.empty()) return 0;
+  auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), mid, values.end());
+  return *mid;
+}
+
+// Checks the depth of every detection matched (IoU >= 0.3) to an isolated obstacle whose truth
+// disparity is at least 8 px; returns how many were checked.
+int ExpectDepthsWithin(const FrameResult& result, const drivers::FrameTruth& truth, double tol,
+                       const std::string& label = "") {
+  const double fb = result.rig->f_px() * result.rig->baseline_m();
+  int checked = 0;
+  for (const drivers::ObstacleTruth& o : truth.obstacles) {
+    if (o.bbox.empty() || o.visible_px < 60) continue;
+    bool touches = false;
+    for (const drivers::ObstacleTruth& other : truth.obstacles) {
+      if (other.id != o.id && !other.bbox.empty() &&
+          ((o.bbox + cv::Size(2, 2) - cv::Point(1, 1)) & other.bbox).area() > 0) {
+        touches = true;
+      }
+    }
+    const double truth_d = TruthMedianDisparity(truth, o.id);
+    if (touches || truth_d < 8.0) continue;
+    for (const detection::Detection& d : result.detections) {
+      if (IoU(d.bbox, o.bbox) < 0.3) continue;
+      const double truth_depth = fb / truth_d;
+      EXPECT_NEAR(d.depth_m, truth_depth, tol * truth_depth)
+          << label << " frame " << truth.index << " " << o.name;
+      ++checked;
+    }
+  }
+  return checked;
+}
+
+double TimingMs(const FrameResult& result, const std::string& stage) {
+  for (const StageTiming& t : result.timings) {
+    if (t.stage == stage) return t.ms;
+  }
+  return -1;
+}
+
+struct Fixture {
+  drivers::SyntheticRenderer renderer{drivers::SyntheticOptions{}};
+  std::shared_ptr<const geometry::StereoRig> rig =
+      std::make_shared<const geometry::StereoRig>(renderer.Rig());
+};
+
+TEST(PipelineProcess, SyntheticFramesGiveDetectionsAndTimings) {
+  Fixture fx;
+  ConfigStore store;
+  Pipeline pipeline;
+  int detections = 0, checked = 0;
+  cv::Mat previous_left;
+  for (int64_t index : {0, 10, 20}) {
+    drivers::FrameTruth truth;
+    const StereoFrame frame = fx.renderer.Render(index, &truth);
+    Result<FrameResult> result = pipeline.Process(frame, Snapshot{store.Get(), fx.rig});
+    ASSERT_TRUE(result.ok()) << result.error().message;
+    EXPECT_EQ(result->frame_id, static_cast<uint64_t>(index / 10 + 1));
+    EXPECT_EQ(result->source_index, frame.index);
+    EXPECT_EQ(result->capture_time_ns, frame.t_ns);
+    EXPECT_EQ(result->algorithm, Algorithm::kCanonical);
+    EXPECT_EQ(result->rig, fx.rig);
+    EXPECT_EQ(result->disparity.fixed.size(), fx.rig->image_size());
+    ASSERT_EQ(result->rectified_left.type(), CV_8UC1);
+    EXPECT_EQ(cv::norm(result->rectified_left, frame.left, cv::NORM_INF), 0.0);
+    // The published image is the pipeline's own copy, not the caller's buffer, and not the
+    // buffer of the previous result.
+    EXPECT_NE(result->rectified_left.data, frame.left.data);
+    EXPECT_NE(result->rectified_left.data, previous_left.data);
+    previous_left = result->rectified_left;
+    std::printf("frame %lld:", static_cast<long long>(index));
+    for (const char* stage : {"rectify", "disparity", "extract", "total"}) {
+      const double ms = TimingMs(*result, stage);
+      EXPECT_GE(ms, 0.0) << stage;
+      std::printf(" %s %.2f ms", stage, ms);
+    }
+    std::printf(", %zu detections\n", result->detections.size());
+    EXPECT_GE(TimingMs(*result, "total"), TimingMs(*result, "disparity"));
+    detections += static_cast<int>(result->detections.size());
+    checked += ExpectDepthsWithin(*result, truth, 0.02);
+  }
+  EXPECT_GT(detections, 0);
+  EXPECT_GT(checked, 0);
+}
+
+TEST(PipelineProcess, WrongSizeIsInvalidArgument) {
+  Fixture fx;
+  ConfigStore store;
+  Pipeline pipeline;
+  StereoFrame frame = fx.renderer.Render(0);
+  cv::resize(frame.left, frame.left, cv::Size(320, 240));
+  Result<FrameResult> result = pipeline.Process(frame, Snapshot{store.Get(), fx.rig});
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(result.error().message.find("320x240"), std::string::npos) << result.error().message;
+  EXPECT_NE(result.error().message.find("640x480"), std::string::npos) << result.error().message;
+  EXPECT_NE(result.error().message.find("left"), std::string::npos) << result.error().message;
+
+  frame.left = cv::Mat();
+  result = pipeline.Process(frame, Snapshot{store.Get(), fx.rig});
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().code, ErrorCode::kInvalidArgument);
+
+  // No rig: refused, not a crash.
+  result = pipeline.Process(fx.renderer.Render(0), Snapshot{store.Get(), nullptr});
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().code, ErrorCode::kInvalidArgument);
+}
+
+TEST(ConfigStoreSet, RejectsABadConfigNamingEveryFieldAndKeepsTheActiveOne) {
+  PipelineConfig initial;
+  initial.canonical.threshold_range_m = 55.0;
+  ConfigStore store(initial);
+  const std::shared_ptr<const PipelineConfig> before = store.Get();
+
+  PipelineConfig bad;
+  bad.matcher.block_matching.num_disparities = 50;  // not a multiple of 16
+  bad.canonical.open_size_px = 2;                   // even
+  bad.range.min_disparity_px = -1;
+  Result<std::shared_ptr<const PipelineConfig>> set = store.Set(bad);
+  ASSERT_FALSE(set.ok());
+  EXPECT_EQ(set.error().code, ErrorCode::kInvalidArgument);
+  for (const char* field : {"matcher.block_matching.num_disparities", "canonical.open_size_px",
+                            "range.min_disparity_px"}) {
+    EXPECT_NE(set.error().message.find(field), std::string::npos)
+        << field << " not in: " << set.error().message;
+  }
+  EXPECT_EQ(store.Get(), before);
+  EXPECT_EQ(store.Get()->canonical.threshold_range_m, 55.0);
+
+  PipelineConfig stevie;
+  stevie.algorithm = Algorithm::kSteViE;
+  set = store.Set(stevie);
+  ASSERT_FALSE(set.ok());
+  EXPECT_NE(set.error().message.find("algorithm: 'stevie' is not available yet"), std::string::npos)
+      << set.error().message;
+
+  PipelineConfig good;
+  good.canonical.threshold_range_m = 70.0;
+  set = store.Set(good);
+  ASSERT_TRUE(set.ok()) << set.error().message;
+  EXPECT_EQ(store.Get(), *set);
+  EXPECT_EQ(store.Get()->canonical.threshold_range_m, 70.0);
+  EXPECT_EQ(before->canonical.threshold_range_m, 55.0);  // the old snapshot is untouched
+}
+
+TEST(PipelineProcess, SwitchingTheMatcherBetweenFramesTakesEffect) {
+  Fixture fx;
+  ConfigStore store;
+  Pipeline pipeline;
+  drivers::FrameTruth truth;
+  const StereoFrame frame = fx.renderer.Render(5, &truth);
+
+  Result<FrameResult> bm = pipeline.Process(frame, Snapshot{store.Get(), fx.rig});
+  ASSERT_TRUE(bm.ok()) << bm.error().message;
+
+  PipelineConfig sgbm_config;
+  sgbm_config.matcher.kind = stereo::MatcherKind::kSemiGlobal;
+  ASSERT_TRUE(store.Set(sgbm_config).ok());
+  Result<FrameResult> sgbm = pipeline.Process(frame, Snapshot{store.Get(), fx.rig});
+  ASSERT_TRUE(sgbm.ok()) << sgbm.error().message;
+
+  // A different matcher gives a different disparity map of the same frame.
+  EXPECT_GT(cv::norm(bm->disparity.fixed, sgbm->disparity.fixed, cv::NORM_L1), 0.0);
+  EXPECT_GT(ExpectDepthsWithin(*bm, truth, 0.02, "BM"), 0);
+  EXPECT_GT(ExpectDepthsWithin(*sgbm, truth, 0.02, "SGBM"), 0);
+
+  // Back to block matching: the same result as the first time (the matcher was rebuilt).
+  ASSERT_TRUE(store.Set(PipelineConfig{}).ok());
+  Result<FrameResult> bm_again = pipeline.Process(frame, Snapshot{store.Get(), fx.rig});
+  ASSERT_TRUE(bm_again.ok());
+  EXPECT_EQ(cv::norm(bm->disparity.fixed, bm_again->disparity.fixed, cv::NORM_INF), 0.0);
+  EXPECT_EQ(bm_again->frame_id, 3u);
+}
+
+TEST(AlgorithmFromName, RoundTripsAndIgnoresCase) {
+  for (Algorithm a : {Algorithm::kCanonical, Algorithm::kSteViE, Algorithm::kSteViS}) {
+    const std::optional<Algorithm> back = AlgorithmFromName(AlgorithmName(a));
+    ASSERT_TRUE(back.has_value()) << AlgorithmName(a);
+    EXPECT_EQ(*back, a);
+  }
+  EXPECT_EQ(AlgorithmFromName("SteViE"), Algorithm::kSteViE);
+  EXPECT_EQ(AlgorithmFromName("CANONICAL"), Algorithm::kCanonical);
+  EXPECT_FALSE(AlgorithmFromName("canon").has_value());
+  EXPECT_FALSE(AlgorithmFromName("").has_value());
+}
+
+}  // namespace
+}  // namespace stevi::pipeline

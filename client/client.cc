@@ -1,0 +1,130 @@
+#include "client/client.h"
+
+#include <algorithm>
+#include <thread>
+
+namespace stevi::client {
+
+std::string StatusCodeName(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::OK: return "OK";
+    case grpc::StatusCode::CANCELLED: return "CANCELLED";
+    case grpc::StatusCode::UNKNOWN: return "UNKNOWN";
+    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
+    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
+    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
+    case grpc::StatusCode::ALREADY_EXISTS: return "ALREADY_EXISTS";
+    case grpc::StatusCode::PERMISSION_DENIED: return "PERMISSION_DENIED";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::FAILED_PRECONDITION: return "FAILED_PRECONDITION";
+    case grpc::StatusCode::ABORTED: return "ABORTED";
+    case grpc::StatusCode::OUT_OF_RANGE: return "OUT_OF_RANGE";
+    case grpc::StatusCode::UNIMPLEMENTED: return "UNIMPLEMENTED";
+    case grpc::StatusCode::INTERNAL: return "INTERNAL";
+    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
+    case grpc::StatusCode::DATA_LOSS: return "DATA_LOSS";
+    case grpc::StatusCode::UNAUTHENTICATED: return "UNAUTHENTICATED";
+    default: return "CODE_" + std::to_string(static_cast<int>(code));
+  }
+}
+
+Client::Client(ClientOptions options) : options_(std::move(options)) {
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(options_.max_message_bytes);
+  args.SetMaxSendMessageSize(options_.max_message_bytes);
+  channel_ = grpc::CreateCustomChannel(options_.address, grpc::InsecureChannelCredentials(), args);
+  stub_ = v1::ObstacleService::NewStub(channel_);
+}
+
+void Client::Prepare(grpc::ClientContext& context) const {
+  context.set_deadline(std::chrono::system_clock::now() + options_.timeout);
+}
+
+grpc::Status Client::GetStatus(v1::GetStatusResponse* response) {
+  grpc::ClientContext context;
+  Prepare(context);
+  return stub_->GetStatus(&context, v1::GetStatusRequest(), response);
+}
+
+grpc::Status Client::GetPipelineConfig(v1::PipelineConfig* response) {
+  grpc::ClientContext context;
+  Prepare(context);
+  return stub_->GetPipelineConfig(&context, v1::GetPipelineConfigRequest(), response);
+}
+
+grpc::Status Client::SetPipelineConfig(const v1::PipelineConfig& update, v1::PipelineConfig* active) {
+  grpc::ClientContext context;
+  Prepare(context);
+  v1::SetPipelineConfigRequest request;
+  *request.mutable_config() = update;
+  return stub_->SetPipelineConfig(&context, request, active);
+}
+
+grpc::Status Client::GetDisparitySnapshot(v1::DisparitySnapshot* response) {
+  grpc::ClientContext context;
+  Prepare(context);
+  return stub_->GetDisparitySnapshot(&context, v1::GetDisparitySnapshotRequest(), response);
+}
+
+grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,
+                                  const StreamOptions& options) {
+  cancelled_ = false;
+  uint64_t received = 0;
+  int failures = 0;
+  auto backoff = std::chrono::milliseconds(200);
+  while (true) {
+    grpc::ClientContext context;
+    {
+      std::lock_guard lock(stream_mu_);
+      if (cancelled_) return grpc::Status::OK;
+      stream_context_ = &context;
+    }
+    // Fail fast when the server cannot be reached within the timeout.
+    bool connected = channel_->WaitForConnected(std::chrono::system_clock::now() + options_.timeout);
+    grpc::Status status;
+    bool stop = false;
+    if (!connected) {
+      status = grpc::Status(grpc::StatusCode::UNAVAILABLE,
+                            "cannot connect to " + options_.address + " within " +
+                                std::to_string(options_.timeout.count()) + " ms");
+    } else {
+      std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader =
+          stub_->StreamTracks(&context, v1::StreamTracksRequest());
+      v1::TrackFrame frame;
+      while (reader->Read(&frame)) {
+        failures = 0;
+        backoff = std::chrono::milliseconds(200);
+        ++received;
+        if (!on_frame(frame) || (options.max_frames > 0 && received >= options.max_frames)) {
+          stop = true;
+          context.TryCancel();
+          break;
+        }
+      }
+      status = reader->Finish();
+    }
+    {
+      std::lock_guard lock(stream_mu_);
+      stream_context_ = nullptr;
+      if (cancelled_) stop = true;
+    }
+    if (stop) return grpc::Status::OK;
+    if (!options.reconnect || status.error_code() != grpc::StatusCode::UNAVAILABLE) {
+      return status.ok() ? grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server ended the stream")
+                         : status;
+    }
+    if (options.max_reconnect_attempts > 0 && ++failures > options.max_reconnect_attempts) {
+      return status;
+    }
+    std::this_thread::sleep_for(backoff);  // reconnect backoff, not synchronisation
+    backoff = std::min(backoff * 2, std::chrono::milliseconds(5000));
+  }
+}
+
+void Client::Cancel() {
+  std::lock_guard lock(stream_mu_);
+  cancelled_ = true;
+  if (stream_context_ != nullptr) stream_context_->TryCancel();
+}
+
+}  // namespace stevi::client

@@ -1,0 +1,68 @@
+// stevi_client: a small C++ client for stevi-server (connect, stream tracks, control calls).
+// Depends on the proto library only.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include <grpcpp/grpcpp.h>
+
+#include "stevi/v1/obstacle_service.grpc.pb.h"
+
+namespace stevi::client {
+
+struct ClientOptions {
+  std::string address = "127.0.0.1:50051";
+  // Deadline of each unary call, and of connecting a stream.
+  std::chrono::milliseconds timeout{5000};
+  int max_message_bytes = 64 << 20;
+};
+
+struct StreamOptions {
+  // Stop after this many frames (0 = until cancelled or the server ends the stream).
+  uint64_t max_frames = 0;
+  // Reconnect with exponential backoff (0.2 s doubling to 5 s) when the stream breaks.
+  bool reconnect = false;
+  // Give up reconnecting after this many failed attempts in a row (0 = never give up).
+  int max_reconnect_attempts = 10;
+};
+
+// Thread-safe, except that one StreamTracks() runs at a time per Client.
+class Client {
+ public:
+  explicit Client(ClientOptions options);
+
+  grpc::Status GetStatus(v1::GetStatusResponse* response);
+  grpc::Status GetPipelineConfig(v1::PipelineConfig* response);
+  // Sends only the fields that are set; the server merges them and returns the active config.
+  grpc::Status SetPipelineConfig(const v1::PipelineConfig& update, v1::PipelineConfig* active);
+  grpc::Status GetDisparitySnapshot(v1::DisparitySnapshot* response);
+
+  // Calls on_frame for every frame until it returns false, max_frames arrived, Cancel() is called,
+  // or the stream fails (and reconnecting, if asked, gives up). Returns OK in the first three cases.
+  grpc::Status StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,
+                            const StreamOptions& options = {});
+  // Ends a running StreamTracks() from another thread.
+  void Cancel();
+
+  const ClientOptions& options() const { return options_; }
+
+ private:
+  void Prepare(grpc::ClientContext& context) const;
+
+  ClientOptions options_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::ObstacleService::Stub> stub_;
+  std::mutex stream_mu_;
+  grpc::ClientContext* stream_context_ = nullptr;
+  std::atomic<bool> cancelled_{false};
+};
+
+// "UNAVAILABLE", "INVALID_ARGUMENT", ...
+std::string StatusCodeName(grpc::StatusCode code);
+
+}  // namespace stevi::client

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Sets up a fresh Debian 12 machine, builds stevi with its tests and benchmarks, and runs every test.
+# Usage: bash deploy/test.sh        (STEVI_BUILD_DIR picks the build folder; default ./build)
+# The reference data is read from $STEVI_DATA_DIR (default ../shared/data); tests that need it
+# skip with a message when it is absent.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+build_dir="${STEVI_BUILD_DIR:-build}"
+jobs="$(nproc)"
+
+bash deploy/install-deps.sh
+cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSTEVI_BUILD_TESTS=ON \
+  -DSTEVI_BUILD_BENCHMARKS=ON -DSTEVI_WERROR=ON
+cmake --build "$build_dir" -j"$jobs"
+ctest --test-dir "$build_dir" --output-on-failure -j"$jobs"

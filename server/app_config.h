@@ -1,0 +1,53 @@
+// Start-up configuration shared by stevi-server and stevi-process: the config file (protobuf text
+// format or JSON of stevi.v1.ServerConfig), command-line flags over it, and what they build.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "core/common/error.h"
+#include "core/pipeline/config.h"
+#include "drivers/stereo_source.h"
+#include "stevi/v1/config.pb.h"
+
+namespace stevi::server {
+
+// Defaults of the server (also documented in config.proto).
+inline constexpr char kDefaultListen[] = "127.0.0.1:50051";
+inline constexpr uint32_t kDefaultQueueFrames = 8;
+inline constexpr uint32_t kDefaultMaxMessageBytes = 16u << 20;
+inline constexpr uint32_t kDefaultMaxStreams = 64;
+inline constexpr double kDefaultFps = 10.0;
+
+// Parsed "--name value" / "--name=value" flags. Flags not in `known` are an error, and so is a
+// flag given twice or without its value. `switches` take no value ("--help").
+struct Flags {
+  std::map<std::string, std::string> values;
+  std::vector<std::string> positional;
+};
+Result<Flags> ParseFlags(int argc, const char* const* argv, const std::set<std::string>& known,
+                         const std::set<std::string>& switches = {});
+
+// Reads a config file: JSON when it starts with '{', else protobuf text format. Errors name the
+// file, the line and the problem. Files over 1 MiB are refused.
+Result<v1::ServerConfig> LoadServerConfig(const std::string& path);
+
+// Applies the source and pipeline flags (--source --left --right --calibration --fps --algorithm
+// --listen) over `config`. Bad values are named.
+Status ApplyFlags(const Flags& flags, v1::ServerConfig& config);
+
+// Cross-field checks before anything is opened: every problem named.
+std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config);
+
+// The pipeline configuration: core defaults, then the config's fields, then validation.
+Result<pipeline::PipelineConfig> BuildPipelineConfig(const v1::PipelineConfig& config);
+
+// Opens the configured source. `loop_images` is what an image source does at its end when the
+// config does not say (the server loops; stevi-process does not).
+Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig& config,
+                                                          bool loop_images);
+
+}  // namespace stevi::server

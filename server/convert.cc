@@ -1,0 +1,274 @@
+#include "server/convert.h"
+
+#include <google/protobuf/util/json_util.h>
+
+#include <opencv2/imgcodecs.hpp>
+
+namespace stevi::server {
+namespace {
+
+using pipeline::Algorithm;
+using stereo::MatcherKind;
+using Mode = stereo::SemiGlobalOptions::Mode;
+
+v1::SemiGlobalMode ToProto(Mode mode) {
+  switch (mode) {
+    case Mode::kSgbm5Path: return v1::SEMI_GLOBAL_MODE_SGBM_5_PATH;
+    case Mode::kFull8Path: return v1::SEMI_GLOBAL_MODE_FULL_8_PATH;
+    case Mode::kThreeWay: return v1::SEMI_GLOBAL_MODE_THREE_WAY;
+    case Mode::kHH4: return v1::SEMI_GLOBAL_MODE_HH4;
+  }
+  return v1::SEMI_GLOBAL_MODE_UNSPECIFIED;
+}
+
+// Copies a proto optional scalar onto a core field when it is set.
+#define STEVI_MERGE(msg, field, target) \
+  do {                                  \
+    if ((msg).has_##field()) (target) = (msg).field(); \
+  } while (false)
+
+}  // namespace
+
+v1::Algorithm ToProto(Algorithm algorithm) {
+  switch (algorithm) {
+    case Algorithm::kCanonical: return v1::ALGORITHM_CANONICAL;
+    case Algorithm::kSteViE: return v1::ALGORITHM_STEVIE;
+    case Algorithm::kSteViS: return v1::ALGORITHM_STEVIS;
+  }
+  return v1::ALGORITHM_UNSPECIFIED;
+}
+
+v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
+  v1::PipelineConfig p;
+  p.set_algorithm(ToProto(c.algorithm));
+
+  v1::MatcherConfig* m = p.mutable_matcher();
+  m->set_kind(c.matcher.kind == MatcherKind::kBlockMatching ? v1::MATCHER_KIND_BLOCK_MATCHING
+                                                             : v1::MATCHER_KIND_SEMI_GLOBAL);
+  const stereo::BlockMatchingOptions& bm = c.matcher.block_matching;
+  v1::BlockMatchingConfig* pbm = m->mutable_block_matching();
+  pbm->set_prefilter_size(bm.prefilter_size);
+  pbm->set_prefilter_cap(bm.prefilter_cap);
+  pbm->set_block_size(bm.block_size);
+  pbm->set_num_disparities(bm.num_disparities);
+  pbm->set_min_disparity(bm.min_disparity);
+  pbm->set_texture_threshold(bm.texture_threshold);
+  pbm->set_uniqueness_ratio(bm.uniqueness_ratio);
+  pbm->set_speckle_window_size(bm.speckle_window_size);
+  pbm->set_speckle_range(bm.speckle_range);
+  pbm->set_pad_left(bm.pad_left);
+
+  const stereo::SemiGlobalOptions& sg = c.matcher.semi_global;
+  v1::SemiGlobalConfig* psg = m->mutable_semi_global();
+  psg->set_block_size(sg.block_size);
+  psg->set_num_disparities(sg.num_disparities);
+  psg->set_min_disparity(sg.min_disparity);
+  psg->set_p1(sg.p1);
+  psg->set_p2(sg.p2);
+  psg->set_disp12_max_diff(sg.disp12_max_diff);
+  psg->set_prefilter_cap(sg.prefilter_cap);
+  psg->set_uniqueness_ratio(sg.uniqueness_ratio);
+  psg->set_speckle_window_size(sg.speckle_window_size);
+  psg->set_speckle_range(sg.speckle_range);
+  psg->set_mode(ToProto(sg.mode));
+  psg->set_pad_left(sg.pad_left);
+
+  v1::RangeConfig* r = p.mutable_range();
+  r->set_min_disparity_px(c.range.min_disparity_px);
+  r->set_max_range_m(c.range.max_range_m);
+  r->set_disparity_sigma_px(c.range.disparity_sigma_px);
+
+  v1::CanonicalConfig* k = p.mutable_canonical();
+  k->set_threshold_range_m(c.canonical.threshold_range_m);
+  k->set_min_area_px(c.canonical.min_area_px);
+  k->set_max_width_fraction(c.canonical.max_width_fraction);
+  k->set_open_size_px(c.canonical.open_size_px);
+  k->set_min_valid_fraction(c.canonical.min_valid_fraction);
+  k->set_max_disparity_step_px(c.canonical.max_disparity_step_px);
+  return p;
+}
+
+std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::PipelineConfig& c) {
+  std::vector<std::string> problems;
+  switch (u.algorithm()) {
+    case v1::ALGORITHM_UNSPECIFIED: break;
+    case v1::ALGORITHM_CANONICAL: c.algorithm = Algorithm::kCanonical; break;
+    case v1::ALGORITHM_STEVIE: c.algorithm = Algorithm::kSteViE; break;
+    case v1::ALGORITHM_STEVIS: c.algorithm = Algorithm::kSteViS; break;
+    default:
+      problems.push_back("algorithm: unknown value " + std::to_string(u.algorithm()));
+  }
+
+  const v1::MatcherConfig& m = u.matcher();
+  switch (m.kind()) {
+    case v1::MATCHER_KIND_UNSPECIFIED: break;
+    case v1::MATCHER_KIND_BLOCK_MATCHING: c.matcher.kind = MatcherKind::kBlockMatching; break;
+    case v1::MATCHER_KIND_SEMI_GLOBAL: c.matcher.kind = MatcherKind::kSemiGlobal; break;
+    default: problems.push_back("matcher.kind: unknown value " + std::to_string(m.kind()));
+  }
+  const v1::BlockMatchingConfig& pbm = m.block_matching();
+  stereo::BlockMatchingOptions& bm = c.matcher.block_matching;
+  STEVI_MERGE(pbm, prefilter_size, bm.prefilter_size);
+  STEVI_MERGE(pbm, prefilter_cap, bm.prefilter_cap);
+  STEVI_MERGE(pbm, block_size, bm.block_size);
+  STEVI_MERGE(pbm, num_disparities, bm.num_disparities);
+  STEVI_MERGE(pbm, min_disparity, bm.min_disparity);
+  STEVI_MERGE(pbm, texture_threshold, bm.texture_threshold);
+  STEVI_MERGE(pbm, uniqueness_ratio, bm.uniqueness_ratio);
+  STEVI_MERGE(pbm, speckle_window_size, bm.speckle_window_size);
+  STEVI_MERGE(pbm, speckle_range, bm.speckle_range);
+  STEVI_MERGE(pbm, pad_left, bm.pad_left);
+
+  const v1::SemiGlobalConfig& psg = m.semi_global();
+  stereo::SemiGlobalOptions& sg = c.matcher.semi_global;
+  STEVI_MERGE(psg, block_size, sg.block_size);
+  STEVI_MERGE(psg, num_disparities, sg.num_disparities);
+  STEVI_MERGE(psg, min_disparity, sg.min_disparity);
+  STEVI_MERGE(psg, p1, sg.p1);
+  STEVI_MERGE(psg, p2, sg.p2);
+  STEVI_MERGE(psg, disp12_max_diff, sg.disp12_max_diff);
+  STEVI_MERGE(psg, prefilter_cap, sg.prefilter_cap);
+  STEVI_MERGE(psg, uniqueness_ratio, sg.uniqueness_ratio);
+  STEVI_MERGE(psg, speckle_window_size, sg.speckle_window_size);
+  STEVI_MERGE(psg, speckle_range, sg.speckle_range);
+  STEVI_MERGE(psg, pad_left, sg.pad_left);
+  switch (psg.mode()) {
+    case v1::SEMI_GLOBAL_MODE_UNSPECIFIED: break;
+    case v1::SEMI_GLOBAL_MODE_SGBM_5_PATH: sg.mode = Mode::kSgbm5Path; break;
+    case v1::SEMI_GLOBAL_MODE_FULL_8_PATH: sg.mode = Mode::kFull8Path; break;
+    case v1::SEMI_GLOBAL_MODE_THREE_WAY: sg.mode = Mode::kThreeWay; break;
+    case v1::SEMI_GLOBAL_MODE_HH4: sg.mode = Mode::kHH4; break;
+    default:
+      problems.push_back("matcher.semi_global.mode: unknown value " + std::to_string(psg.mode()));
+  }
+
+  const v1::RangeConfig& r = u.range();
+  STEVI_MERGE(r, min_disparity_px, c.range.min_disparity_px);
+  STEVI_MERGE(r, max_range_m, c.range.max_range_m);
+  STEVI_MERGE(r, disparity_sigma_px, c.range.disparity_sigma_px);
+
+  const v1::CanonicalConfig& k = u.canonical();
+  STEVI_MERGE(k, threshold_range_m, c.canonical.threshold_range_m);
+  STEVI_MERGE(k, min_area_px, c.canonical.min_area_px);
+  STEVI_MERGE(k, max_width_fraction, c.canonical.max_width_fraction);
+  STEVI_MERGE(k, open_size_px, c.canonical.open_size_px);
+  STEVI_MERGE(k, min_valid_fraction, c.canonical.min_valid_fraction);
+  STEVI_MERGE(k, max_disparity_step_px, c.canonical.max_disparity_step_px);
+  return problems;
+}
+
+#undef STEVI_MERGE
+
+void ToProto(const std::vector<pipeline::StageTiming>& timings,
+             google::protobuf::RepeatedPtrField<v1::StageTiming>* out) {
+  out->Clear();
+  for (const pipeline::StageTiming& t : timings) {
+    v1::StageTiming* pt = out->Add();
+    pt->set_stage(t.stage);
+    pt->set_ms(t.ms);
+  }
+}
+
+namespace {
+void SetBox(const cv::Rect& r, v1::BoundingBox* box) {
+  box->set_x(r.x);
+  box->set_y(r.y);
+  box->set_width(r.width);
+  box->set_height(r.height);
+}
+void SetPoint(const cv::Vec3d& p, v1::PointCam* point) {
+  point->set_x_m(p[0]);
+  point->set_y_m(p[1]);
+  point->set_z_m(p[2]);
+}
+}  // namespace
+
+v1::TruthFrame ToTruthFrame(const drivers::FrameTruth& truth, int64_t capture_time_ns) {
+  v1::TruthFrame f;
+  f.set_source_index(truth.index);
+  f.set_capture_time_ns(capture_time_ns);
+  for (const drivers::ObstacleTruth& o : truth.obstacles) {
+    v1::TruthObstacle* t = f.add_obstacles();
+    t->set_id(o.id);
+    t->set_name(o.name);
+    if (o.visible_px > 0) SetBox(o.bbox, t->mutable_bbox());
+    t->set_visible_px(o.visible_px);
+    SetPoint(o.position_cam_m, t->mutable_position_cam());
+    t->set_depth_m(o.depth_m);
+    t->set_range_m(o.range_m);
+  }
+  return f;
+}
+
+std::string ToJsonLine(const google::protobuf::Message& message) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.preserve_proto_field_names = true;
+  options.always_print_primitive_fields = true;
+  std::string out;
+  if (!google::protobuf::util::MessageToJsonString(message, &out, options).ok()) return "{}";
+  return out;
+}
+
+v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
+  v1::TrackFrame f;
+  f.set_frame_id(result.frame_id);
+  f.set_capture_time_ns(result.capture_time_ns);
+  f.set_capture_unix_time_ns(result.capture_unix_time_ns);
+  f.set_source_index(result.source_index);
+  f.set_algorithm(ToProto(result.algorithm));
+  if (result.rig) f.set_calibration_id(result.rig->calibration_id());
+  ToProto(result.timings, f.mutable_timings());
+  uint64_t id = 1;
+  for (const detection::Detection& d : result.detections) {
+    v1::Track* t = f.add_tracks();
+    t->set_track_id(id++);
+    SetBox(d.bbox, t->mutable_bbox());
+    t->set_depth_m(d.depth_m);
+    t->set_range_m(d.range_m);
+    t->set_range_sigma_m(d.range_sigma_m);
+    SetPoint(d.position_cam_m, t->mutable_position_cam());
+    t->set_disparity_px(d.disparity_px);
+    t->set_score(d.score);
+    t->set_extractor(d.extractor);
+    t->set_area_px(d.area_px);
+  }
+  return f;
+}
+
+Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result) {
+  v1::DisparitySnapshot s;
+  s.set_frame_id(result.frame_id);
+  s.set_capture_time_ns(result.capture_time_ns);
+  s.set_width(result.disparity.fixed.cols);
+  s.set_height(result.disparity.fixed.rows);
+  s.set_disparity_scale(stereo::DisparityMap::kScale);
+  s.set_min_disparity(result.disparity.min_disparity);
+  s.set_num_disparities(result.disparity.num_disparities);
+
+  std::vector<uchar> png;
+  const auto encode = [&](const cv::Mat& image, std::string* out) {
+    png.clear();
+    if (image.empty() || !cv::imencode(".png", image, png)) return false;
+    out->assign(png.begin(), png.end());
+    return true;
+  };
+  if (!encode(stereo::ToFixedPoint16U(result.disparity), s.mutable_disparity_png16()) ||
+      !encode(stereo::ToColour(result.disparity), s.mutable_disparity_colour_png()) ||
+      !encode(result.rectified_left, s.mutable_left_png())) {
+    return Error{ErrorCode::kInternal, "snapshot: PNG encoding failed"};
+  }
+  if (result.rig) {
+    const geometry::StereoRig& rig = *result.rig;
+    s.set_f_px(rig.f_px());
+    s.set_baseline_m(rig.baseline_m());
+    s.set_cx(rig.cx());
+    s.set_cy(rig.cy());
+    s.set_calibration_id(rig.calibration_id());
+    for (int i = 0; i < 4; ++i) {
+      for (int j = 0; j < 4; ++j) s.add_q(rig.Q()(i, j));
+    }
+  }
+  return s;
+}
+
+}  // namespace stevi::server

@@ -1,0 +1,42 @@
+// The one conversion file between core types and the stevi.v1 protos.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/pipeline/config.h"
+#include "core/pipeline/pipeline.h"
+#include "drivers/synthetic/synthetic_source.h"
+#include "stevi/v1/config.pb.h"
+#include "stevi/v1/obstacle_service.pb.h"
+#include "stevi/v1/truth.pb.h"
+
+namespace stevi::server {
+
+// Every field of the core config, filled.
+v1::PipelineConfig ToProto(const pipeline::PipelineConfig& config);
+
+// Overlays the fields that are set in `update` onto `config`. Returns the problems that the proto
+// itself carries (an enum value out of range, a negative count), each naming the field; `config`
+// is then partly updated and must be discarded. Range checks are left to PipelineConfig::Validate.
+std::vector<std::string> MergeFromProto(const v1::PipelineConfig& update,
+                                        pipeline::PipelineConfig& config);
+
+v1::Algorithm ToProto(pipeline::Algorithm algorithm);
+
+// The frame as it goes out to subscribers (detections as per-frame tracks until tracking lands).
+v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result);
+
+// PNG images and the rig's geometry. Fails (kInternal) only when PNG encoding fails.
+Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result);
+
+// The synthetic source's truth for one frame.
+v1::TruthFrame ToTruthFrame(const drivers::FrameTruth& truth, int64_t capture_time_ns);
+
+// One line of JSON with the proto field names (the format of every tool that prints tracks).
+std::string ToJsonLine(const google::protobuf::Message& message);
+
+void ToProto(const std::vector<pipeline::StageTiming>& timings,
+             google::protobuf::RepeatedPtrField<v1::StageTiming>* out);
+
+}  // namespace stevi::server

@@ -1,0 +1,194 @@
+#include "server/engine.h"
+
+#include <algorithm>
+#include <chrono>
+#include <map>
+
+namespace stevi::server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr size_t kRateWindow = 30;    // frames over which fps and mean timings are taken
+constexpr auto kRetryFirst = std::chrono::milliseconds(200);
+constexpr auto kRetryMax = std::chrono::seconds(5);
+
+void PushBounded(std::deque<Clock::time_point>& times, Clock::time_point t) {
+  times.push_back(t);
+  while (times.size() > kRateWindow) times.pop_front();
+}
+
+// Frames per second over the window; 0 when fewer than two frames or none for 2 s.
+double Rate(const std::deque<Clock::time_point>& times) {
+  if (times.size() < 2 || Clock::now() - times.back() > std::chrono::seconds(2)) return 0;
+  const double span_s = std::chrono::duration<double>(times.back() - times.front()).count();
+  return span_s > 0 ? static_cast<double>(times.size() - 1) / span_s : 0;
+}
+
+int64_t UnixNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+}  // namespace
+
+std::string_view SourceStateName(SourceState state) {
+  switch (state) {
+    case SourceState::kStarting: return "starting";
+    case SourceState::kRunning: return "running";
+    case SourceState::kDown: return "down";
+    case SourceState::kEnded: return "ended";
+  }
+  return "unknown";
+}
+
+Result<std::unique_ptr<Engine>> Engine::Create(std::unique_ptr<drivers::StereoSource> source,
+                                               pipeline::PipelineConfig config, Sink sink) {
+  if (source == nullptr) return Error{ErrorCode::kInternal, "engine: no source"};
+  if (std::vector<std::string> problems = config.Validate(); !problems.empty()) {
+    return Error::Invalid(problems);
+  }
+  return std::unique_ptr<Engine>(new Engine(std::move(source), std::move(config), std::move(sink)));
+}
+
+Engine::Engine(std::unique_ptr<drivers::StereoSource> source, pipeline::PipelineConfig config,
+               Sink sink)
+    : source_(std::move(source)),
+      source_description_(source_->Describe()),
+      rig_(source_->Rig()),
+      config_(std::move(config)),
+      sink_(std::move(sink)),
+      started_(Clock::now()) {}
+
+Engine::~Engine() { Stop(); }
+
+void Engine::Start() {
+  std::lock_guard lock(mu_);
+  if (started_threads_ || stopping_) return;
+  started_threads_ = true;
+  capture_thread_ = std::thread([this] { CaptureLoop(); });
+  pipeline_thread_ = std::thread([this] { PipelineLoop(); });
+}
+
+void Engine::Stop() {
+  {
+    std::lock_guard lock(mu_);
+    stopping_ = true;
+  }
+  stop_cv_.notify_all();
+  mailbox_.Close();
+  if (capture_thread_.joinable()) capture_thread_.join();
+  if (pipeline_thread_.joinable()) pipeline_thread_.join();
+}
+
+bool Engine::WaitUntil(Clock::time_point deadline) {
+  std::unique_lock lock(mu_);
+  stop_cv_.wait_until(lock, deadline, [&] { return stopping_; });
+  return !stopping_;
+}
+
+void Engine::SetSourceState(SourceState state, std::string error) {
+  std::lock_guard lock(mu_);
+  source_state_ = state;
+  source_error_ = std::move(error);
+}
+
+void Engine::CaptureLoop() {
+  const double fps = source_->NominalFps();
+  const auto period = fps > 0 ? std::chrono::duration_cast<Clock::duration>(
+                                    std::chrono::duration<double>(1.0 / fps))
+                              : Clock::duration::zero();
+  auto next_tick = Clock::now();
+  auto retry = std::chrono::duration_cast<Clock::duration>(kRetryFirst);
+  while (WaitUntil(next_tick)) {
+    Result<StereoFrame> frame = source_->Next();
+    const auto now = Clock::now();
+    if (!frame.ok()) {
+      if (frame.error().code == ErrorCode::kOutOfRange) {
+        SetSourceState(SourceState::kEnded, frame.error().message);
+        return;
+      }
+      SetSourceState(SourceState::kDown, frame.error().message);
+      next_tick = now + retry;
+      retry = std::min<Clock::duration>(retry * 2, kRetryMax);
+      continue;
+    }
+    retry = std::chrono::duration_cast<Clock::duration>(kRetryFirst);
+    if (frame->unix_time_ns == 0) frame->unix_time_ns = UnixNowNs();
+    {
+      std::lock_guard lock(mu_);
+      source_state_ = SourceState::kRunning;
+      source_error_.clear();
+      ++frames_captured_;
+      PushBounded(capture_times_, now);
+    }
+    mailbox_.Put(std::move(frame).value());
+    // Pace; when the source itself is slower than the period, do not try to catch up.
+    next_tick = std::max(next_tick + period, now);
+  }
+}
+
+void Engine::PipelineLoop() {
+  while (std::optional<StereoFrame> frame = mailbox_.Take()) {
+    pipeline::Snapshot snapshot{config_.Get(), rig_};
+    Result<pipeline::FrameResult> result = pipeline_.Process(*frame, snapshot);
+    const auto now = Clock::now();
+    if (!result.ok()) {
+      std::lock_guard lock(mu_);
+      ++frames_failed_;
+      source_error_ = "pipeline: " + result.error().message;
+      continue;
+    }
+    auto shared = std::make_shared<const pipeline::FrameResult>(std::move(result).value());
+    {
+      std::lock_guard lock(mu_);
+      ++frames_processed_;
+      PushBounded(process_times_, now);
+      recent_timings_.push_back(shared->timings);
+      while (recent_timings_.size() > kRateWindow) recent_timings_.pop_front();
+      latest_ = shared;
+    }
+    if (sink_) sink_(shared);
+  }
+}
+
+std::shared_ptr<const pipeline::FrameResult> Engine::Latest() const {
+  std::lock_guard lock(mu_);
+  return latest_;
+}
+
+EngineStatus Engine::Status() const {
+  EngineStatus s;
+  s.source = source_description_;
+  s.frames_dropped_capture = mailbox_.dropped();
+  const std::shared_ptr<const pipeline::PipelineConfig> config = config_.Get();
+  s.algorithm = config->algorithm;
+  s.calibration_id = rig_ ? rig_->calibration_id() : "";
+  s.uptime_s = std::chrono::duration<double>(Clock::now() - started_).count();
+  std::lock_guard lock(mu_);
+  s.source_state = source_state_;
+  s.source_error = source_error_;
+  s.fps_in = Rate(capture_times_);
+  s.fps_out = Rate(process_times_);
+  s.frames_captured = frames_captured_;
+  s.frames_processed = frames_processed_;
+  s.frames_failed = frames_failed_;
+  // Mean per stage, in the order the stages first appear.
+  std::vector<std::string> order;
+  std::map<std::string, std::pair<double, int>> sums;
+  for (const auto& timings : recent_timings_) {
+    for (const pipeline::StageTiming& t : timings) {
+      auto [it, inserted] = sums.try_emplace(t.stage, 0.0, 0);
+      if (inserted) order.push_back(t.stage);
+      it->second.first += t.ms;
+      it->second.second += 1;
+    }
+  }
+  for (const std::string& stage : order) {
+    const auto& [sum, n] = sums[stage];
+    s.mean_timings.push_back({stage, sum / n});
+  }
+  return s;
+}
+
+}  // namespace stevi::server

@@ -1,0 +1,100 @@
+// Runs a source through the pipeline live: a capture thread, a one-slot latest-wins mailbox and a
+// pipeline thread that hands every result to a sink. No gRPC here.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/common/error.h"
+#include "core/common/mailbox.h"
+#include "core/pipeline/config.h"
+#include "core/pipeline/pipeline.h"
+#include "drivers/stereo_source.h"
+
+namespace stevi::server {
+
+enum class SourceState { kStarting, kRunning, kDown, kEnded };
+
+struct EngineStatus {
+  SourceState source_state = SourceState::kStarting;
+  std::string source;        // the source's description
+  std::string source_error;  // the last error while DOWN (or why it ENDED)
+  double fps_in = 0;         // recent capture rate
+  double fps_out = 0;        // recent processing rate
+  uint64_t frames_captured = 0;
+  uint64_t frames_processed = 0;
+  uint64_t frames_failed = 0;
+  uint64_t frames_dropped_capture = 0;   // replaced in the mailbox before the pipeline took them
+  std::vector<pipeline::StageTiming> mean_timings;  // over the last frames
+  pipeline::Algorithm algorithm = pipeline::Algorithm::kCanonical;
+  std::string calibration_id;
+  double uptime_s = 0;
+};
+
+// Thread-safe. Start() launches the threads; Stop() (also run by the destructor) joins them.
+class Engine {
+ public:
+  using Sink = std::function<void(const std::shared_ptr<const pipeline::FrameResult>&)>;
+
+  // Validates `config` (kInvalidArgument naming every bad field). `sink` runs on the pipeline thread
+  // for every processed frame, in order.
+  static Result<std::unique_ptr<Engine>> Create(std::unique_ptr<drivers::StereoSource> source,
+                                                pipeline::PipelineConfig config, Sink sink);
+  ~Engine();
+  Engine(const Engine&) = delete;
+  Engine& operator=(const Engine&) = delete;
+
+  void Start();
+  // Stops capture, lets the frame in progress finish, joins the threads. Idempotent.
+  void Stop();
+
+  pipeline::ConfigStore& config() { return config_; }
+  // The latest processed frame, or nullptr before the first.
+  std::shared_ptr<const pipeline::FrameResult> Latest() const;
+  EngineStatus Status() const;
+
+ private:
+  Engine(std::unique_ptr<drivers::StereoSource> source, pipeline::PipelineConfig config, Sink sink);
+  void CaptureLoop();
+  void PipelineLoop();
+  // Waits until `deadline` or Stop(); false when stopping.
+  bool WaitUntil(std::chrono::steady_clock::time_point deadline);
+  void SetSourceState(SourceState state, std::string error);
+
+  std::unique_ptr<drivers::StereoSource> source_;
+  const std::string source_description_;
+  std::shared_ptr<const geometry::StereoRig> rig_;
+  pipeline::ConfigStore config_;
+  Sink sink_;
+  LatestMailbox<StereoFrame> mailbox_;
+  pipeline::Pipeline pipeline_;
+  const std::chrono::steady_clock::time_point started_;
+
+  mutable std::mutex mu_;  // guards everything below
+  std::condition_variable stop_cv_;
+  bool stopping_ = false;
+  bool started_threads_ = false;
+  SourceState source_state_ = SourceState::kStarting;
+  std::string source_error_;
+  uint64_t frames_captured_ = 0;
+  uint64_t frames_processed_ = 0;
+  uint64_t frames_failed_ = 0;
+  std::deque<std::chrono::steady_clock::time_point> capture_times_, process_times_;
+  std::deque<std::vector<pipeline::StageTiming>> recent_timings_;
+  std::shared_ptr<const pipeline::FrameResult> latest_;
+
+  std::thread capture_thread_;
+  std::thread pipeline_thread_;
+};
+
+std::string_view SourceStateName(SourceState state);
+
+}  // namespace stevi::server

@@ -1,0 +1,69 @@
+#include "server/server.h"
+
+#include <chrono>
+
+#include "server/app_config.h"
+#include "server/convert.h"
+
+namespace stevi::server {
+
+Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
+  std::vector<std::string> problems = ValidateServerConfig(config);
+  Result<pipeline::PipelineConfig> pipeline_config = BuildPipelineConfig(config.pipeline());
+  if (!pipeline_config.ok()) problems.push_back(pipeline_config.error().message);
+  if (!problems.empty()) return Error::Invalid(problems);
+
+  Result<std::unique_ptr<drivers::StereoSource>> source =
+      OpenSource(config.source(), /*loop_images=*/true);
+  if (!source.ok()) return source.error();
+
+  std::unique_ptr<Server> server(new Server());
+  server->listen_ = config.has_listen() ? config.listen() : kDefaultListen;
+  const uint32_t queue =
+      config.has_subscriber_queue_frames() ? config.subscriber_queue_frames() : kDefaultQueueFrames;
+  const uint32_t max_streams = config.has_max_streams() ? config.max_streams() : kDefaultMaxStreams;
+  server->broadcaster_ = std::make_unique<FrameBroadcaster>(queue, max_streams);
+
+  FrameBroadcaster* broadcaster = server->broadcaster_.get();
+  Result<std::unique_ptr<Engine>> engine = Engine::Create(
+      std::move(source).value(), std::move(pipeline_config).value(),
+      [broadcaster](const std::shared_ptr<const pipeline::FrameResult>& result) {
+        // Converted once per frame, shared by every subscriber.
+        broadcaster->Publish(std::make_shared<const v1::TrackFrame>(ToTrackFrame(*result)));
+      });
+  if (!engine.ok()) return engine.error();
+  server->engine_ = std::move(engine).value();
+  server->service_ = std::make_unique<ObstacleServiceImpl>(*server->engine_, *broadcaster);
+
+  const int max_message =
+      static_cast<int>(config.has_max_message_bytes() ? config.max_message_bytes()
+                                                      : kDefaultMaxMessageBytes);
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(server->listen_, grpc::InsecureServerCredentials(), &server->port_);
+  builder.RegisterService(server->service_.get());
+  builder.SetMaxReceiveMessageSize(max_message);
+  builder.SetMaxSendMessageSize(max_message);
+  server->grpc_server_ = builder.BuildAndStart();
+  if (server->grpc_server_ == nullptr || server->port_ == 0) {
+    return Error{ErrorCode::kUnavailable,
+                 "cannot listen on " + server->listen_ + " (address in use or not local?)"};
+  }
+  server->engine_->Start();
+  return server;
+}
+
+Server::~Server() { Shutdown(); }
+
+void Server::Shutdown() {
+  if (shut_down_) return;
+  shut_down_ = true;
+  // End the streams first so that Shutdown() does not wait on them, then stop accepting.
+  if (broadcaster_) broadcaster_->Close();
+  if (grpc_server_) {
+    grpc_server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
+    grpc_server_->Wait();
+  }
+  if (engine_) engine_->Stop();
+}
+
+}  // namespace stevi::server

@@ -1,0 +1,43 @@
+// stevi-server's body: source, engine, broadcaster and the gRPC server, started and stopped in
+// order. main() only parses flags and waits for a signal.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "core/common/error.h"
+#include "server/engine.h"
+#include "server/service.h"
+#include "stevi/v1/config.pb.h"
+
+namespace stevi::server {
+
+class Server {
+ public:
+  // Validates the whole config (every problem named) before opening the source or the socket,
+  // then opens the source, starts the engine and listens.
+  static Result<std::unique_ptr<Server>> Start(const v1::ServerConfig& config);
+  ~Server();
+
+  // The port actually bound (useful with "127.0.0.1:0").
+  int port() const { return port_; }
+  const std::string& listen_address() const { return listen_; }
+  Engine& engine() { return *engine_; }
+
+  // Graceful shutdown: stop accepting, end every stream with a final status, stop the source and
+  // the pipeline. Idempotent.
+  void Shutdown();
+
+ private:
+  Server() = default;
+
+  std::string listen_;
+  int port_ = 0;
+  std::unique_ptr<FrameBroadcaster> broadcaster_;
+  std::unique_ptr<Engine> engine_;
+  std::unique_ptr<ObstacleServiceImpl> service_;
+  std::unique_ptr<grpc::Server> grpc_server_;
+  bool shut_down_ = false;
+};
+
+}  // namespace stevi::server

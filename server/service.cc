@@ -1,0 +1,203 @@
+#include "server/service.h"
+
+#include <utility>
+
+#include "server/convert.h"
+#include "server/grpc_status.h"
+
+namespace stevi::server {
+namespace {
+
+v1::SourceState ToProto(SourceState state) {
+  switch (state) {
+    case SourceState::kStarting: return v1::SOURCE_STATE_STARTING;
+    case SourceState::kRunning: return v1::SOURCE_STATE_RUNNING;
+    case SourceState::kDown: return v1::SOURCE_STATE_DOWN;
+    case SourceState::kEnded: return v1::SOURCE_STATE_ENDED;
+  }
+  return v1::SOURCE_STATE_UNSPECIFIED;
+}
+
+// One StreamTracks call: writes the subscriber's queue, one write in flight at a time.
+// Lifetime: deleted in OnDone(), after detaching from the subscription.
+class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame> {
+ public:
+  TrackStreamReactor(FrameBroadcaster& broadcaster, std::shared_ptr<Subscription<FramePtr>> sub)
+      : broadcaster_(broadcaster), sub_(std::move(sub)) {
+    if (sub_ == nullptr) {
+      finished_ = true;
+      Finish(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                          "too many StreamTracks subscribers (see max_streams)"));
+      return;
+    }
+    sub_->SetNotify([this] { WriteNext(); });
+    WriteNext();
+  }
+
+  void OnWriteDone(bool ok) override {
+    {
+      std::lock_guard lock(mu_);
+      writing_ = false;
+      if (!ok) {
+        FinishLocked(grpc::Status(grpc::StatusCode::UNAVAILABLE, "stream write failed"));
+        return;
+      }
+    }
+    WriteNext();
+  }
+
+  void OnCancel() override {
+    std::lock_guard lock(mu_);
+    cancelled_ = true;
+    if (!writing_) FinishLocked(grpc::Status::CANCELLED);
+  }
+
+  void OnDone() override {
+    if (sub_ != nullptr) {
+      sub_->Detach();
+      broadcaster_.Unsubscribe(sub_->id());
+    }
+    delete this;
+  }
+
+ private:
+  // Starts the next write when idle: from the constructor, from OnWriteDone and from the
+  // subscription's notify (on the broadcaster's thread). Never two at once (see Subscription).
+  void WriteNext() {
+    std::lock_guard lock(mu_);
+    if (finished_ || writing_) return;
+    if (cancelled_) {
+      FinishLocked(grpc::Status::CANCELLED);
+      return;
+    }
+    Subscription<FramePtr>::Popped popped = sub_->Pop();
+    switch (popped.state) {
+      case Subscription<FramePtr>::PopState::kEmpty:
+        return;  // notified at the next frame
+      case Subscription<FramePtr>::PopState::kEnded:
+        FinishLocked(grpc::Status(grpc::StatusCode::UNAVAILABLE, "server shutting down"));
+        return;
+      case Subscription<FramePtr>::PopState::kItem:
+        current_ = **popped.item;
+        current_.set_dropped_frames(popped.dropped);
+        writing_ = true;
+        StartWrite(&current_);
+        return;
+    }
+  }
+
+  void FinishLocked(const grpc::Status& status) {
+    if (finished_) return;
+    finished_ = true;
+    Finish(status);
+  }
+
+  FrameBroadcaster& broadcaster_;
+  std::shared_ptr<Subscription<FramePtr>> sub_;
+  std::mutex mu_;
+  bool writing_ = false;
+  bool finished_ = false;
+  bool cancelled_ = false;
+  v1::TrackFrame current_;
+};
+
+grpc::ServerUnaryReactor* Reply(grpc::CallbackServerContext* context, const grpc::Status& status) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  reactor->Finish(status);
+  return reactor;
+}
+
+}  // namespace
+
+grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadcaster,
+                           v1::GetStatusResponse* response) {
+  const EngineStatus s = engine.Status();
+  response->set_source_state(ToProto(s.source_state));
+  response->set_source(s.source);
+  response->set_source_error(s.source_error);
+  response->set_fps_in(s.fps_in);
+  response->set_fps_out(s.fps_out);
+  response->set_frames_captured(s.frames_captured);
+  response->set_frames_processed(s.frames_processed);
+  response->set_frames_failed(s.frames_failed);
+  response->set_frames_dropped_capture(s.frames_dropped_capture);
+  ToProto(s.mean_timings, response->mutable_timings());
+  response->set_algorithm(ToProto(s.algorithm));
+  response->set_calibration_id(s.calibration_id);
+  response->set_uptime_s(s.uptime_s);
+  for (const auto& sub : broadcaster.Stats()) {
+    v1::SubscriberStatus* out = response->add_subscribers();
+    out->set_subscriber_id(sub.id);
+    out->set_peer(sub.peer);
+    out->set_frames_sent(sub.sent);
+    out->set_frames_dropped(sub.dropped);
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status GetPipelineConfigImpl(Engine& engine, v1::PipelineConfig* response) {
+  *response = ToProto(*engine.config().Get());
+  return grpc::Status::OK;
+}
+
+grpc::Status SetPipelineConfigImpl(Engine& engine, std::mutex& mu,
+                                   const v1::SetPipelineConfigRequest& request,
+                                   v1::PipelineConfig* response) {
+  std::lock_guard lock(mu);
+  pipeline::PipelineConfig updated = *engine.config().Get();
+  if (std::vector<std::string> problems = MergeFromProto(request.config(), updated);
+      !problems.empty()) {
+    return ToGrpcStatus(Error::Invalid(problems));
+  }
+  Result<std::shared_ptr<const pipeline::PipelineConfig>> active =
+      engine.config().Set(std::move(updated));
+  if (!active.ok()) return ToGrpcStatus(active.error());
+  *response = ToProto(**active);
+  return grpc::Status::OK;
+}
+
+grpc::Status GetDisparitySnapshotImpl(const Engine& engine, v1::DisparitySnapshot* response) {
+  const EngineStatus status = engine.Status();
+  if (status.source_state == SourceState::kDown) {
+    return ToGrpcStatus(Error{ErrorCode::kUnavailable, "source is down: " + status.source_error});
+  }
+  std::shared_ptr<const pipeline::FrameResult> latest = engine.Latest();
+  if (latest == nullptr) {
+    return ToGrpcStatus(Error{ErrorCode::kFailedPrecondition, "no frame has been processed yet"});
+  }
+  Result<v1::DisparitySnapshot> snapshot = ToSnapshot(*latest);
+  if (!snapshot.ok()) return ToGrpcStatus(snapshot.error());
+  *response = std::move(snapshot).value();
+  return grpc::Status::OK;
+}
+
+grpc::ServerWriteReactor<v1::TrackFrame>* ObstacleServiceImpl::StreamTracks(
+    grpc::CallbackServerContext* context, const v1::StreamTracksRequest* /*request*/) {
+  return new TrackStreamReactor(broadcaster_, broadcaster_.Subscribe(context->peer()));
+}
+
+grpc::ServerUnaryReactor* ObstacleServiceImpl::GetStatus(grpc::CallbackServerContext* context,
+                                                         const v1::GetStatusRequest* /*request*/,
+                                                         v1::GetStatusResponse* response) {
+  return Reply(context, GetStatusImpl(engine_, broadcaster_, response));
+}
+
+grpc::ServerUnaryReactor* ObstacleServiceImpl::GetPipelineConfig(
+    grpc::CallbackServerContext* context, const v1::GetPipelineConfigRequest* /*request*/,
+    v1::PipelineConfig* response) {
+  return Reply(context, GetPipelineConfigImpl(engine_, response));
+}
+
+grpc::ServerUnaryReactor* ObstacleServiceImpl::SetPipelineConfig(
+    grpc::CallbackServerContext* context, const v1::SetPipelineConfigRequest* request,
+    v1::PipelineConfig* response) {
+  return Reply(context, SetPipelineConfigImpl(engine_, config_mu_, *request, response));
+}
+
+grpc::ServerUnaryReactor* ObstacleServiceImpl::GetDisparitySnapshot(
+    grpc::CallbackServerContext* context, const v1::GetDisparitySnapshotRequest* /*request*/,
+    v1::DisparitySnapshot* response) {
+  return Reply(context, GetDisparitySnapshotImpl(engine_, response));
+}
+
+}  // namespace stevi::server

@@ -1,0 +1,54 @@
+// The ObstacleService: thin gRPC adapters over the engine. Each unary RPC's logic is a plain
+// function of (engine, request, response), testable without a channel.
+#pragma once
+
+#include <memory>
+#include <mutex>
+
+#include <grpcpp/grpcpp.h>
+
+#include "server/broadcaster.h"
+#include "server/engine.h"
+#include "stevi/v1/obstacle_service.grpc.pb.h"
+
+namespace stevi::server {
+
+using FramePtr = std::shared_ptr<const v1::TrackFrame>;
+using FrameBroadcaster = Broadcaster<FramePtr>;
+
+grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadcaster,
+                           v1::GetStatusResponse* response);
+grpc::Status GetPipelineConfigImpl(Engine& engine, v1::PipelineConfig* response);
+// Merges, validates, swaps in. Serialised by `mu` so that concurrent updates do not lose fields.
+grpc::Status SetPipelineConfigImpl(Engine& engine, std::mutex& mu,
+                                   const v1::SetPipelineConfigRequest& request,
+                                   v1::PipelineConfig* response);
+grpc::Status GetDisparitySnapshotImpl(const Engine& engine, v1::DisparitySnapshot* response);
+
+class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
+ public:
+  ObstacleServiceImpl(Engine& engine, FrameBroadcaster& broadcaster)
+      : engine_(engine), broadcaster_(broadcaster) {}
+
+  grpc::ServerWriteReactor<v1::TrackFrame>* StreamTracks(
+      grpc::CallbackServerContext* context, const v1::StreamTracksRequest* request) override;
+  grpc::ServerUnaryReactor* GetStatus(grpc::CallbackServerContext* context,
+                                      const v1::GetStatusRequest* request,
+                                      v1::GetStatusResponse* response) override;
+  grpc::ServerUnaryReactor* GetPipelineConfig(grpc::CallbackServerContext* context,
+                                              const v1::GetPipelineConfigRequest* request,
+                                              v1::PipelineConfig* response) override;
+  grpc::ServerUnaryReactor* SetPipelineConfig(grpc::CallbackServerContext* context,
+                                              const v1::SetPipelineConfigRequest* request,
+                                              v1::PipelineConfig* response) override;
+  grpc::ServerUnaryReactor* GetDisparitySnapshot(grpc::CallbackServerContext* context,
+                                                 const v1::GetDisparitySnapshotRequest* request,
+                                                 v1::DisparitySnapshot* response) override;
+
+ private:
+  Engine& engine_;
+  FrameBroadcaster& broadcaster_;
+  std::mutex config_mu_;
+};
+
+}  // namespace stevi::server

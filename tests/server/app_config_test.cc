@@ -1,0 +1,141 @@
+#include "server/app_config.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "tests/testing/data.h"
+
+namespace stevi::server {
+namespace {
+
+using ::testing::AllOf;
+using ::testing::HasSubstr;
+
+std::string WriteFile(const std::string& name, const std::string& text) {
+  const std::string path = testing::MakeTempDir("stevi-config") + "/" + name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+Result<Flags> Parse(std::vector<const char*> args) {
+  args.insert(args.begin(), "prog");
+  return ParseFlags(static_cast<int>(args.size()), args.data(),
+                    {"listen", "source", "left", "right", "calibration", "fps", "algorithm"},
+                    {"help"});
+}
+
+TEST(LoadServerConfig, ReadsTextFormat) {
+  const std::string path = WriteFile("server.textproto", R"(
+    listen: "127.0.0.1:6000"
+    source { kind: SOURCE_KIND_SYNTHETIC fps: 25 synthetic { baseline_m: 0.8 } }
+    pipeline { canonical { threshold_range_m: 55 } matcher { kind: MATCHER_KIND_SEMI_GLOBAL } }
+  )");
+  Result<v1::ServerConfig> config = LoadServerConfig(path);
+  ASSERT_TRUE(config.ok()) << config.error().message;
+  EXPECT_EQ(config->listen(), "127.0.0.1:6000");
+  EXPECT_DOUBLE_EQ(config->source().synthetic().baseline_m(), 0.8);
+  Result<pipeline::PipelineConfig> pipeline = BuildPipelineConfig(config->pipeline());
+  ASSERT_TRUE(pipeline.ok()) << pipeline.error().message;
+  EXPECT_DOUBLE_EQ(pipeline->canonical.threshold_range_m, 55);
+  EXPECT_EQ(pipeline->matcher.kind, stereo::MatcherKind::kSemiGlobal);
+  EXPECT_EQ(pipeline->canonical.min_area_px, detection::CanonicalOptions().min_area_px);
+}
+
+TEST(LoadServerConfig, ReadsJson) {
+  const std::string path = WriteFile(
+      "server.json", R"({"listen": "127.0.0.1:6001", "pipeline": {"algorithm": "ALGORITHM_CANONICAL"}})");
+  Result<v1::ServerConfig> config = LoadServerConfig(path);
+  ASSERT_TRUE(config.ok()) << config.error().message;
+  EXPECT_EQ(config->listen(), "127.0.0.1:6001");
+}
+
+TEST(LoadServerConfig, NamesTheFileLineAndProblem) {
+  const std::string path = WriteFile("bad.textproto", "listen: \"x:1\"\nsource { speed: 3 }\n");
+  Result<v1::ServerConfig> config = LoadServerConfig(path);
+  ASSERT_FALSE(config.ok());
+  EXPECT_EQ(config.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(config.error().message, AllOf(HasSubstr(path), HasSubstr("line 2"), HasSubstr("speed")));
+
+  Result<v1::ServerConfig> json = LoadServerConfig(WriteFile("bad.json", "{\"listen\": 5,"));
+  ASSERT_FALSE(json.ok());
+  EXPECT_THAT(json.error().message, HasSubstr("JSON"));
+
+  Result<v1::ServerConfig> missing = LoadServerConfig("/nonexistent/stevi.textproto");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.error().code, ErrorCode::kNotFound);
+  EXPECT_THAT(missing.error().message, HasSubstr("/nonexistent/stevi.textproto"));
+}
+
+TEST(BuildPipelineConfig, NamesEveryBadField) {
+  v1::PipelineConfig config;
+  config.mutable_matcher()->mutable_block_matching()->set_num_disparities(50);
+  config.mutable_canonical()->set_threshold_range_m(-1);
+  config.mutable_range()->set_min_disparity_px(0);
+  Result<pipeline::PipelineConfig> built = BuildPipelineConfig(config);
+  ASSERT_FALSE(built.ok());
+  EXPECT_THAT(built.error().message,
+              AllOf(HasSubstr("pipeline.matcher.block_matching.num_disparities"),
+                    HasSubstr("pipeline.canonical.threshold_range_m"),
+                    HasSubstr("pipeline.range.min_disparity_px")));
+}
+
+TEST(ParseFlags, AcceptsBothSpellingsAndRejectsTheUnknown) {
+  Result<Flags> flags = Parse({"--listen", "127.0.0.1:7", "--fps=12.5", "--help"});
+  ASSERT_TRUE(flags.ok()) << flags.error().message;
+  EXPECT_EQ(flags->values.at("listen"), "127.0.0.1:7");
+  EXPECT_EQ(flags->values.at("fps"), "12.5");
+  EXPECT_EQ(flags->values.at("help"), "true");
+
+  EXPECT_THAT(Parse({"--bogus", "1"}).error().message, HasSubstr("--bogus"));
+  EXPECT_THAT(Parse({"--listen"}).error().message, HasSubstr("needs a value"));
+  EXPECT_THAT(Parse({"--fps", "1", "--fps", "2"}).error().message, HasSubstr("twice"));
+}
+
+TEST(ApplyFlags, OverridesTheFileAndNamesBadValues) {
+  v1::ServerConfig config;
+  config.set_listen("127.0.0.1:1");
+  Result<Flags> flags = Parse({"--listen", "127.0.0.1:2", "--algorithm", "CANONICAL", "--fps", "30"});
+  ASSERT_TRUE(flags.ok());
+  ASSERT_TRUE(ApplyFlags(*flags, config).ok());
+  EXPECT_EQ(config.listen(), "127.0.0.1:2");
+  EXPECT_EQ(config.pipeline().algorithm(), v1::ALGORITHM_CANONICAL);
+  EXPECT_DOUBLE_EQ(config.source().fps(), 30);
+
+  Result<Flags> bad = Parse({"--algorithm", "magic", "--fps", "-3", "--source", "camera"});
+  ASSERT_TRUE(bad.ok());
+  const Status applied = ApplyFlags(*bad, config);
+  ASSERT_FALSE(applied.ok());
+  EXPECT_THAT(applied.error().message,
+              AllOf(HasSubstr("--algorithm"), HasSubstr("--fps"), HasSubstr("--source")));
+  EXPECT_EQ(config.listen(), "127.0.0.1:2") << "nothing applied from a bad set of flags";
+}
+
+TEST(ValidateServerConfig, ListsEveryCrossFieldProblem) {
+  v1::ServerConfig config;
+  config.set_listen("nowhere");
+  config.mutable_source()->set_kind(v1::SOURCE_KIND_IMAGES);
+  config.set_max_streams(0);
+  const std::vector<std::string> problems = ValidateServerConfig(config);
+  const std::string all = ::testing::PrintToString(problems);
+  EXPECT_THAT(all, AllOf(HasSubstr("listen"), HasSubstr("source.left"), HasSubstr("source.right"),
+                         HasSubstr("source.calibration"), HasSubstr("max_streams")));
+
+  v1::ServerConfig fine;
+  fine.set_listen("127.0.0.1:0");
+  EXPECT_TRUE(ValidateServerConfig(fine).empty());
+}
+
+TEST(OpenSource, ReportsSyntheticProblemsWithTheirPrefix) {
+  v1::SourceConfig config;
+  config.mutable_synthetic()->set_width(-5);
+  config.mutable_synthetic()->set_baseline_m(0);
+  Result<std::unique_ptr<drivers::StereoSource>> source = OpenSource(config, true);
+  ASSERT_FALSE(source.ok());
+  EXPECT_THAT(source.error().message,
+              AllOf(HasSubstr("source.synthetic"), HasSubstr("width"), HasSubstr("baseline_m")));
+}
+
+}  // namespace
+}  // namespace stevi::server

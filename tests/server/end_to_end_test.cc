@@ -1,0 +1,269 @@
+// The real binaries: stevi-server with `stevi` commands against it, and stevi-process.
+#include <signal.h>
+
+#include <gmock/gmock.h>
+#include <google/protobuf/util/json_util.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/geometry/calibration_io.h"
+#include "drivers/synthetic/synthetic_source.h"
+#include "stevi/v1/truth.pb.h"
+#include "tests/server/truth_check.h"
+#include "tests/testing/data.h"
+#include "tests/testing/subprocess.h"
+
+namespace stevi {
+namespace {
+
+using ::testing::HasSubstr;
+using testing::BinaryPath;
+using testing::Subprocess;
+using namespace std::chrono_literals;
+
+constexpr auto kCommandTimeout = 60s;
+
+template <typename Message>
+std::vector<Message> ParseJsonLines(const std::string& text) {
+  std::vector<Message> out;
+  std::istringstream lines(text);
+  std::string line;
+  while (std::getline(lines, line)) {
+    if (line.empty()) continue;
+    Message m;
+    const auto status = google::protobuf::util::JsonStringToMessage(line, &m);
+    EXPECT_TRUE(status.ok()) << "not a " << Message::descriptor()->full_name() << ": " << line;
+    out.push_back(m);
+  }
+  return out;
+}
+
+int CountLines(const std::string& text) {
+  return static_cast<int>(std::count(text.begin(), text.end(), '\n'));
+}
+
+class ServerProcessTest : public ::testing::Test {
+ protected:
+  static constexpr double kFps = 20;
+
+  void SetUp() override {
+    server_ = std::make_unique<Subprocess>(std::vector<std::string>{
+        BinaryPath("stevi-server"), "--listen", "127.0.0.1:0", "--fps", "20"});
+    const std::optional<std::string> line = server_->WaitForStderrLine("serving", 60s);
+    ASSERT_TRUE(line.has_value()) << "the server did not start: " << server_->DrainStderr();
+    std::smatch m;
+    ASSERT_TRUE(std::regex_search(*line, m, std::regex("127\\.0\\.0\\.1:(\\d+)"))) << *line;
+    address_ = "127.0.0.1:" + m[1].str();
+  }
+
+  testing::RunResult Stevi(std::vector<std::string> args) {
+    args.insert(args.begin(), {BinaryPath("stevi"), "--server", address_, "--timeout", "20"});
+    return testing::Run(args, kCommandTimeout);
+  }
+
+  std::unique_ptr<Subprocess> server_;
+  std::string address_;
+};
+
+TEST_F(ServerProcessTest, WatchShowsObstaclesWithDepthWithinTwoPercent) {
+  const testing::RunResult watch = Stevi({"watch", "--count", "30", "--json"});
+  ASSERT_EQ(watch.exit_code, 0) << watch.err;
+  const auto frames = ParseJsonLines<v1::TrackFrame>(watch.out);
+  ASSERT_EQ(frames.size(), 30u);
+
+  drivers::SyntheticOptions options;
+  options.fps = kFps;
+  drivers::SyntheticRenderer renderer(options);
+  testing::DepthCheck check;
+  for (const v1::TrackFrame& f : frames) {
+    drivers::FrameTruth truth;
+    renderer.Render(f.source_index(), &truth);
+    testing::CheckFrame(f, truth, options.f_px * options.baseline_m, check);
+  }
+  std::cout << "stevi watch: " << check.matched << "/" << check.expected
+            << " obstacles with disparity >= 8 px matched, " << check.within
+            << " within 2 % of the true depth, worst " << 100 * check.worst_relative_error
+            << " %\n";
+  EXPECT_GE(check.recall(), 0.8);
+  EXPECT_EQ(check.within, check.matched) << ::testing::PrintToString(check.failures);
+
+  const testing::RunResult table = Stevi({"watch", "--count", "2"});
+  ASSERT_EQ(table.exit_code, 0) << table.err;
+  EXPECT_THAT(table.out, HasSubstr("depth m"));
+  EXPECT_THAT(table.out, HasSubstr("canonical"));
+}
+
+TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
+  const testing::RunResult bad = Stevi({"config", "set", "canonical.threshold_range_m=-5",
+                                        "matcher.block_matching.block_size=8"});
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_THAT(bad.err, HasSubstr("INVALID_ARGUMENT"));
+  EXPECT_THAT(bad.err, HasSubstr("canonical.threshold_range_m"));
+  EXPECT_THAT(bad.err, HasSubstr("matcher.block_matching.block_size"));
+  EXPECT_EQ(CountLines(bad.err), 1) << bad.err;
+
+  const testing::RunResult typo = Stevi({"config", "set", "canonical.threshold=5"});
+  EXPECT_EQ(typo.exit_code, 2);
+  EXPECT_THAT(typo.err, HasSubstr("threshold_range_m"));
+
+  const testing::RunResult good = Stevi({"config", "set", "matcher.kind=semi_global"});
+  EXPECT_EQ(good.exit_code, 0) << good.err;
+  const testing::RunResult get = Stevi({"config", "get", "--json"});
+  ASSERT_EQ(get.exit_code, 0) << get.err;
+  EXPECT_THAT(get.out, HasSubstr("MATCHER_KIND_SEMI_GLOBAL"));
+  EXPECT_THAT(get.out, HasSubstr("\"threshold_range_m\": 80"));
+
+  ASSERT_EQ(Stevi({"watch", "--count", "2", "--json"}).exit_code, 0);
+  const testing::RunResult status = Stevi({"status"});
+  ASSERT_EQ(status.exit_code, 0) << status.err;
+  EXPECT_THAT(status.out, HasSubstr("(running)"));
+  EXPECT_THAT(status.out, HasSubstr("disparity"));
+
+  const std::string prefix = testing::MakeTempDir("stevi-snapshot") + "/snap";
+  const testing::RunResult snapshot = Stevi({"snapshot", "--out", prefix});
+  ASSERT_EQ(snapshot.exit_code, 0) << snapshot.err;
+  for (const char* suffix : {"_disparity16.png", "_disparity_colour.png", "_left.png", "_meta.json"}) {
+    EXPECT_TRUE(std::filesystem::exists(prefix + suffix)) << prefix + suffix;
+  }
+  std::ifstream meta(prefix + "_meta.json");
+  std::stringstream text;
+  text << meta.rdbuf();
+  EXPECT_THAT(text.str(), HasSubstr("\"f_px\": 700"));
+
+  server_->Signal(SIGTERM);
+  EXPECT_EQ(server_->Wait(10s), 0) << server_->DrainStderr();
+  EXPECT_THAT(server_->DrainStderr(), HasSubstr("stopped"));
+}
+
+TEST(Stevi, AnUnreachableServerIsOneClearLine) {
+  const testing::RunResult r =
+      testing::Run({BinaryPath("stevi"), "--server", "127.0.0.1:1", "--timeout", "2", "status"}, kCommandTimeout);
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("cannot reach the server at 127.0.0.1:1"));
+  EXPECT_EQ(CountLines(r.err), 1) << r.err;
+
+  const testing::RunResult w = testing::Run(
+      {BinaryPath("stevi"), "--server", "127.0.0.1:1", "--timeout", "2", "watch"}, kCommandTimeout);
+  EXPECT_EQ(w.exit_code, 1);
+  EXPECT_EQ(CountLines(w.err), 1) << w.err;
+
+  const testing::RunResult usage = testing::Run({BinaryPath("stevi"), "fly"}, kCommandTimeout);
+  EXPECT_EQ(usage.exit_code, 2);
+  EXPECT_THAT(usage.err, HasSubstr("unknown command 'fly'"));
+}
+
+TEST(SteviProcess, SyntheticFramesAndTruthAgree) {
+  const std::string dir = testing::MakeTempDir("stevi-process");
+  const testing::RunResult r =
+      testing::Run({BinaryPath("stevi-process"), "--frames", "12", "--out", dir + "/tracks.jsonl", "--truth",
+           dir + "/truth.jsonl"},
+          kCommandTimeout);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::ifstream tracks_file(dir + "/tracks.jsonl"), truth_file(dir + "/truth.jsonl");
+  std::stringstream tracks_text, truth_text;
+  tracks_text << tracks_file.rdbuf();
+  truth_text << truth_file.rdbuf();
+  const auto frames = ParseJsonLines<v1::TrackFrame>(tracks_text.str());
+  const auto truths = ParseJsonLines<v1::TruthFrame>(truth_text.str());
+  ASSERT_EQ(frames.size(), 12u);
+  ASSERT_EQ(truths.size(), 12u);
+  for (size_t i = 0; i < frames.size(); ++i) {
+    EXPECT_EQ(frames[i].frame_id(), i + 1) << "no frame is dropped";
+    EXPECT_EQ(frames[i].source_index(), truths[i].source_index());
+  }
+  // Depth against the truth file alone (no renderer in this check).
+  int matched = 0, expected = 0;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    std::vector<cv::Rect> boxes, truth_boxes;
+    std::vector<double> truth_depths;
+    for (const auto& t : frames[i].tracks()) {
+      boxes.emplace_back(t.bbox().x(), t.bbox().y(), t.bbox().width(), t.bbox().height());
+    }
+    for (const auto& o : truths[i].obstacles()) {
+      if (o.visible_px() < 300 || 700 * 0.6 / o.depth_m() < 8) continue;
+      truth_boxes.emplace_back(o.bbox().x(), o.bbox().y(), o.bbox().width(), o.bbox().height());
+      truth_depths.push_back(o.depth_m());
+    }
+    expected += static_cast<int>(truth_boxes.size());
+    for (const auto& [d, t] : testing::MatchByIoU(boxes, truth_boxes, 0.3)) {
+      ++matched;
+      EXPECT_NEAR(frames[i].tracks(d).depth_m(), truth_depths[t], 0.02 * truth_depths[t]);
+    }
+  }
+  EXPECT_GE(matched, 0.8 * expected) << matched << " of " << expected;
+
+  const testing::RunResult bad = testing::Run({BinaryPath("stevi-process"), "--frames", "zero"}, kCommandTimeout);
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_THAT(bad.err, HasSubstr("--frames"));
+}
+
+// Fronto-parallel textured targets at 10..40 m, written as an image sequence with a calibration
+// file, read back through `stevi-process --source images`.
+TEST(SteviProcess, ImageSequenceDepthWithinTwoPercent) {
+  const std::string dir = testing::MakeTempDir("stevi-sequence");
+  drivers::SyntheticOptions options;
+  options.scene.obstacles.clear();
+  const std::vector<double> depths = {10, 15, 20, 25, 30, 40};
+  for (size_t i = 0; i < depths.size(); ++i) {
+    drivers::Obstacle target;
+    target.id = static_cast<int>(i) + 1;
+    target.name = "target-" + std::to_string(static_cast<int>(depths[i])) + "m";
+    // About 90 x 70 px at every depth, one per frame, in front of the sky.
+    target.size_m = cv::Vec3d(90 * depths[i] / options.f_px, 70 * depths[i] / options.f_px, 0.5);
+    target.path.start = cv::Vec3d(0, -0.15 * depths[i], depths[i] + 0.25);
+    // Each target only in its own frame: the others sit far behind the camera.
+    options.scene.obstacles.push_back(target);
+  }
+  std::vector<std::vector<drivers::ObstacleTruth>> truth_per_frame;
+  for (size_t k = 0; k < depths.size(); ++k) {
+    drivers::SyntheticOptions single = options;
+    single.scene.obstacles = {options.scene.obstacles[k]};
+    drivers::SyntheticRenderer renderer(single);
+    drivers::FrameTruth truth;
+    const StereoFrame frame = renderer.Render(0, &truth);
+    char name[64];
+    std::snprintf(name, sizeof name, "/left_%03zu.png", k);
+    ASSERT_TRUE(cv::imwrite(dir + name, frame.left));
+    std::snprintf(name, sizeof name, "/right_%03zu.png", k);
+    ASSERT_TRUE(cv::imwrite(dir + name, frame.right));
+    truth_per_frame.push_back(truth.obstacles);
+  }
+  ASSERT_TRUE(geometry::SaveCalibrationYaml(
+                  geometry::IdealCalibration(cv::Size(options.width, options.height), options.f_px,
+                                             options.baseline_m, options.width / 2.0,
+                                             options.height / 2.0),
+                  dir + "/calibration.yaml")
+                  .ok());
+
+  const testing::RunResult r =
+      testing::Run({BinaryPath("stevi-process"), "--source", "images", "--left", dir + "/left_%03d.png",
+           "--right", dir + "/right_%03d.png", "--calibration", dir + "/calibration.yaml"},
+          kCommandTimeout);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto frames = ParseJsonLines<v1::TrackFrame>(r.out);
+  ASSERT_EQ(frames.size(), depths.size());
+  std::cout << "stevi-process over an image sequence:\n  truth m  measured m  error %\n";
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const drivers::ObstacleTruth& truth = truth_per_frame[k].front();
+    std::vector<cv::Rect> boxes;
+    for (const auto& t : frames[k].tracks()) {
+      boxes.emplace_back(t.bbox().x(), t.bbox().y(), t.bbox().width(), t.bbox().height());
+    }
+    const auto matches = testing::MatchByIoU(boxes, {truth.bbox}, 0.3);
+    ASSERT_EQ(matches.size(), 1u) << "target at " << truth.depth_m << " m not found";
+    const double measured = frames[k].tracks(matches[0].first).depth_m();
+    const double error = 100 * (measured - truth.depth_m) / truth.depth_m;
+    std::printf("  %7.2f  %10.3f  %+7.3f\n", truth.depth_m, measured, error);
+    EXPECT_LE(std::abs(error), 2.0) << "target at " << truth.depth_m << " m";
+  }
+}
+
+}  // namespace
+}  // namespace stevi

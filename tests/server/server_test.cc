@@ -1,0 +1,203 @@
+// The server in-process on a loopback port, through real gRPC channels.
+#include "server/server.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include <thread>
+
+#include "client/client.h"
+#include "tests/server/truth_check.h"
+
+namespace stevi::server {
+namespace {
+
+using ::testing::AllOf;
+using ::testing::HasSubstr;
+
+constexpr double kFps = 20;
+
+v1::ServerConfig TestConfig() {
+  v1::ServerConfig config;
+  config.set_listen("127.0.0.1:0");
+  config.mutable_source()->set_fps(kFps);
+  return config;
+}
+
+class ServerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    Result<std::unique_ptr<Server>> server = Server::Start(TestConfig());
+    ASSERT_TRUE(server.ok()) << server.error().message;
+    server_ = std::move(server).value();
+    client::ClientOptions options;
+    options.address = "127.0.0.1:" + std::to_string(server_->port());
+    options.timeout = std::chrono::seconds(20);
+    client_ = std::make_unique<client::Client>(options);
+  }
+
+  std::vector<v1::TrackFrame> Collect(client::Client& c, uint64_t n) {
+    std::vector<v1::TrackFrame> frames;
+    client::StreamOptions options;
+    options.max_frames = n;
+    const grpc::Status status = c.StreamTracks(
+        [&](const v1::TrackFrame& f) {
+          frames.push_back(f);
+          return true;
+        },
+        options);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return frames;
+  }
+
+  std::unique_ptr<Server> server_;
+  std::unique_ptr<client::Client> client_;
+};
+
+TEST_F(ServerTest, TwoClientsStreamAtOnceWithAccurateDepth) {
+  client::Client second(client_->options());
+  std::vector<v1::TrackFrame> a, b;
+  std::thread other([&] { b = Collect(second, 25); });
+  a = Collect(*client_, 25);
+  other.join();
+  ASSERT_EQ(a.size(), 25u);
+  ASSERT_EQ(b.size(), 25u);
+
+  // Both see increasing frame ids and the same frames' content.
+  for (const auto* frames : {&a, &b}) {
+    for (size_t i = 1; i < frames->size(); ++i) {
+      EXPECT_GT((*frames)[i].frame_id(), (*frames)[i - 1].frame_id());
+    }
+  }
+
+  // Depth against the truth of the very frames streamed (the renderer is a pure function).
+  drivers::SyntheticOptions options;
+  options.fps = kFps;
+  drivers::SyntheticRenderer renderer(options);
+  const double fB = options.f_px * options.baseline_m;
+  testing::DepthCheck check;
+  for (const v1::TrackFrame& f : a) {
+    drivers::FrameTruth truth;
+    renderer.Render(f.source_index(), &truth);
+    testing::CheckFrame(f, truth, fB, check);
+  }
+  std::cout << "server stream: " << check.matched << "/" << check.expected
+            << " obstacles matched, " << check.within << " within 2 %, worst "
+            << 100 * check.worst_relative_error << " %\n";
+  EXPECT_GE(check.recall(), 0.8);
+  EXPECT_EQ(check.within, check.matched) << ::testing::PrintToString(check.failures);
+}
+
+TEST_F(ServerTest, BadConfigIsRefusedAndTheActiveOneStays) {
+  v1::PipelineConfig before;
+  ASSERT_TRUE(client_->GetPipelineConfig(&before).ok());
+
+  v1::PipelineConfig bad;
+  bad.mutable_matcher()->mutable_block_matching()->set_num_disparities(50);
+  bad.mutable_canonical()->set_threshold_range_m(-1);
+  v1::PipelineConfig active;
+  const grpc::Status refused = client_->SetPipelineConfig(bad, &active);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(refused.error_message(),
+              AllOf(HasSubstr("matcher.block_matching.num_disparities"),
+                    HasSubstr("canonical.threshold_range_m")));
+  v1::PipelineConfig after;
+  ASSERT_TRUE(client_->GetPipelineConfig(&after).ok());
+  EXPECT_EQ(after.SerializeAsString(), before.SerializeAsString());
+
+  v1::PipelineConfig good;
+  good.mutable_matcher()->set_kind(v1::MATCHER_KIND_SEMI_GLOBAL);
+  good.mutable_canonical()->set_threshold_range_m(70);
+  ASSERT_TRUE(client_->SetPipelineConfig(good, &active).ok());
+  EXPECT_EQ(active.matcher().kind(), v1::MATCHER_KIND_SEMI_GLOBAL);
+  EXPECT_DOUBLE_EQ(active.canonical().threshold_range_m(), 70);
+  EXPECT_EQ(active.canonical().min_area_px(), before.canonical().min_area_px());
+
+  // Frames keep coming with the new matcher: the disparity stage still reports.
+  const std::vector<v1::TrackFrame> frames = Collect(*client_, 3);
+  ASSERT_EQ(frames.size(), 3u);
+  v1::GetStatusResponse status;
+  ASSERT_TRUE(client_->GetStatus(&status).ok());
+  EXPECT_EQ(status.source_state(), v1::SOURCE_STATE_RUNNING);
+  EXPECT_GT(status.frames_processed(), 0u);
+}
+
+TEST_F(ServerTest, SnapshotDecodesToTheRigSize) {
+  Collect(*client_, 1);  // at least one frame processed
+  v1::DisparitySnapshot snapshot;
+  const grpc::Status status = client_->GetDisparitySnapshot(&snapshot);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  const auto decode = [](const std::string& bytes) {
+    return cv::imdecode(std::vector<uchar>(bytes.begin(), bytes.end()), cv::IMREAD_UNCHANGED);
+  };
+  const cv::Mat disparity = decode(snapshot.disparity_png16());
+  const cv::Mat colour = decode(snapshot.disparity_colour_png());
+  const cv::Mat left = decode(snapshot.left_png());
+  EXPECT_EQ(disparity.size(), cv::Size(640, 480));
+  EXPECT_EQ(disparity.type(), CV_16UC1);
+  EXPECT_EQ(colour.size(), cv::Size(640, 480));
+  EXPECT_EQ(colour.channels(), 3);
+  EXPECT_EQ(left.size(), cv::Size(640, 480));
+  EXPECT_EQ(snapshot.disparity_scale(), 16);
+  EXPECT_DOUBLE_EQ(snapshot.f_px(), 700);
+  EXPECT_DOUBLE_EQ(snapshot.baseline_m(), 0.6);
+  ASSERT_EQ(snapshot.q_size(), 16);
+  // Q maps (u, v, d) to depth fB/d: w = Q[3][2] * d, z = Q[2][3].
+  EXPECT_NEAR(snapshot.q(11) / (snapshot.q(14) * 16.0), 700 * 0.6 / 16.0, 1e-9);
+  // Some of the disparity is valid, and values stay within the searched range.
+  double max_value = 0;
+  cv::minMaxLoc(disparity, nullptr, &max_value);
+  EXPECT_GT(cv::countNonZero(disparity), 1000);
+  EXPECT_LE(max_value, 16.0 * (snapshot.min_disparity() + snapshot.num_disparities()));
+}
+
+TEST_F(ServerTest, StatusCountsSubscribersAndShutdownEndsStreams) {
+  client::Client watcher(client_->options());
+  std::atomic<int> received{0};
+  grpc::Status stream_status;
+  std::mutex mu;
+  std::condition_variable cv;
+  std::thread streaming([&] {
+    stream_status = watcher.StreamTracks([&](const v1::TrackFrame&) {
+      ++received;
+      cv.notify_all();
+      return true;
+    });
+  });
+  {
+    std::unique_lock lock(mu);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return received.load() > 0; }));
+  }
+  v1::GetStatusResponse status;
+  ASSERT_TRUE(client_->GetStatus(&status).ok());
+  EXPECT_EQ(status.subscribers_size(), 1);
+  EXPECT_GT(status.subscribers(0).frames_sent(), 0u);
+  EXPECT_EQ(status.algorithm(), v1::ALGORITHM_CANONICAL);
+  EXPECT_EQ(status.calibration_id(), "synthetic");
+  std::vector<std::string> stages;
+  for (const auto& t : status.timings()) stages.push_back(t.stage());
+  EXPECT_THAT(stages, ::testing::IsSupersetOf({"rectify", "disparity", "extract", "total"}));
+
+  server_->Shutdown();  // ends the stream with a final status
+  streaming.join();
+  EXPECT_EQ(stream_status.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_THAT(stream_status.error_message(), HasSubstr("shutting down"));
+}
+
+TEST(ServerStart, RefusesABadConfigBeforeOpeningAnything) {
+  v1::ServerConfig config;
+  config.set_listen("no-port");
+  config.mutable_pipeline()->mutable_range()->set_min_disparity_px(-2);
+  config.mutable_source()->set_kind(v1::SOURCE_KIND_IMAGES);
+  Result<std::unique_ptr<Server>> server = Server::Start(config);
+  ASSERT_FALSE(server.ok());
+  EXPECT_EQ(server.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(server.error().message,
+              AllOf(HasSubstr("listen"), HasSubstr("pipeline.range.min_disparity_px"),
+                    HasSubstr("source.left")));
+}
+
+}  // namespace
+}  // namespace stevi::server

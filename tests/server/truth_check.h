@@ -1,0 +1,56 @@
+// Compares streamed TrackFrames with the synthetic truth: recall and depth error.
+#pragma once
+
+#include <cmath>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "drivers/synthetic/synthetic_source.h"
+#include "stevi/v1/obstacle_service.pb.h"
+#include "tests/testing/truth_match.h"
+
+namespace stevi::testing {
+
+struct DepthCheck {
+  int expected = 0;   // visible obstacles with truth disparity >= min_disparity_px
+  int matched = 0;    // of those, matched by a track (IoU >= 0.3)
+  int within = 0;     // of those, depth within max_relative_error
+  double worst_relative_error = 0;
+  std::vector<std::string> failures;
+
+  double recall() const { return expected > 0 ? static_cast<double>(matched) / expected : 0; }
+};
+
+// Obstacles smaller than min_visible_px in the image are not expected.
+inline void CheckFrame(const v1::TrackFrame& frame, const drivers::FrameTruth& truth, double fB,
+                       DepthCheck& check, double min_disparity_px = 8.0,
+                       double max_relative_error = 0.02, int min_visible_px = 300) {
+  std::vector<cv::Rect> boxes, truth_boxes;
+  std::vector<const drivers::ObstacleTruth*> expected;
+  for (const v1::Track& t : frame.tracks()) {
+    boxes.emplace_back(t.bbox().x(), t.bbox().y(), t.bbox().width(), t.bbox().height());
+  }
+  for (const drivers::ObstacleTruth& o : truth.obstacles) {
+    if (o.visible_px < min_visible_px || fB / o.depth_m < min_disparity_px) continue;
+    expected.push_back(&o);
+    truth_boxes.push_back(o.bbox);
+  }
+  check.expected += static_cast<int>(expected.size());
+  for (const auto& [d, t] : MatchByIoU(boxes, truth_boxes, 0.3)) {
+    ++check.matched;
+    const double truth_depth = expected[t]->depth_m;
+    const double error = std::abs(frame.tracks(d).depth_m() - truth_depth) / truth_depth;
+    check.worst_relative_error = std::max(check.worst_relative_error, error);
+    if (error <= max_relative_error) {
+      ++check.within;
+    } else {
+      std::ostringstream out;
+      out << "frame " << frame.source_index() << " " << expected[t]->name << ": depth "
+          << frame.tracks(d).depth_m() << " m, truth " << truth_depth << " m";
+      check.failures.push_back(out.str());
+    }
+  }
+}
+
+}  // namespace stevi::testing

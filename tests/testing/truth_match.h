@@ -1,0 +1,18 @@
+// Matching detections to ground-truth boxes: IoU >= a threshold, one-to-one, best pairs first.
+#pragma once
+
+#include <utility>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace stevi::testing {
+
+double IoU(const cv::Rect& a, const cv::Rect& b);
+
+// Greedy one-to-one assignment by decreasing IoU; returns (detection index, truth index) pairs
+// whose IoU is at least min_iou.
+std::vector<std::pair<int, int>> MatchByIoU(const std::vector<cv::Rect>& detections,
+                                            const std::vector<cv::Rect>& truths, double min_iou);
+
+}  // namespace stevi::testing
