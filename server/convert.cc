@@ -57,6 +57,9 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
   pbm->set_speckle_window_size(bm.speckle_window_size);
   pbm->set_speckle_range(bm.speckle_range);
   pbm->set_pad_left(bm.pad_left);
+  pbm->set_prefilter_type(bm.prefilter_type == stereo::BlockMatchingOptions::PreFilter::kXSobel
+                              ? v1::PRE_FILTER_X_SOBEL
+                              : v1::PRE_FILTER_NORMALIZED_RESPONSE);
 
   const stereo::SemiGlobalOptions& sg = c.matcher.semi_global;
   v1::SemiGlobalConfig* psg = m->mutable_semi_global();
@@ -72,6 +75,7 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
   psg->set_speckle_range(sg.speckle_range);
   psg->set_mode(ToProto(sg.mode));
   psg->set_pad_left(sg.pad_left);
+  psg->set_texture_threshold(sg.texture_threshold);
 
   v1::RangeConfig* r = p.mutable_range();
   r->set_min_disparity_px(c.range.min_disparity_px);
@@ -85,6 +89,7 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
   k->set_open_size_px(c.canonical.open_size_px);
   k->set_min_valid_fraction(c.canonical.min_valid_fraction);
   k->set_max_disparity_step_px(c.canonical.max_disparity_step_px);
+  k->set_interior_erode_px(c.canonical.interior_erode_px);
   return p;
 }
 
@@ -118,6 +123,16 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
   STEVI_MERGE(pbm, speckle_window_size, bm.speckle_window_size);
   STEVI_MERGE(pbm, speckle_range, bm.speckle_range);
   STEVI_MERGE(pbm, pad_left, bm.pad_left);
+  switch (pbm.prefilter_type()) {
+    case v1::PRE_FILTER_UNSPECIFIED: break;
+    case v1::PRE_FILTER_X_SOBEL: bm.prefilter_type = stereo::BlockMatchingOptions::PreFilter::kXSobel; break;
+    case v1::PRE_FILTER_NORMALIZED_RESPONSE:
+      bm.prefilter_type = stereo::BlockMatchingOptions::PreFilter::kNormalizedResponse;
+      break;
+    default:
+      problems.push_back("matcher.block_matching.prefilter_type: unknown value " +
+                         std::to_string(pbm.prefilter_type()));
+  }
 
   const v1::SemiGlobalConfig& psg = m.semi_global();
   stereo::SemiGlobalOptions& sg = c.matcher.semi_global;
@@ -132,6 +147,7 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
   STEVI_MERGE(psg, speckle_window_size, sg.speckle_window_size);
   STEVI_MERGE(psg, speckle_range, sg.speckle_range);
   STEVI_MERGE(psg, pad_left, sg.pad_left);
+  STEVI_MERGE(psg, texture_threshold, sg.texture_threshold);
   switch (psg.mode()) {
     case v1::SEMI_GLOBAL_MODE_UNSPECIFIED: break;
     case v1::SEMI_GLOBAL_MODE_SGBM_5_PATH: sg.mode = Mode::kSgbm5Path; break;
@@ -154,6 +170,7 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
   STEVI_MERGE(k, open_size_px, c.canonical.open_size_px);
   STEVI_MERGE(k, min_valid_fraction, c.canonical.min_valid_fraction);
   STEVI_MERGE(k, max_disparity_step_px, c.canonical.max_disparity_step_px);
+  STEVI_MERGE(k, interior_erode_px, c.canonical.interior_erode_px);
   return problems;
 }
 

@@ -15,6 +15,9 @@
 namespace stevi::detection {
 namespace {
 
+// Fewer interior pixels than this and the whole blob gives the disparity.
+constexpr int kMinInteriorPixels = 30;
+
 std::string Got(double value) {
   char buf[64];
   std::snprintf(buf, sizeof(buf), " (got %g)", value);
@@ -70,6 +73,9 @@ std::vector<std::string> CanonicalOptions::Validate() const {
   if (!(max_disparity_step_px >= 0 && max_disparity_step_px <= 1000)) {
     problems.push_back("max_disparity_step_px: must be in [0, 1000] pixels" +
                        Got(max_disparity_step_px));
+  }
+  if (interior_erode_px < 0 || interior_erode_px > 50) {
+    problems.push_back("interior_erode_px: must be in 0..50" + Got(interior_erode_px));
   }
   if (!(min_valid_fraction >= 0 && min_valid_fraction <= 1)) {
     problems.push_back("min_valid_fraction: must be in [0, 1]" + Got(min_valid_fraction));
@@ -132,12 +138,29 @@ std::vector<Detection> DetectCanonical(const stereo::DisparityMap& disparity,
                                              stereo::DisparityMap::kScale)),
                 options.min_area_px)
           : extraction::ExtractBlobs(mask, options.min_area_px);
+  // The blobs' interiors: block matching spreads an object's disparity a few pixels into its
+  // surroundings (and ramps across its borders), so the range comes from the interior when there is
+  // enough of it.
+  cv::Mat1i interior;
+  if (options.interior_erode_px > 0) {
+    interior = blobs.labels.clone();
+    cv::Mat1b eroded;
+    const int k = 2 * options.interior_erode_px + 1;
+    cv::erode(mask, eroded, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(k, k)));
+    interior.setTo(0, eroded == 0);
+  }
   const double max_width_px = options.max_width_fraction * mask.cols;
   for (const extraction::Blob& blob : blobs.blobs) {
     if (blob.bbox.width > max_width_px) continue;  // the skyline, the ground
     int valid = 0;
-    const std::optional<double> median = stereo::MedianDisparityInMask(
+    std::optional<double> median = stereo::MedianDisparityInMask(
         disparity, blobs.labels, blob.label, blob.bbox, range.min_disparity_px, &valid);
+    if (median && options.interior_erode_px > 0) {
+      int interior_valid = 0;
+      const std::optional<double> inner = stereo::MedianDisparityInMask(
+          disparity, interior, blob.label, blob.bbox, range.min_disparity_px, &interior_valid);
+      if (inner && interior_valid >= kMinInteriorPixels) median = inner;
+    }
     if (!median || valid == 0) continue;
     const double valid_fraction = static_cast<double>(valid) / blob.area_px;
     if (valid_fraction < options.min_valid_fraction) continue;

@@ -23,6 +23,9 @@ struct CanonicalOptions {
   // Neighbouring pixels whose disparities differ by more than this (pixels) belong to different
   // blobs, so that touching obstacles at different ranges separate. 0 joins every neighbour.
   double max_disparity_step_px = 1.0;
+  // The blob's disparity is the median over its interior: the mask eroded by this many pixels
+  // (0 = the whole mask), unless fewer than 30 interior pixels remain.
+  int interior_erode_px = 5;
   // Blobs whose mask has fewer trusted disparities than this fraction are dropped.
   double min_valid_fraction = 0.3;
 

@@ -6,6 +6,7 @@
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace stevi::stereo {
 namespace {
@@ -62,16 +63,28 @@ int ToOpenCvMode(SemiGlobalOptions::Mode mode) {
   return cv::StereoSGBM::MODE_SGBM_3WAY;
 }
 
-// Both OpenCV matchers behind one implementation: optional left padding, compute, crop, and
-// normalisation of every unmatched value to DisparityMap::kInvalid.
+// Smallest window of the SGBM texture gate: with smaller blocks (1, 3) the mean of |x-Sobel| over
+// the block would follow the pixel noise too closely to separate it from texture.
+constexpr int kMinTextureWindow = 5;
+
+// The texture gate of SemiGlobalOptions::texture_threshold: a pixel is matched only when the mean
+// of |x-Sobel| of the left image over the window centred on it reaches the threshold.
+struct TextureGate {
+  int threshold = 0;  // 0: no gate
+  int window = 1;     // odd
+};
+
+// Both OpenCV matchers behind one implementation: optional left padding, compute, crop, the
+// optional texture gate, and normalisation of every unmatched value to DisparityMap::kInvalid.
 class OpenCvMatcher final : public DisparityMatcher {
  public:
   OpenCvMatcher(MatcherOptions options, cv::Ptr<cv::StereoMatcher> matcher, int pad_columns,
-                int block_size)
+                int block_size, TextureGate gate = {})
       : options_(std::move(options)),
         matcher_(std::move(matcher)),
         pad_columns_(pad_columns),
-        block_size_(block_size) {}
+        block_size_(block_size),
+        gate_(gate) {}
 
   DisparityMap Compute(const cv::Mat& left_rect, const cv::Mat& right_rect) override {
     CV_Assert(left_rect.type() == CV_8UC1 && right_rect.type() == CV_8UC1);
@@ -103,11 +116,27 @@ class OpenCvMatcher final : public DisparityMatcher {
     // Crop the padding and map every value below the search range (OpenCV's (min - 1) * 16
     // marker, speckles, negatives) to kInvalid in one pass.
     const int16_t floor_fixed = static_cast<int16_t>(out.min_disparity * DisparityMap::kScale);
+    if (gate_.threshold <= 0) {
+      for (int y = 0; y < out.fixed.rows; ++y) {
+        const int16_t* src = raw_.ptr<int16_t>(y) + pad_columns_;
+        int16_t* dst = out.fixed.ptr<int16_t>(y);
+        for (int x = 0; x < out.fixed.cols; ++x) {
+          dst[x] = src[x] < floor_fixed ? DisparityMap::kInvalid : src[x];
+        }
+      }
+      return out;
+    }
+
+    // Texture gate, in the same pass: the window sum of |x-Sobel| against threshold * area
+    // (exact integer form of "window mean >= threshold").
+    ComputeTextureSum(left_rect);
+    const int64_t min_sum = int64_t{gate_.threshold} * gate_.window * gate_.window;
     for (int y = 0; y < out.fixed.rows; ++y) {
       const int16_t* src = raw_.ptr<int16_t>(y) + pad_columns_;
+      const int32_t* texture = texture_sum_.ptr<int32_t>(y);
       int16_t* dst = out.fixed.ptr<int16_t>(y);
       for (int x = 0; x < out.fixed.cols; ++x) {
-        dst[x] = src[x] < floor_fixed ? DisparityMap::kInvalid : src[x];
+        dst[x] = src[x] < floor_fixed || texture[x] < min_sum ? DisparityMap::kInvalid : src[x];
       }
     }
     return out;
@@ -116,11 +145,23 @@ class OpenCvMatcher final : public DisparityMatcher {
   const MatcherOptions& options() const override { return options_; }
 
  private:
+  // texture_sum_ (CV_32SC1, the left image's size) = sum over the gate window of
+  // min(|x-Sobel|, 255) of `left`. The border is replicated, so the first and last columns get a
+  // one-sided derivative rather than 0. Member buffers: allocated again only on a size change.
+  void ComputeTextureSum(const cv::Mat& left) {
+    cv::Sobel(left, gradient_, CV_16S, 1, 0, 3, 1.0, 0.0, cv::BORDER_REPLICATE);
+    cv::convertScaleAbs(gradient_, abs_gradient_);
+    cv::boxFilter(abs_gradient_, texture_sum_, CV_32S, cv::Size(gate_.window, gate_.window),
+                  cv::Point(-1, -1), /*normalize=*/false, cv::BORDER_REPLICATE);
+  }
+
   MatcherOptions options_;
   cv::Ptr<cv::StereoMatcher> matcher_;
   int pad_columns_;
   int block_size_;
+  TextureGate gate_;
   cv::Mat left_padded_, right_padded_, raw_;
+  cv::Mat gradient_, abs_gradient_, texture_sum_;
 };
 
 }  // namespace
@@ -169,6 +210,7 @@ std::vector<std::string> SemiGlobalOptions::Validate() const {
   CheckRange(problems, "uniqueness_ratio", uniqueness_ratio, 0, 100);
   CheckAtLeast(problems, "speckle_window_size", speckle_window_size, 0);
   CheckRange(problems, "speckle_range", speckle_range, 0, kMaxSpeckleRange);
+  CheckAtLeast(problems, "texture_threshold", texture_threshold, 0);
   if (mode != Mode::kSgbm5Path && mode != Mode::kFull8Path && mode != Mode::kThreeWay &&
       mode != Mode::kHH4) {
     problems.push_back("mode: unknown value" + Got(static_cast<int>(mode)));
@@ -214,7 +256,8 @@ std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options) {
         o.prefilter_cap, o.uniqueness_ratio, o.speckle_window_size, o.speckle_range,
         ToOpenCvMode(o.mode));
     const int pad = o.pad_left ? o.min_disparity + o.num_disparities : 0;
-    return std::make_unique<OpenCvMatcher>(options, std::move(sgbm), pad, o.block_size);
+    const TextureGate gate{o.texture_threshold, std::max(o.block_size, kMinTextureWindow)};
+    return std::make_unique<OpenCvMatcher>(options, std::move(sgbm), pad, o.block_size, gate);
   }
   const BlockMatchingOptions& o = options.block_matching;
   cv::Ptr<cv::StereoBM> bm = cv::StereoBM::create(o.num_disparities, o.block_size);

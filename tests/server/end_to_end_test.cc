@@ -118,7 +118,7 @@ TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
   const testing::RunResult get = Stevi({"config", "get", "--json"});
   ASSERT_EQ(get.exit_code, 0) << get.err;
   EXPECT_THAT(get.out, HasSubstr("MATCHER_KIND_SEMI_GLOBAL"));
-  EXPECT_THAT(get.out, HasSubstr("\"threshold_range_m\": 80"));
+  EXPECT_THAT(get.out, HasSubstr("\"threshold_range_m\":80"));
 
   ASSERT_EQ(Stevi({"watch", "--count", "2", "--json"}).exit_code, 0);
   const testing::RunResult status = Stevi({"status"});
@@ -135,7 +135,7 @@ TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
   std::ifstream meta(prefix + "_meta.json");
   std::stringstream text;
   text << meta.rdbuf();
-  EXPECT_THAT(text.str(), HasSubstr("\"f_px\": 700"));
+  EXPECT_THAT(text.str(), HasSubstr("\"f_px\":700"));
 
   server_->Signal(SIGTERM);
   EXPECT_EQ(server_->Wait(10s), 0) << server_->DrainStderr();

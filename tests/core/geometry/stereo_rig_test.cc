@@ -10,9 +10,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
-#ifdef STEVI_TEST_WITH_IMGCODECS
 #include <opencv2/imgcodecs.hpp>
-#endif
 #include <opencv2/imgproc.hpp>
 
 #include "core/geometry/calibration_io.h"
@@ -618,10 +616,9 @@ TEST(StereoRigRealData, XimeaRigIsRefusedUntilSwapped) {
   EXPECT_NEAR(rig->baseline_m(), 0.0925, 0.002);  // data README: about 92.5 mm
 }
 
-#ifdef STEVI_TEST_WITH_IMGCODECS
 // The swapped XIMEA rig on its real chessboard views: the rectified corners of both views lie on
 // the same rows, and the corners re-projected through Q measure the board's 24 mm squares.
-// (Measured: mean row error 0.08-0.13 px, squares 24.00-24.02 mm.) Needs opencv_imgcodecs.
+// (Measured: mean row error 0.08-0.13 px, squares 24.00-24.02 mm.)
 TEST(StereoRigRealData, XimeaChessboardRectifiesOntoEqualRows) {
   std::string dir, why;
   const std::optional<StereoCalibration> owner = XimeaOwnerCalibration(dir, why);
@@ -674,7 +671,6 @@ TEST(StereoRigRealData, XimeaChessboardRectifiesOntoEqualRows) {
   }
   EXPECT_GE(pairs_checked, 2);
 }
-#endif  // STEVI_TEST_WITH_IMGCODECS
 
 }  // namespace
 }  // namespace stevi::geometry

@@ -37,9 +37,11 @@ double TruthMedianDisparity(const drivers::FrameTruth& truth, int id) {
 }
 
 // Checks the depth of every detection matched (IoU >= 0.3) to an isolated obstacle whose truth
-// disparity is at least 8 px; returns how many were checked.
+// disparity is at least 8 px; returns how many were checked. The tolerance is `tol` of the depth,
+// or, when quantisation_px > 0 and the disparity is below 16 px, the larger of that and the
+// quantisation bound Z^2 / (f B) * quantisation_px.
 int ExpectDepthsWithin(const FrameResult& result, const drivers::FrameTruth& truth, double tol,
-                       const std::string& label = "") {
+                       const std::string& label = "", double quantisation_px = 0) {
   const double fb = result.rig->f_px() * result.rig->baseline_m();
   int checked = 0;
   for (const drivers::ObstacleTruth& o : truth.obstacles) {
@@ -56,7 +58,11 @@ int ExpectDepthsWithin(const FrameResult& result, const drivers::FrameTruth& tru
     for (const detection::Detection& d : result.detections) {
       if (IoU(d.bbox, o.bbox) < 0.3) continue;
       const double truth_depth = fb / truth_d;
-      EXPECT_NEAR(d.depth_m, truth_depth, tol * truth_depth)
+      double allowed = tol * truth_depth;
+      if (quantisation_px > 0 && truth_d < 16.0) {
+        allowed = std::max(allowed, truth_depth * truth_depth / fb * quantisation_px);
+      }
+      EXPECT_NEAR(d.depth_m, truth_depth, allowed)
           << label << " frame " << truth.index << " " << o.name;
       ++checked;
     }
@@ -196,7 +202,10 @@ TEST(PipelineProcess, SwitchingTheMatcherBetweenFramesTakesEffect) {
   // A different matcher gives a different disparity map of the same frame.
   EXPECT_GT(cv::norm(bm->disparity.fixed, sgbm->disparity.fixed, cv::NORM_L1), 0.0);
   EXPECT_GT(ExpectDepthsWithin(*bm, truth, 0.02, "BM"), 0);
-  EXPECT_GT(ExpectDepthsWithin(*sgbm, truth, 0.02, "SGBM"), 0);
+  // OpenCV's SGBM pulls sub-pixel disparities towards whole pixels by up to about 0.2 px (measured
+  // in the matcher tests), which at 8.75 px is 2.2 %: below 16 px it is held to the quantisation
+  // bound with a quarter pixel (the default range.disparity_sigma_px) instead of 2 %.
+  EXPECT_GT(ExpectDepthsWithin(*sgbm, truth, 0.02, "SGBM", 0.25), 0);
 
   // Back to block matching: the same result as the first time (the matcher was rebuilt).
   ASSERT_TRUE(store.Set(PipelineConfig{}).ok());

@@ -11,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/stereo/disparity.h"
+#include "drivers/synthetic/synthetic_source.h"
 
 namespace stevi::stereo {
 namespace {
@@ -133,6 +134,7 @@ TEST(SemiGlobalOptionsValidate, ListsEveryProblem) {
   o.uniqueness_ratio = -1;
   o.speckle_window_size = -1;
   o.speckle_range = -3;
+  o.texture_threshold = -4;
   const std::vector<std::string> problems = o.Validate();
   EXPECT_THAT(problems, Contains("block_size: must be odd (got 12)"));
   EXPECT_THAT(problems, Contains("block_size: must be in 1..11 (got 12)"));
@@ -143,7 +145,20 @@ TEST(SemiGlobalOptionsValidate, ListsEveryProblem) {
   EXPECT_THAT(problems, Contains("uniqueness_ratio: must be in 0..100 (got -1)"));
   EXPECT_THAT(problems, Contains("speckle_window_size: must be >= 0 (got -1)"));
   EXPECT_THAT(problems, Contains(HasSubstr("speckle_range: must be in 0..")));
-  EXPECT_THAT(problems, SizeIs(9));
+  EXPECT_THAT(problems, Contains("texture_threshold: must be >= 0 (got -4)"));
+  EXPECT_THAT(problems, SizeIs(10));
+}
+
+TEST(SemiGlobalOptionsValidate, NamesTextureThresholdWhenNegative) {
+  SemiGlobalOptions o;
+  o.texture_threshold = -1;
+  EXPECT_THAT(o.Validate(), testing::ElementsAre("texture_threshold: must be >= 0 (got -1)"));
+  o.texture_threshold = 0;  // disables the gate
+  EXPECT_THAT(o.Validate(), IsEmpty());
+  MatcherOptions options = SemiGlobal();
+  options.semi_global.texture_threshold = -7;
+  EXPECT_THAT(options.Validate(),
+              testing::ElementsAre("semi_global.texture_threshold: must be >= 0 (got -7)"));
 }
 
 TEST(SemiGlobalOptionsValidate, PenaltiesAgainstAutomaticValues) {
@@ -324,6 +339,174 @@ TEST(MakeMatcher, EverySemiGlobalModeRecoversTheDisparity) {
     EXPECT_GE(stats.matched, 0.95) << static_cast<int>(mode);
     EXPECT_GE(stats.correct, 0.98) << static_cast<int>(mode);
   }
+}
+
+// A fronto-parallel plane at a constant disparity whose left half is flat grey and whose right
+// half carries a texture like the synthetic obstacles' (contrast +-0.35 of 255, random cells of
+// kCell pixels, bilinear), seen by two cameras with independent Gaussian pixel noise of sigma 2
+// grey levels (seeded), as in the synthetic rig.
+struct HalfFlatPair {
+  cv::Mat1b left, right;
+  int disparity = 0;
+  int flat_end = 0;  // columns [0, flat_end) of the left image see the flat half
+};
+
+HalfFlatPair HalfFlatNoisyPair(cv::Size size, int disparity, uint64_t seed) {
+  constexpr int kCell = 4;
+  cv::RNG rng(seed);
+  const int scene_width = size.width + disparity;
+  cv::Mat1f cells(size.height / kCell + 2, scene_width / kCell + 2);
+  rng.fill(cells, cv::RNG::UNIFORM, 128.0 - 89.0, 128.0 + 89.0);
+  cv::Mat1f scene;
+  cv::resize(cells, scene, cv::Size(cells.cols * kCell, cells.rows * kCell), 0, 0,
+             cv::INTER_LINEAR);
+  scene = scene(cv::Rect(0, 0, scene_width, size.height)).clone();
+  HalfFlatPair pair;
+  pair.disparity = disparity;
+  pair.flat_end = size.width / 2;
+  scene(cv::Rect(0, 0, pair.flat_end, size.height)).setTo(140.0f);
+  // left(x) = scene(x), right(x) = scene(x + d): left(x) = right(x - d).
+  auto view = [&](int x0) {
+    cv::Mat1f noise(size);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, 2.0);
+    cv::Mat1b out;
+    cv::Mat1f(scene(cv::Rect(x0, 0, size.width, size.height)) + noise).convertTo(out, CV_8U);
+    return out;
+  };
+  pair.left = view(0);
+  pair.right = view(disparity);
+  return pair;
+}
+
+// Matched fraction and median absolute error (pixels) against `expected` over `region`.
+struct RegionError {
+  double matched = 0;
+  double median_error = 1e9;
+};
+
+RegionError MedianError(const DisparityMap& map, const cv::Rect& region, double expected) {
+  std::vector<float> errors;
+  for (int y = region.y; y < region.y + region.height; ++y) {
+    for (int x = region.x; x < region.x + region.width; ++x) {
+      if (const std::optional<float> d = map.At(x, y)) {
+        errors.push_back(std::abs(*d - static_cast<float>(expected)));
+      }
+    }
+  }
+  RegionError out;
+  out.matched = static_cast<double>(errors.size()) / region.area();
+  if (!errors.empty()) {
+    std::nth_element(errors.begin(), errors.begin() + errors.size() / 2, errors.end());
+    out.median_error = errors[errors.size() / 2];
+  }
+  return out;
+}
+
+// cv::StereoSGBM matches pixel noise on a flat surface to random disparities; the texture gate
+// removes those and keeps the textured surface.
+TEST(MakeMatcher, SemiGlobalTextureGateRemovesMatchesOnFlatNoise) {
+  const HalfFlatPair pair = HalfFlatNoisyPair(cv::Size(320, 240), 12, 42);
+  // Away from the image border and from the flat/textured boundary (the 5x5 texture window and
+  // SGBM's own smoothing reach a few pixels across it).
+  const cv::Rect flat(8, 8, pair.flat_end - 24, 224);
+  const cv::Rect textured(pair.flat_end + 16, 8, 320 - pair.flat_end - 24, 224);
+
+  MatcherOptions options = SemiGlobal();
+  ASSERT_GT(options.semi_global.texture_threshold, 0) << "the gate is on by default";
+  const DisparityMap gated = MakeMatcher(options)->Compute(pair.left, pair.right);
+  options.semi_global.texture_threshold = 0;
+  const DisparityMap ungated = MakeMatcher(options)->Compute(pair.left, pair.right);
+
+  const RegionError flat_gated = MedianError(gated, flat, pair.disparity);
+  const RegionError flat_ungated = MedianError(ungated, flat, pair.disparity);
+  const RegionError textured_gated = MedianError(gated, textured, pair.disparity);
+  const RegionError textured_ungated = MedianError(ungated, textured, pair.disparity);
+  std::printf("flat half matched: %.2f %% gated, %.2f %% ungated; textured half matched %.2f %% "
+              "(median error %.3f px) gated, %.2f %% ungated\n",
+              100 * flat_gated.matched, 100 * flat_ungated.matched, 100 * textured_gated.matched,
+              textured_gated.median_error, 100 * textured_ungated.matched);
+  EXPECT_LT(flat_gated.matched, 0.02);
+  EXPECT_GT(textured_gated.matched, 0.90);
+  EXPECT_LT(textured_gated.median_error, 0.25);
+  // Without the gate SGBM matches a good part of the flat half, to noise (28-41 % at median
+  // errors of 41-48 px over seeds 1..29): the gate is what removes it.
+  EXPECT_GT(flat_ungated.matched, 0.2);
+  EXPECT_GT(flat_ungated.median_error, 5.0);
+  // The gate only removes matches: every gated disparity is the ungated one.
+  const cv::Mat1b kept = gated.fixed != DisparityMap::kInvalid;
+  EXPECT_EQ(cv::norm(gated.fixed, ungated.fixed, cv::NORM_INF, kept), 0.0);
+  EXPECT_GE(textured_ungated.matched, textured_gated.matched);
+}
+
+// The synthetic rig's default scene (flat sky gradient with pixel noise of sigma 2, textured
+// obstacles): without the gate SGBM matches a quarter of the open sky to noise, which the
+// detector turns into ~100 spurious blobs per frame; with the default gate none is left, and the
+// obstacles keep their matches.
+TEST(MakeMatcher, SemiGlobalTextureGateClearsTheSyntheticSky) {
+  const drivers::SyntheticRenderer renderer{drivers::SyntheticOptions{}};
+  drivers::FrameTruth truth;
+  const StereoFrame frame = renderer.Render(0, &truth);
+  // Open sky: sky pixels more than 8 px from anything else (next to an obstacle's silhouette,
+  // SGBM and any window-based gate give the sky the obstacle's disparity).
+  cv::Mat1b near_scene;
+  cv::dilate(truth.object_id != -1, near_scene,
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(17, 17)));
+  const cv::Mat1b open_sky = (truth.object_id == -1) & ~near_scene;
+  const cv::Mat1b obstacles = truth.object_id > 0;
+  ASSERT_GT(cv::countNonZero(open_sky), 50000);
+  ASSERT_GT(cv::countNonZero(obstacles), 20000);
+
+  struct SceneStats {
+    double open_sky_matched = 0, obstacle_matched = 0, obstacle_correct = 0;
+  };
+  auto measure = [&](int texture_threshold) {
+    MatcherOptions options = SemiGlobal();
+    options.semi_global.texture_threshold = texture_threshold;
+    const DisparityMap map = MakeMatcher(options)->Compute(frame.left, frame.right);
+    long sky = 0, sky_matched = 0, obstacle = 0, obstacle_matched = 0, obstacle_correct = 0;
+    for (int y = 0; y < map.fixed.rows; ++y) {
+      for (int x = 0; x < map.fixed.cols; ++x) {
+        const std::optional<float> d = map.At(x, y);
+        if (open_sky(y, x)) {
+          ++sky;
+          sky_matched += d.has_value();
+        } else if (obstacles(y, x)) {
+          ++obstacle;
+          if (!d) continue;
+          ++obstacle_matched;
+          if (std::abs(*d - truth.disparity_px(y, x)) <= 1.0f) ++obstacle_correct;
+        }
+      }
+    }
+    return SceneStats{static_cast<double>(sky_matched) / sky,
+                      static_cast<double>(obstacle_matched) / obstacle,
+                      static_cast<double>(obstacle_correct) / std::max(1L, obstacle_matched)};
+  };
+  const SceneStats gated = measure(SemiGlobalOptions().texture_threshold);
+  const SceneStats ungated = measure(0);
+  std::printf("open sky matched: %.3f %% gated, %.2f %% ungated; obstacles matched %.2f %% / "
+              "%.2f %%, within 1 px %.2f %% / %.2f %%\n",
+              100 * gated.open_sky_matched, 100 * ungated.open_sky_matched,
+              100 * gated.obstacle_matched, 100 * ungated.obstacle_matched,
+              100 * gated.obstacle_correct, 100 * ungated.obstacle_correct);
+  EXPECT_LT(gated.open_sky_matched, 0.001);
+  EXPECT_GT(ungated.open_sky_matched, 0.1);
+  EXPECT_GT(gated.obstacle_matched, 0.95);
+  EXPECT_GT(gated.obstacle_correct, 0.98);
+  EXPECT_GE(gated.obstacle_correct, ungated.obstacle_correct - 0.005);
+}
+
+// Block matching has its own texture threshold: SemiGlobalOptions::texture_threshold does not
+// touch it.
+TEST(MakeMatcher, SemiGlobalTextureThresholdDoesNotAffectBlockMatching) {
+  const HalfFlatPair pair = HalfFlatNoisyPair(cv::Size(200, 120), 9, 43);
+  MatcherOptions options = BlockMatching();
+  options.semi_global.texture_threshold = 0;
+  const DisparityMap a = MakeMatcher(options)->Compute(pair.left, pair.right);
+  options.semi_global.texture_threshold = 200;
+  const DisparityMap b = MakeMatcher(options)->Compute(pair.left, pair.right);
+  EXPECT_EQ(cv::norm(a.fixed, b.fixed, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::countNonZero(a.fixed != DisparityMap::kInvalid), 200 * 120 / 4);
 }
 
 // cv::StereoBM's x-Sobel pre-filter: the horizontal Sobel response, clamped to +-cap and offset
