@@ -46,17 +46,21 @@ std::string RotationProblem(const cv::Matx33d& r) {
   return {};
 }
 
+// The node at `key`, or an empty node (OpenCV may throw on malformed input).
+cv::FileNode Lookup(const cv::FileNode& root, const std::string& key) {
+  try {
+    return root[key];
+  } catch (const cv::Exception&) {
+    return cv::FileNode();
+  }
+}
+
 // Reads one key as a matrix; nullopt (with a problem appended) when missing or malformed.
 // `shapes` lists the accepted (rows, cols) pairs; `expected` describes them for the message.
 std::optional<cv::Mat> ReadMatrix(const cv::FileNode& root, const std::string& key,
                                   bool required, const std::vector<cv::Size>& shapes,
                                   const std::string& expected, std::vector<std::string>& problems) {
-  cv::FileNode node;
-  try {
-    node = root[key];
-  } catch (const cv::Exception&) {
-    node = cv::FileNode();
-  }
+  const cv::FileNode node = Lookup(root, key);
   if (node.empty() || node.isNone()) {
     if (required) problems.push_back(key + ": missing (expected " + expected + ")");
     return std::nullopt;
@@ -122,12 +126,7 @@ std::optional<cv::Mat> ReadMatrix(const cv::FileNode& root, const std::string& k
 
 std::optional<int> ReadPositiveInt(const cv::FileNode& root, const std::string& key,
                                    std::vector<std::string>& problems) {
-  cv::FileNode node;
-  try {
-    node = root[key];
-  } catch (const cv::Exception&) {
-    node = cv::FileNode();
-  }
+  const cv::FileNode node = Lookup(root, key);
   if (node.empty() || node.isNone()) {
     problems.push_back(key + ": missing (expected a positive integer)");
     return std::nullopt;

@@ -32,4 +32,17 @@ std::vector<std::pair<int, int>> MatchByIoU(const std::vector<cv::Rect>& detecti
   return matches;
 }
 
+double MedianOverId(const cv::Mat1i& ids, const cv::Mat1f& values, int id) {
+  std::vector<float> picked;
+  for (int y = 0; y < ids.rows; ++y) {
+    for (int x = 0; x < ids.cols; ++x) {
+      if (ids(y, x) == id) picked.push_back(values(y, x));
+    }
+  }
+  if (picked.empty()) return 0;
+  auto mid = picked.begin() + static_cast<std::ptrdiff_t>(picked.size() / 2);
+  std::nth_element(picked.begin(), mid, picked.end());
+  return *mid;
+}
+
 }  // namespace stevi::testing

@@ -15,4 +15,8 @@ double IoU(const cv::Rect& a, const cv::Rect& b);
 std::vector<std::pair<int, int>> MatchByIoU(const std::vector<cv::Rect>& detections,
                                             const std::vector<cv::Rect>& truths, double min_iou);
 
+// Median of `values` over the pixels where ids == id (0 when there are none): e.g. the truth
+// disparity of one obstacle of the synthetic scene.
+double MedianOverId(const cv::Mat1i& ids, const cv::Mat1f& values, int id);
+
 }  // namespace stevi::testing

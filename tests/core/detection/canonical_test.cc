@@ -15,6 +15,7 @@
 #include "core/stereo/disparity.h"
 #include "core/stereo/matcher.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/testing/truth_match.h"
 
 namespace stevi::detection {
 namespace {
@@ -53,11 +54,6 @@ std::optional<Detection> Overlapping(const std::vector<Detection>& detections, c
   return best;
 }
 
-double IoU(const cv::Rect& a, const cv::Rect& b) {
-  const double inter = (a & b).area();
-  const double uni = a.area() + b.area() - inter;
-  return uni > 0 ? inter / uni : 0.0;
-}
 
 TEST(DetectCanonical, AnalyticMapGivesTheRectanglesAndTheirDepths) {
   const StereoRig rig = TestRig();
@@ -193,19 +189,6 @@ DisparityMap FromTruth(const cv::Mat1f& truth) {
   return map;
 }
 
-// Median of the truth disparity over an obstacle's visible pixels.
-double TruthMedianDisparity(const drivers::FrameTruth& truth, int id) {
-  std::vector<float> values;
-  for (int y = 0; y < truth.object_id.rows; ++y) {
-    for (int x = 0; x < truth.object_id.cols; ++x) {
-      if (truth.object_id(y, x) == id) values.push_back(truth.disparity_px(y, x));
-    }
-  }
-  if (values.empty()) return 0;
-  auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
-  std::nth_element(values.begin(), mid, values.end());
-  return *mid;
-}
 
 // True when a visible pixel of `o` is next to (8-neighbourhood) a visible pixel of another
 // obstacle of `near`: their disparities are both above the threshold, so one blob holds both.
@@ -246,13 +229,13 @@ void Score(const drivers::FrameTruth& truth, const std::vector<Detection>& detec
     }
   }
   for (const drivers::ObstacleTruth* o : near) {
-    const double truth_d = TruthMedianDisparity(truth, o->id);
+    const double truth_d = testing::MedianOverId(truth.object_id, truth.disparity_px, o->id);
     if (truth_d < min_truth_disparity_px) continue;
     const bool touches = TouchesAnother(truth, *o, near);
     const Detection* best = nullptr;
     double best_iou = 0;
     for (const Detection& d : detections) {
-      const double iou = IoU(d.bbox, o->bbox);
+      const double iou = testing::IoU(d.bbox, o->bbox);
       if (iou > best_iou) {
         best_iou = iou;
         best = &d;

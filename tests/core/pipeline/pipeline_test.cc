@@ -13,28 +13,12 @@
 
 #include "core/pipeline/config.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/testing/truth_match.h"
 
 namespace stevi::pipeline {
 namespace {
 
-double IoU(const cv::Rect& a, const cv::Rect& b) {
-  const double inter = (a & b).area();
-  const double uni = a.area() + b.area() - inter;
-  return uni > 0 ? inter / uni : 0.0;
-}
 
-double TruthMedianDisparity(const drivers::FrameTruth& truth, int id) {
-  std::vector<float> values;
-  for (int y = 0; y < truth.object_id.rows; ++y) {
-    for (int x = 0; x < truth.object_id.cols; ++x) {
-      if (truth.object_id(y, x) == id) values.push_back(truth.disparity_px(y, x));
-    }
-  }
-  if (values.empty()) return 0;
-  auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
-  std::nth_element(values.begin(), mid, values.end());
-  return *mid;
-}
 
 // Checks the depth of every detection matched (IoU >= 0.3) to an isolated obstacle whose truth
 // disparity is at least 8 px; returns how many were checked. The tolerance is `tol` of the depth,
@@ -53,10 +37,10 @@ int ExpectDepthsWithin(const FrameResult& result, const drivers::FrameTruth& tru
         touches = true;
       }
     }
-    const double truth_d = TruthMedianDisparity(truth, o.id);
+    const double truth_d = testing::MedianOverId(truth.object_id, truth.disparity_px, o.id);
     if (touches || truth_d < 8.0) continue;
     for (const detection::Detection& d : result.detections) {
-      if (IoU(d.bbox, o.bbox) < 0.3) continue;
+      if (testing::IoU(d.bbox, o.bbox) < 0.3) continue;
       const double truth_depth = fb / truth_d;
       double allowed = tol * truth_depth;
       if (quantisation_px > 0 && truth_d < 16.0) {
