@@ -86,7 +86,7 @@ TEST_F(ServerTest, TwoClientsStreamAtOnceWithAccurateDepth) {
   std::cout << "server stream: " << check.matched << "/" << check.expected
             << " obstacles matched, " << check.within << " within 2 %, worst "
             << 100 * check.worst_relative_error << " %\n";
-  EXPECT_GE(check.recall(), 0.8);
+  EXPECT_GE(check.recall(), 0.85);
   EXPECT_EQ(check.within, check.matched) << ::testing::PrintToString(check.failures);
 }
 
