@@ -24,6 +24,25 @@ double Rate(const std::deque<Clock::time_point>& times) {
   return span_s > 0 ? static_cast<double>(times.size() - 1) / span_s : 0;
 }
 
+// The threads must outlive any failure of a library underneath: an exception (a bug, or input a
+// library refuses in a way we did not foresee) becomes an error value and is counted.
+Result<StereoFrame> NextFrame(drivers::StereoSource& source) {
+  try {
+    return source.Next();
+  } catch (const std::exception& e) {
+    return Error{ErrorCode::kInternal, std::string("source: unexpected failure: ") + e.what()};
+  }
+}
+
+Result<pipeline::FrameResult> ProcessFrame(pipeline::Pipeline& pipe, const StereoFrame& frame,
+                                           const pipeline::Snapshot& snapshot) {
+  try {
+    return pipe.Process(frame, snapshot);
+  } catch (const std::exception& e) {
+    return Error{ErrorCode::kInternal, std::string("unexpected failure: ") + e.what()};
+  }
+}
+
 int64_t UnixNowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::system_clock::now().time_since_epoch())
@@ -101,7 +120,7 @@ void Engine::CaptureLoop() {
   auto next_tick = Clock::now();
   auto retry = std::chrono::duration_cast<Clock::duration>(kRetryFirst);
   while (WaitUntil(next_tick)) {
-    Result<StereoFrame> frame = source_->Next();
+    Result<StereoFrame> frame = NextFrame(*source_);
     const auto now = Clock::now();
     if (!frame.ok()) {
       if (frame.error().code == ErrorCode::kOutOfRange) {
@@ -131,7 +150,7 @@ void Engine::CaptureLoop() {
 void Engine::PipelineLoop() {
   while (std::optional<StereoFrame> frame = mailbox_.Take()) {
     pipeline::Snapshot snapshot{config_.Get(), rig_};
-    Result<pipeline::FrameResult> result = pipeline_.Process(*frame, snapshot);
+    Result<pipeline::FrameResult> result = ProcessFrame(pipeline_, *frame, snapshot);
     const auto now = Clock::now();
     if (!result.ok()) {
       std::lock_guard lock(mu_);
