@@ -60,10 +60,12 @@ grpc::Status Client::SetPipelineConfig(const v1::PipelineConfig& update, v1::Pip
   return stub_->SetPipelineConfig(&context, request, active);
 }
 
-grpc::Status Client::GetDisparitySnapshot(v1::DisparitySnapshot* response) {
+grpc::Status Client::GetDisparitySnapshot(v1::DisparitySnapshot* response, bool annotated) {
   grpc::ClientContext context;
   Prepare(context);
-  return stub_->GetDisparitySnapshot(&context, v1::GetDisparitySnapshotRequest(), response);
+  v1::GetDisparitySnapshotRequest request;
+  request.set_annotated(annotated);
+  return stub_->GetDisparitySnapshot(&context, request, response);
 }
 
 grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,

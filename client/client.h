@@ -40,7 +40,8 @@ class Client {
   grpc::Status GetPipelineConfig(v1::PipelineConfig* response);
   // Sends only the fields that are set; the server merges them and returns the active config.
   grpc::Status SetPipelineConfig(const v1::PipelineConfig& update, v1::PipelineConfig* active);
-  grpc::Status GetDisparitySnapshot(v1::DisparitySnapshot* response);
+  // With `annotated`, the snapshot also carries the left image with the obstacles drawn on it.
+  grpc::Status GetDisparitySnapshot(v1::DisparitySnapshot* response, bool annotated = false);
 
   // Calls on_frame for every frame until it returns false, max_frames arrived, Cancel() is called,
   // or the stream fails (and reconnecting, if asked, gives up). Returns OK in the first three cases.

@@ -33,7 +33,8 @@ Commands:
   config set KEY=VALUE...      change it while running, e.g. algorithm=canonical,
                                matcher.kind=semi_global, canonical.threshold_range_m=60
   snapshot --out PREFIX        write PREFIX_disparity16.png, PREFIX_disparity_colour.png,
-                               PREFIX_left.png and PREFIX_meta.json
+                               PREFIX_left.png, PREFIX_annotated.png (boxes, ids, ranges)
+                               and PREFIX_meta.json
 
 --server defaults to 127.0.0.1:50051; --timeout (seconds, default 5) bounds each call.
 Exit status: 0 on success, 1 when the server fails or cannot be reached, 2 on bad usage.
@@ -226,7 +227,8 @@ int Snapshot(Client& client, const std::vector<std::string>& args) {
   }
   const std::string& prefix = args[1];
   v1::DisparitySnapshot snapshot;
-  if (grpc::Status status = client.GetDisparitySnapshot(&snapshot); !status.ok()) {
+  if (grpc::Status status = client.GetDisparitySnapshot(&snapshot, /*annotated=*/true);
+      !status.ok()) {
     return RpcFailed(client, "snapshot", status);
   }
   const auto write = [](const std::string& path, const std::string& bytes) {
@@ -238,10 +240,12 @@ int Snapshot(Client& client, const std::vector<std::string>& args) {
   meta.clear_disparity_png16();
   meta.clear_disparity_colour_png();
   meta.clear_left_png();
+  meta.clear_annotated_png();
   const std::vector<std::pair<std::string, std::string>> files = {
       {prefix + "_disparity16.png", snapshot.disparity_png16()},
       {prefix + "_disparity_colour.png", snapshot.disparity_colour_png()},
       {prefix + "_left.png", snapshot.left_png()},
+      {prefix + "_annotated.png", snapshot.annotated_png()},
       {prefix + "_meta.json", Json(meta) + "\n"}};
   for (const auto& [path, bytes] : files) {
     if (!write(path, bytes)) {

@@ -4,6 +4,8 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/pipeline/annotate.h"
+
 namespace stevi::server {
 namespace {
 
@@ -252,7 +254,7 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
   return f;
 }
 
-Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result) {
+Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result, bool annotated) {
   v1::DisparitySnapshot s;
   s.set_frame_id(result.frame_id);
   s.set_capture_time_ns(result.capture_time_ns);
@@ -271,7 +273,8 @@ Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result) {
   };
   if (!encode(stereo::ToFixedPoint16U(result.disparity), s.mutable_disparity_png16()) ||
       !encode(stereo::ToColour(result.disparity), s.mutable_disparity_colour_png()) ||
-      !encode(result.rectified_left, s.mutable_left_png())) {
+      !encode(result.rectified_left, s.mutable_left_png()) ||
+      (annotated && !encode(pipeline::AnnotateDetections(result), s.mutable_annotated_png()))) {
     return Error{ErrorCode::kInternal, "snapshot: PNG encoding failed"};
   }
   if (result.rig) {

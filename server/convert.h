@@ -28,7 +28,8 @@ v1::Algorithm ToProto(pipeline::Algorithm algorithm);
 v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result);
 
 // PNG images and the rig's geometry. Fails (kInternal) only when PNG encoding fails.
-Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result);
+// With `annotated`, also the left image with the detections drawn on it.
+Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result, bool annotated);
 
 // The synthetic source's truth for one frame.
 v1::TruthFrame ToTruthFrame(const drivers::FrameTruth& truth, int64_t capture_time_ns);

@@ -156,7 +156,9 @@ grpc::Status SetPipelineConfigImpl(Engine& engine, std::mutex& mu,
   return grpc::Status::OK;
 }
 
-grpc::Status GetDisparitySnapshotImpl(const Engine& engine, v1::DisparitySnapshot* response) {
+grpc::Status GetDisparitySnapshotImpl(const Engine& engine,
+                                      const v1::GetDisparitySnapshotRequest& request,
+                                      v1::DisparitySnapshot* response) {
   const EngineStatus status = engine.Status();
   if (status.source_state == SourceState::kDown) {
     return ToGrpcStatus(Error{ErrorCode::kUnavailable, "source is down: " + status.source_error});
@@ -165,7 +167,7 @@ grpc::Status GetDisparitySnapshotImpl(const Engine& engine, v1::DisparitySnapsho
   if (latest == nullptr) {
     return ToGrpcStatus(Error{ErrorCode::kFailedPrecondition, "no frame has been processed yet"});
   }
-  Result<v1::DisparitySnapshot> snapshot = ToSnapshot(*latest);
+  Result<v1::DisparitySnapshot> snapshot = ToSnapshot(*latest, request.annotated());
   if (!snapshot.ok()) return ToGrpcStatus(snapshot.error());
   *response = std::move(snapshot).value();
   return grpc::Status::OK;
@@ -195,9 +197,9 @@ grpc::ServerUnaryReactor* ObstacleServiceImpl::SetPipelineConfig(
 }
 
 grpc::ServerUnaryReactor* ObstacleServiceImpl::GetDisparitySnapshot(
-    grpc::CallbackServerContext* context, const v1::GetDisparitySnapshotRequest* /*request*/,
+    grpc::CallbackServerContext* context, const v1::GetDisparitySnapshotRequest* request,
     v1::DisparitySnapshot* response) {
-  return Reply(context, GetDisparitySnapshotImpl(engine_, response));
+  return Reply(context, GetDisparitySnapshotImpl(engine_, *request, response));
 }
 
 }  // namespace stevi::server

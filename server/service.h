@@ -23,7 +23,9 @@ grpc::Status GetPipelineConfigImpl(Engine& engine, v1::PipelineConfig* response)
 grpc::Status SetPipelineConfigImpl(Engine& engine, std::mutex& mu,
                                    const v1::SetPipelineConfigRequest& request,
                                    v1::PipelineConfig* response);
-grpc::Status GetDisparitySnapshotImpl(const Engine& engine, v1::DisparitySnapshot* response);
+grpc::Status GetDisparitySnapshotImpl(const Engine& engine,
+                                      const v1::GetDisparitySnapshotRequest& request,
+                                      v1::DisparitySnapshot* response);
 
 class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
  public:

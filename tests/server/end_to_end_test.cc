@@ -129,7 +129,8 @@ TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
   const std::string prefix = testing::MakeTempDir("stevi-snapshot") + "/snap";
   const testing::RunResult snapshot = Stevi({"snapshot", "--out", prefix});
   ASSERT_EQ(snapshot.exit_code, 0) << snapshot.err;
-  for (const char* suffix : {"_disparity16.png", "_disparity_colour.png", "_left.png", "_meta.json"}) {
+  for (const char* suffix :
+       {"_disparity16.png", "_disparity_colour.png", "_left.png", "_annotated.png", "_meta.json"}) {
     EXPECT_TRUE(std::filesystem::exists(prefix + suffix)) << prefix + suffix;
   }
   std::ifstream meta(prefix + "_meta.json");

@@ -107,7 +107,8 @@ TEST(GetDisparitySnapshotImpl, FailedPreconditionBeforeTheFirstFrame) {
                                                           pipeline::PipelineConfig{}, nullptr);
   ASSERT_TRUE(engine.ok());
   v1::DisparitySnapshot snapshot;
-  const grpc::Status status = GetDisparitySnapshotImpl(**engine, &snapshot);
+  const grpc::Status status =
+      GetDisparitySnapshotImpl(**engine, v1::GetDisparitySnapshotRequest(), &snapshot);
   EXPECT_EQ(status.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
   EXPECT_THAT(status.error_message(), HasSubstr("no frame"));
 }
