@@ -29,6 +29,22 @@ v1::SemiGlobalMode ToProto(Mode mode) {
     if ((msg).has_##field()) (target) = (msg).field(); \
   } while (false)
 
+void ToProto(const detection::StereoBlobOptions& o, v1::BlobConfig* p) {
+  p->set_min_area_px(o.min_area_px);
+  p->set_max_width_fraction(o.max_width_fraction);
+  p->set_min_valid_fraction(o.min_valid_fraction);
+  p->set_max_disparity_step_px(o.max_disparity_step_px);
+  p->set_interior_erode_px(o.interior_erode_px);
+}
+
+void MergeBlobs(const v1::BlobConfig& p, detection::StereoBlobOptions& o) {
+  STEVI_MERGE(p, min_area_px, o.min_area_px);
+  STEVI_MERGE(p, max_width_fraction, o.max_width_fraction);
+  STEVI_MERGE(p, min_valid_fraction, o.min_valid_fraction);
+  STEVI_MERGE(p, max_disparity_step_px, o.max_disparity_step_px);
+  STEVI_MERGE(p, interior_erode_px, o.interior_erode_px);
+}
+
 }  // namespace
 
 v1::Algorithm ToProto(Algorithm algorithm) {
@@ -86,12 +102,8 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
 
   v1::CanonicalConfig* k = p.mutable_canonical();
   k->set_threshold_range_m(c.canonical.threshold_range_m);
-  k->set_min_area_px(c.canonical.min_area_px);
-  k->set_max_width_fraction(c.canonical.max_width_fraction);
   k->set_open_size_px(c.canonical.open_size_px);
-  k->set_min_valid_fraction(c.canonical.min_valid_fraction);
-  k->set_max_disparity_step_px(c.canonical.max_disparity_step_px);
-  k->set_interior_erode_px(c.canonical.interior_erode_px);
+  ToProto(c.canonical.blobs, k->mutable_blobs());
   return p;
 }
 
@@ -167,12 +179,8 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
 
   const v1::CanonicalConfig& k = u.canonical();
   STEVI_MERGE(k, threshold_range_m, c.canonical.threshold_range_m);
-  STEVI_MERGE(k, min_area_px, c.canonical.min_area_px);
-  STEVI_MERGE(k, max_width_fraction, c.canonical.max_width_fraction);
   STEVI_MERGE(k, open_size_px, c.canonical.open_size_px);
-  STEVI_MERGE(k, min_valid_fraction, c.canonical.min_valid_fraction);
-  STEVI_MERGE(k, max_disparity_step_px, c.canonical.max_disparity_step_px);
-  STEVI_MERGE(k, interior_erode_px, c.canonical.interior_erode_px);
+  MergeBlobs(k.blobs(), c.canonical.blobs);
   return problems;
 }
 

@@ -10,13 +10,10 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include "core/extraction/blobs.h"
+#include "core/detection/stereo_blobs.h"
 
 namespace stevi::detection {
 namespace {
-
-// Fewer interior pixels than this and the whole blob gives the disparity.
-constexpr int kMinInteriorPixels = 30;
 
 std::string Got(double value) {
   char buf[64];
@@ -36,26 +33,6 @@ int16_t CandidateFloorFixed(const geometry::StereoRig& rig, const geometry::Rang
   return static_cast<int16_t>(std::clamp(fixed, 1.0, 32767.0));
 }
 
-// Fraction of the blob's valid disparities within a band around the median: near 1 for one
-// surface at one range, lower for blobs that merge surfaces at different ranges.
-double Consistency(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
-                   const cv::Rect& box, double median_px, double min_disparity_px) {
-  const double band = std::max(1.0, 0.1 * median_px) * stereo::DisparityMap::kScale;
-  const double median_fixed = median_px * stereo::DisparityMap::kScale;
-  const double floor_fixed = min_disparity_px * stereo::DisparityMap::kScale;
-  int valid = 0, consistent = 0;
-  for (int y = box.y; y < box.y + box.height; ++y) {
-    const int* lab = labels[y];
-    const int16_t* d = disparity.fixed[y];
-    for (int x = box.x; x < box.x + box.width; ++x) {
-      if (lab[x] != label || d[x] < 0 || d[x] < floor_fixed) continue;
-      ++valid;
-      if (std::abs(d[x] - median_fixed) <= band) ++consistent;
-    }
-  }
-  return valid == 0 ? 0.0 : static_cast<double>(consistent) / valid;
-}
-
 }  // namespace
 
 std::vector<std::string> CanonicalOptions::Validate() const {
@@ -63,55 +40,18 @@ std::vector<std::string> CanonicalOptions::Validate() const {
   if (!(threshold_range_m > 0) || !std::isfinite(threshold_range_m)) {
     problems.push_back("threshold_range_m: must be > 0 metres" + Got(threshold_range_m));
   }
-  if (min_area_px < 1) problems.push_back("min_area_px: must be >= 1" + Got(min_area_px));
-  if (!(max_width_fraction > 0 && max_width_fraction <= 1)) {
-    problems.push_back("max_width_fraction: must be in (0, 1]" + Got(max_width_fraction));
-  }
   if (open_size_px < 1 || open_size_px % 2 == 0) {
     problems.push_back("open_size_px: must be odd and >= 1" + Got(open_size_px));
   }
-  if (!(max_disparity_step_px >= 0 && max_disparity_step_px <= 1000)) {
-    problems.push_back("max_disparity_step_px: must be in [0, 1000] pixels" +
-                       Got(max_disparity_step_px));
-  }
-  if (interior_erode_px < 0 || interior_erode_px > 50) {
-    problems.push_back("interior_erode_px: must be in 0..50" + Got(interior_erode_px));
-  }
-  if (!(min_valid_fraction >= 0 && min_valid_fraction <= 1)) {
-    problems.push_back("min_valid_fraction: must be in [0, 1]" + Got(min_valid_fraction));
-  }
+  for (const std::string& p : blobs.Validate()) problems.push_back("blobs." + p);
   return problems;
-}
-
-void FillRange(Detection& d, const geometry::StereoRig& rig, const geometry::RangeOptions& range) {
-  const double f = rig.f_px();
-  const double b = rig.baseline_m();
-  if (!(d.disparity_px > 0)) {
-    d.depth_m = d.range_m = d.range_sigma_m = std::numeric_limits<double>::infinity();
-    d.position_cam_m = cv::Vec3d(0, 0, std::numeric_limits<double>::infinity());
-    return;
-  }
-  d.depth_m = geometry::DepthFromDisparity(d.disparity_px, f, b);
-  const std::optional<cv::Vec3d> point =
-      geometry::PointFromDisparity(d.centroid_px.x, d.centroid_px.y, d.disparity_px, rig.Q());
-  if (point) {
-    d.position_cam_m = *point;
-  } else {
-    // Pinhole fallback with the rectified intrinsics.
-    d.position_cam_m = cv::Vec3d((d.centroid_px.x - rig.cx()) * d.depth_m / f,
-                                 (d.centroid_px.y - rig.cy()) * d.depth_m / f, d.depth_m);
-  }
-  d.range_m = geometry::RangeFromPoint(d.position_cam_m);
-  const double depth_sigma = geometry::DepthSigma(d.depth_m, f, b, range.disparity_sigma_px);
-  d.range_sigma_m = d.depth_m > 0 ? depth_sigma * d.range_m / d.depth_m : depth_sigma;
 }
 
 std::vector<Detection> DetectCanonical(const stereo::DisparityMap& disparity,
                                        const geometry::StereoRig& rig,
                                        const geometry::RangeOptions& range,
                                        const CanonicalOptions& options) {
-  std::vector<Detection> out;
-  if (disparity.empty()) return out;
+  if (disparity.empty()) return {};
 
   // 1. Candidates: trusted disparities nearer than the threshold range.
   const int16_t floor_fixed = CandidateFloorFixed(rig, range, options);
@@ -129,58 +69,8 @@ std::vector<Detection> DetectCanonical(const stereo::DisparityMap& disparity,
     cv::morphologyEx(mask, mask, cv::MORPH_OPEN, kernel);
   }
 
-  // 3. Blobs, with the thesis's filters.
-  const extraction::BlobSet blobs =
-      options.max_disparity_step_px > 0
-          ? extraction::ExtractDisparityBlobs(
-                mask, disparity.fixed,
-                static_cast<int>(std::lround(options.max_disparity_step_px *
-                                             stereo::DisparityMap::kScale)),
-                options.min_area_px)
-          : extraction::ExtractBlobs(mask, options.min_area_px);
-  // The blobs' interiors: block matching spreads an object's disparity a few pixels into its
-  // surroundings (and ramps across its borders), so the range comes from the interior when there is
-  // enough of it.
-  cv::Mat1i interior;
-  if (options.interior_erode_px > 0) {
-    interior = blobs.labels.clone();
-    cv::Mat1b eroded;
-    const int k = 2 * options.interior_erode_px + 1;
-    cv::erode(mask, eroded, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(k, k)));
-    interior.setTo(0, eroded == 0);
-  }
-  const double max_width_px = options.max_width_fraction * mask.cols;
-  for (const extraction::Blob& blob : blobs.blobs) {
-    if (blob.bbox.width > max_width_px) continue;  // the skyline, the ground
-    int valid = 0;
-    std::optional<double> median = stereo::MedianDisparityInMask(
-        disparity, blobs.labels, blob.label, blob.bbox, range.min_disparity_px, &valid);
-    if (median && options.interior_erode_px > 0) {
-      int interior_valid = 0;
-      const std::optional<double> inner = stereo::MedianDisparityInMask(
-          disparity, interior, blob.label, blob.bbox, range.min_disparity_px, &interior_valid);
-      if (inner && interior_valid >= kMinInteriorPixels) median = inner;
-    }
-    if (!median || valid == 0) continue;
-    const double valid_fraction = static_cast<double>(valid) / blob.area_px;
-    if (valid_fraction < options.min_valid_fraction) continue;
-    if (!geometry::IsTrustedDisparity(*median, rig.f_px(), rig.baseline_m(), range)) continue;
-
-    Detection d;
-    d.bbox = blob.bbox;
-    d.centroid_px = blob.centroid_px;
-    d.area_px = blob.area_px;
-    d.perimeter_px = blob.perimeter_px;
-    d.disparity_px = *median;
-    d.valid_disparities = valid;
-    FillRange(d, rig, range);
-    d.score = std::clamp(valid_fraction, 0.0, 1.0) * Consistency(disparity, blobs.labels,
-                                                                 blob.label, blob.bbox, *median,
-                                                                 range.min_disparity_px);
-    d.extractor = "canonical";
-    out.push_back(std::move(d));
-  }
-  return out;
+  // 3. Blobs, ranged, with the thesis's filters.
+  return RangeBlobs(mask, disparity, rig, range, options.blobs, "canonical");
 }
 
 }  // namespace stevi::detection

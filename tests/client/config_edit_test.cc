@@ -24,7 +24,7 @@ TEST(SetFieldByPath, SetsNestedScalarsAndShortEnumNames) {
   EXPECT_EQ(SetFieldByPath(config, "canonical.threshold_range_m", "62.5"), "");
   EXPECT_DOUBLE_EQ(config.canonical().threshold_range_m(), 62.5);
   EXPECT_TRUE(config.canonical().has_threshold_range_m());
-  EXPECT_FALSE(config.canonical().has_min_area_px()) << "only what was set is sent";
+  EXPECT_FALSE(config.canonical().blobs().has_min_area_px()) << "only what was set is sent";
   EXPECT_EQ(SetFieldByPath(config, "matcher.block_matching.pad_left", "false"), "");
   EXPECT_TRUE(config.matcher().block_matching().has_pad_left());
 }
@@ -35,8 +35,8 @@ TEST(SetFieldByPath, NamesTheKeyAndWhatIsValid) {
               AllOf(HasSubstr("canonical.nope"), HasSubstr("threshold_range_m")));
   EXPECT_THAT(SetFieldByPath(config, "algorithm", "magic"),
               AllOf(HasSubstr("algorithm"), HasSubstr("ALGORITHM_CANONICAL")));
-  EXPECT_THAT(SetFieldByPath(config, "canonical.min_area_px", "lots"),
-              AllOf(HasSubstr("canonical.min_area_px"), HasSubstr("lots")));
+  EXPECT_THAT(SetFieldByPath(config, "canonical.blobs.min_area_px", "lots"),
+              AllOf(HasSubstr("canonical.blobs.min_area_px"), HasSubstr("lots")));
   EXPECT_THAT(SetFieldByPath(config, "matcher", "1"), HasSubstr("group of settings"));
   EXPECT_THAT(SetFieldByPath(config, "algorithm.x", "1"), HasSubstr("is a value"));
 }

@@ -40,7 +40,7 @@ TEST(LoadServerConfig, ReadsTextFormat) {
   ASSERT_TRUE(pipeline.ok()) << pipeline.error().message;
   EXPECT_DOUBLE_EQ(pipeline->canonical.threshold_range_m, 55);
   EXPECT_EQ(pipeline->matcher.kind, stereo::MatcherKind::kSemiGlobal);
-  EXPECT_EQ(pipeline->canonical.min_area_px, detection::CanonicalOptions().min_area_px);
+  EXPECT_EQ(pipeline->canonical.blobs.min_area_px, detection::StereoBlobOptions().min_area_px);
 }
 
 TEST(LoadServerConfig, ReadsJson) {

@@ -33,9 +33,9 @@ TEST(MergeFromProto, UnsetFieldsKeepTheirValues) {
   config.canonical.threshold_range_m = 33;
   config.matcher.block_matching.num_disparities = 96;
   v1::PipelineConfig update;
-  update.mutable_canonical()->set_min_area_px(200);
+  update.mutable_canonical()->mutable_blobs()->set_min_area_px(200);
   EXPECT_THAT(MergeFromProto(update, config), ::testing::IsEmpty());
-  EXPECT_EQ(config.canonical.min_area_px, 200);
+  EXPECT_EQ(config.canonical.blobs.min_area_px, 200);
   EXPECT_EQ(config.canonical.threshold_range_m, 33);
   EXPECT_EQ(config.matcher.block_matching.num_disparities, 96);
   EXPECT_EQ(config.algorithm, pipeline::Algorithm::kCanonical);

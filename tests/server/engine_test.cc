@@ -119,21 +119,21 @@ TEST(SetPipelineConfigImpl, MergesValidatesAndKeepsTheActiveOnError) {
   ASSERT_TRUE(engine.ok());
   std::mutex mu;
   v1::SetPipelineConfigRequest request;
-  request.mutable_config()->mutable_canonical()->set_min_area_px(0);
+  request.mutable_config()->mutable_canonical()->mutable_blobs()->set_min_area_px(0);
   request.mutable_config()->mutable_range()->set_disparity_sigma_px(-1);
   v1::PipelineConfig active;
   const grpc::Status refused = SetPipelineConfigImpl(**engine, mu, request, &active);
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_THAT(refused.error_message(), HasSubstr("canonical.min_area_px"));
+  EXPECT_THAT(refused.error_message(), HasSubstr("canonical.blobs.min_area_px"));
   EXPECT_THAT(refused.error_message(), HasSubstr("range.disparity_sigma_px"));
-  EXPECT_EQ((*engine)->config().Get()->canonical.min_area_px,
-            detection::CanonicalOptions().min_area_px);
+  EXPECT_EQ((*engine)->config().Get()->canonical.blobs.min_area_px,
+            detection::StereoBlobOptions().min_area_px);
 
   request.Clear();
-  request.mutable_config()->mutable_canonical()->set_min_area_px(150);
+  request.mutable_config()->mutable_canonical()->mutable_blobs()->set_min_area_px(150);
   ASSERT_TRUE(SetPipelineConfigImpl(**engine, mu, request, &active).ok());
-  EXPECT_EQ(active.canonical().min_area_px(), 150);
-  EXPECT_EQ((*engine)->config().Get()->canonical.min_area_px, 150);
+  EXPECT_EQ(active.canonical().blobs().min_area_px(), 150);
+  EXPECT_EQ((*engine)->config().Get()->canonical.blobs.min_area_px, 150);
 }
 
 }  // namespace

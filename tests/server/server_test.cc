@@ -113,7 +113,7 @@ TEST_F(ServerTest, BadConfigIsRefusedAndTheActiveOneStays) {
   ASSERT_TRUE(client_->SetPipelineConfig(good, &active).ok());
   EXPECT_EQ(active.matcher().kind(), v1::MATCHER_KIND_SEMI_GLOBAL);
   EXPECT_DOUBLE_EQ(active.canonical().threshold_range_m(), 70);
-  EXPECT_EQ(active.canonical().min_area_px(), before.canonical().min_area_px());
+  EXPECT_EQ(active.canonical().blobs().min_area_px(), before.canonical().blobs().min_area_px());
 
   // Frames keep coming with the new matcher: the disparity stage still reports.
   const std::vector<v1::TrackFrame> frames = Collect(*client_, 3);

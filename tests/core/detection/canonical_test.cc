@@ -99,7 +99,7 @@ TEST(DetectCanonical, DropsWideBlobsBlobsBelowTheFloorAndSmallBlobs) {
 
   // A narrower blob of the same disparity is kept when the width limit allows it.
   CanonicalOptions wide_ok;
-  wide_ok.max_width_fraction = 0.9;
+  wide_ok.blobs.max_width_fraction = 0.9;
   EXPECT_EQ(DetectCanonical(map, rig, RangeOptions{}, wide_ok).size(), 2u);
 }
 
@@ -139,21 +139,21 @@ TEST(CanonicalOptionsValidate, ListsEveryProblem) {
   EXPECT_TRUE(CanonicalOptions{}.Validate().empty());
   CanonicalOptions bad;
   bad.threshold_range_m = 0;
-  bad.min_area_px = 0;
-  bad.max_width_fraction = 1.5;
+  bad.blobs.min_area_px = 0;
+  bad.blobs.max_width_fraction = 1.5;
   bad.open_size_px = 4;
-  bad.min_valid_fraction = -0.1;
+  bad.blobs.min_valid_fraction = -0.1;
   const std::vector<std::string> problems = bad.Validate();
   ASSERT_EQ(problems.size(), 5u);
-  const char* fields[] = {"threshold_range_m: ", "min_area_px: ", "max_width_fraction: ",
-                          "open_size_px: ", "min_valid_fraction: "};
-  const char* got[] = {"(got 0)", "(got 0)", "(got 1.5)", "(got 4)", "(got -0.1)"};
+  const char* fields[] = {"threshold_range_m: ", "open_size_px: ", "blobs.min_area_px: ",
+                          "blobs.max_width_fraction: ", "blobs.min_valid_fraction: "};
+  const char* got[] = {"(got 0)", "(got 4)", "(got 0)", "(got 1.5)", "(got -0.1)"};
   for (int i = 0; i < 5; ++i) {
     EXPECT_EQ(problems[i].rfind(fields[i], 0), 0u) << problems[i];
     EXPECT_NE(problems[i].find(got[i]), std::string::npos) << problems[i];
   }
   bad = CanonicalOptions{};
-  bad.max_width_fraction = 0;
+  bad.blobs.max_width_fraction = 0;
   bad.open_size_px = 0;
   EXPECT_EQ(bad.Validate().size(), 2u);
 }
@@ -223,7 +223,7 @@ void Score(const drivers::FrameTruth& truth, const std::vector<Detection>& detec
   const double fb = kF * kB;
   std::vector<const drivers::ObstacleTruth*> near;
   for (const drivers::ObstacleTruth& o : truth.obstacles) {
-    if (o.visible_px >= options.min_area_px && !o.bbox.empty() &&
+    if (o.visible_px >= options.blobs.min_area_px && !o.bbox.empty() &&
         o.depth_m < options.threshold_range_m) {
       near.push_back(&o);
     }

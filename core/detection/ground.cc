@@ -1,0 +1,142 @@
+#include "core/detection/ground.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <random>
+
+namespace stevi::detection {
+namespace {
+
+struct RowMode {
+  double row;
+  double disparity_px;  // the mode bin's mean disparity
+  int count;
+};
+
+std::string Got(double value) {
+  char buf[48];
+  std::snprintf(buf, sizeof buf, " (got %g)", value);
+  return buf;
+}
+
+}  // namespace
+
+std::vector<std::string> GroundOptions::Validate() const {
+  std::vector<std::string> problems;
+  if (!(min_row_fraction > 0 && min_row_fraction <= 1)) {
+    problems.push_back("min_row_fraction: must be in (0, 1]" + Got(min_row_fraction));
+  }
+  if (min_support_rows < 2) problems.push_back("min_support_rows: must be >= 2" + Got(min_support_rows));
+  if (!(inlier_px > 0 && inlier_px <= 16)) problems.push_back("inlier_px: must be in (0, 16]" + Got(inlier_px));
+  if (!(min_span_px >= 0 && min_span_px <= 256)) {
+    problems.push_back("min_span_px: must be in [0, 256]" + Got(min_span_px));
+  }
+  if (!(margin_px >= 0 && margin_px <= 64)) problems.push_back("margin_px: must be in [0, 64]" + Got(margin_px));
+  if (!(margin_fraction >= 0 && margin_fraction <= 1)) {
+    problems.push_back("margin_fraction: must be in [0, 1]" + Got(margin_fraction));
+  }
+  return problems;
+}
+
+std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
+                                     const GroundOptions& options) {
+  const cv::Mat1s& fixed = disparity.fixed;
+  if (fixed.empty()) return std::nullopt;
+  const int max_bin = std::max(1, disparity.min_disparity + disparity.num_disparities) + 1;
+
+  // The mode of each row (1 px bins), kept when it dominates the row.
+  std::vector<RowMode> modes;
+  std::vector<int> bins(max_bin);
+  std::vector<double> sums(max_bin);
+  for (int y = 0; y < fixed.rows; ++y) {
+    std::fill(bins.begin(), bins.end(), 0);
+    std::fill(sums.begin(), sums.end(), 0.0);
+    const int16_t* row = fixed[y];
+    for (int x = 0; x < fixed.cols; ++x) {
+      if (row[x] < stereo::DisparityMap::kScale) continue;  // unmatched, or below 1 px
+      const int bin = std::min(max_bin - 1, row[x] / stereo::DisparityMap::kScale);
+      ++bins[bin];
+      sums[bin] += row[x];
+    }
+    const auto best = std::max_element(bins.begin(), bins.end());
+    if (*best >= options.min_row_fraction * fixed.cols) {
+      const int bin = static_cast<int>(best - bins.begin());
+      modes.push_back({static_cast<double>(y), sums[bin] / *best / stereo::DisparityMap::kScale,
+                       *best});
+    }
+  }
+  if (static_cast<int>(modes.size()) < options.min_support_rows) return std::nullopt;
+
+  // RANSAC over pairs of rows: the line with the most supporting rows (weighted by their counts).
+  std::mt19937 rng(12345);  // seeded: the same map gives the same model
+  std::uniform_int_distribution<size_t> pick(0, modes.size() - 1);
+  double best_slope = 0, best_horizon = 0, best_score = -1;
+  const auto inliers_of = [&](double slope, double horizon, std::vector<const RowMode*>* out) {
+    double score = 0;
+    for (const RowMode& m : modes) {
+      if (std::abs(slope * (m.row - horizon) - m.disparity_px) <= options.inlier_px) {
+        score += m.count;
+        if (out) out->push_back(&m);
+      }
+    }
+    return score;
+  };
+  for (int iteration = 0; iteration < 200; ++iteration) {
+    const RowMode& a = modes[pick(rng)];
+    const RowMode& b = modes[pick(rng)];
+    if (std::abs(a.row - b.row) < 5) continue;
+    const double slope = (b.disparity_px - a.disparity_px) / (b.row - a.row);
+    if (!(slope > 1e-3)) continue;  // ground gets nearer towards the bottom of the image
+    const double horizon = a.row - a.disparity_px / slope;
+    // A level or moderately pitched camera sees its horizon near the image.
+    if (horizon < -fixed.rows || horizon > 2.0 * fixed.rows) continue;
+    const double score = inliers_of(slope, horizon, nullptr);
+    if (score > best_score) {
+      best_score = score;
+      best_slope = slope;
+      best_horizon = horizon;
+    }
+  }
+  if (best_score < 0) return std::nullopt;
+  std::vector<const RowMode*> inliers;
+  inliers_of(best_slope, best_horizon, &inliers);
+  if (static_cast<int>(inliers.size()) < options.min_support_rows) return std::nullopt;
+  double lo = inliers.front()->disparity_px, hi = lo;
+  for (const RowMode* m : inliers) {
+    lo = std::min(lo, m->disparity_px);
+    hi = std::max(hi, m->disparity_px);
+  }
+  if (hi - lo < options.min_span_px) return std::nullopt;
+
+  // Least squares d = s * row + c over the inlier rows.
+  double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (const RowMode* m : inliers) {
+    const double w = m->count;
+    sw += w;
+    sx += w * m->row;
+    sy += w * m->disparity_px;
+    sxx += w * m->row * m->row;
+    sxy += w * m->row * m->disparity_px;
+  }
+  const double denominator = sw * sxx - sx * sx;
+  if (std::abs(denominator) < 1e-9) return std::nullopt;
+  const double slope = (sw * sxy - sx * sy) / denominator;
+  const double intercept = (sy - slope * sx) / sw;
+  if (!(slope > 1e-3)) return std::nullopt;
+  GroundModel model;
+  model.slope = slope;
+  model.horizon_row = -intercept / slope;
+  if (model.horizon_row < -fixed.rows || model.horizon_row > 2.0 * fixed.rows) return std::nullopt;
+  model.support_rows = static_cast<int>(inliers.size());
+  return model;
+}
+
+bool StandsOutFromGround(const std::optional<GroundModel>& ground, double row, double d_px,
+                         const GroundOptions& options) {
+  if (!ground) return true;
+  const double ground_d = ground->DisparityAt(row);
+  return d_px > ground_d + std::max(options.margin_px, options.margin_fraction * ground_d);
+}
+
+}  // namespace stevi::detection

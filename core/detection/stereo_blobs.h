@@ -1,0 +1,47 @@
+// The stereo half of every detector: blobs of a candidate mask, each given the median disparity
+// of its interior, a range, an uncertainty and a score.
+#pragma once
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/detection/detection.h"
+#include "core/geometry/range.h"
+#include "core/geometry/stereo_rig.h"
+#include "core/stereo/disparity.h"
+
+namespace stevi::detection {
+
+struct StereoBlobOptions {
+  // Blobs smaller than this (pixels) are dropped.
+  int min_area_px = 60;
+  // Blobs wider than this fraction of the image width (the skyline, the ground) are dropped.
+  double max_width_fraction = 0.8;
+  // Blobs whose mask has fewer trusted disparities than this fraction are dropped.
+  double min_valid_fraction = 0.3;
+  // Neighbouring pixels whose disparities differ by more than this (pixels) belong to different
+  // blobs, so that touching obstacles at different ranges separate. 0 joins every neighbour.
+  double max_disparity_step_px = 1.0;
+  // The blob's disparity is the median over its interior: the mask eroded by this many pixels
+  // (0 = the whole mask), unless fewer than 30 interior pixels remain. Block matching spreads an
+  // object's disparity a few pixels into its surroundings.
+  int interior_erode_px = 5;
+
+  std::vector<std::string> Validate() const;
+};
+
+// Blobs of `candidates` (non-zero pixels; with max_disparity_step_px > 0 they must hold valid
+// disparities), filtered (width, area, valid fraction, trusted range) and ranged. `extractor` names
+// the detector in each Detection.
+std::vector<Detection> RangeBlobs(const cv::Mat1b& candidates, const stereo::DisparityMap& disparity,
+                                  const geometry::StereoRig& rig,
+                                  const geometry::RangeOptions& range,
+                                  const StereoBlobOptions& options, std::string_view extractor);
+
+// Fills the fields derived from d.disparity_px (depth, range, sigma, position) from the rig.
+void FillRange(Detection& d, const geometry::StereoRig& rig, const geometry::RangeOptions& range);
+
+}  // namespace stevi::detection
