@@ -35,6 +35,8 @@ void ToProto(const detection::StereoBlobOptions& o, v1::BlobConfig* p) {
   p->set_min_valid_fraction(o.min_valid_fraction);
   p->set_max_disparity_step_px(o.max_disparity_step_px);
   p->set_interior_erode_px(o.interior_erode_px);
+  p->set_max_depth_per_height(o.max_depth_per_height);
+  p->set_min_terrain_height_m(o.min_terrain_height_m);
 }
 
 void MergeBlobs(const v1::BlobConfig& p, detection::StereoBlobOptions& o) {
@@ -43,6 +45,176 @@ void MergeBlobs(const v1::BlobConfig& p, detection::StereoBlobOptions& o) {
   STEVI_MERGE(p, min_valid_fraction, o.min_valid_fraction);
   STEVI_MERGE(p, max_disparity_step_px, o.max_disparity_step_px);
   STEVI_MERGE(p, interior_erode_px, o.interior_erode_px);
+  STEVI_MERGE(p, max_depth_per_height, o.max_depth_per_height);
+  STEVI_MERGE(p, min_terrain_height_m, o.min_terrain_height_m);
+}
+
+// "<path>: unknown value <n>", the problem of an enum value the schema does not know.
+void UnknownEnum(const std::string& path, int value, std::vector<std::string>& problems) {
+  problems.push_back(path + ": unknown value " + std::to_string(value));
+}
+
+void ToProto(const detection::GroundOptions& o, v1::GroundConfig* p) {
+  p->set_enabled(o.enabled);
+  p->set_min_row_fraction(o.min_row_fraction);
+  p->set_min_row_pixels(o.min_row_pixels);
+  p->set_min_row_spread(o.min_row_spread);
+  p->set_min_mode_px(o.min_mode_px);
+  p->set_min_support_rows(o.min_support_rows);
+  p->set_inlier_px(o.inlier_px);
+  p->set_min_span_px(o.min_span_px);
+  p->set_margin_px(o.margin_px);
+  p->set_margin_fraction(o.margin_fraction);
+}
+
+void MergeGround(const v1::GroundConfig& p, detection::GroundOptions& o) {
+  STEVI_MERGE(p, enabled, o.enabled);
+  STEVI_MERGE(p, min_row_fraction, o.min_row_fraction);
+  STEVI_MERGE(p, min_row_pixels, o.min_row_pixels);
+  STEVI_MERGE(p, min_row_spread, o.min_row_spread);
+  STEVI_MERGE(p, min_mode_px, o.min_mode_px);
+  STEVI_MERGE(p, min_support_rows, o.min_support_rows);
+  STEVI_MERGE(p, inlier_px, o.inlier_px);
+  STEVI_MERGE(p, min_span_px, o.min_span_px);
+  STEVI_MERGE(p, margin_px, o.margin_px);
+  STEVI_MERGE(p, margin_fraction, o.margin_fraction);
+}
+
+using extraction::StructuringShape;
+
+v1::StructuringShape ToProto(StructuringShape shape) {
+  switch (shape) {
+    case StructuringShape::kRect: return v1::STRUCTURING_SHAPE_RECT;
+    case StructuringShape::kEllipse: return v1::STRUCTURING_SHAPE_ELLIPSE;
+    case StructuringShape::kCross: return v1::STRUCTURING_SHAPE_CROSS;
+  }
+  return v1::STRUCTURING_SHAPE_UNSPECIFIED;
+}
+
+void ToProto(const extraction::MorphologyOptions& o, v1::MorphologyConfig* p) {
+  p->set_shape(ToProto(o.shape));
+  p->set_close_size(o.close_size);
+  p->set_open_size(o.open_size);
+  p->set_fill_holes(o.fill_holes);
+}
+
+// `path` names the message ("stevie.morphology") in the problems.
+void MergeMorphology(const v1::MorphologyConfig& p, extraction::MorphologyOptions& o,
+                     const std::string& path, std::vector<std::string>& problems) {
+  switch (p.shape()) {
+    case v1::STRUCTURING_SHAPE_UNSPECIFIED: break;
+    case v1::STRUCTURING_SHAPE_RECT: o.shape = StructuringShape::kRect; break;
+    case v1::STRUCTURING_SHAPE_ELLIPSE: o.shape = StructuringShape::kEllipse; break;
+    case v1::STRUCTURING_SHAPE_CROSS: o.shape = StructuringShape::kCross; break;
+    default: UnknownEnum(path + ".shape", p.shape(), problems);
+  }
+  STEVI_MERGE(p, close_size, o.close_size);
+  STEVI_MERGE(p, open_size, o.open_size);
+  STEVI_MERGE(p, fill_holes, o.fill_holes);
+}
+
+void ToProto(const extraction::EdgeOptions& o, v1::EdgeConfig* p) {
+  p->set_blur_size(o.blur_size);
+  p->set_blur_sigma(o.blur_sigma);
+  p->set_canny_low(o.canny_low);
+  p->set_canny_high(o.canny_high);
+  p->set_canny_aperture(o.canny_aperture);
+  p->set_l2_gradient(o.l2_gradient);
+}
+
+void MergeEdges(const v1::EdgeConfig& p, extraction::EdgeOptions& o) {
+  STEVI_MERGE(p, blur_size, o.blur_size);
+  STEVI_MERGE(p, blur_sigma, o.blur_sigma);
+  STEVI_MERGE(p, canny_low, o.canny_low);
+  STEVI_MERGE(p, canny_high, o.canny_high);
+  STEVI_MERGE(p, canny_aperture, o.canny_aperture);
+  STEVI_MERGE(p, l2_gradient, o.l2_gradient);
+}
+
+void ToProto(const extraction::SaliencyOptions& o, v1::SaliencyConfig* p) {
+  p->set_centre_level(o.centre_level);
+  p->mutable_scales()->Assign(o.scales.begin(), o.scales.end());
+  p->mutable_surround_radii()->Assign(o.surround_radii.begin(), o.surround_radii.end());
+  p->set_uniqueness_weight(o.uniqueness_weight);
+  p->set_peak_fraction(o.peak_fraction);
+  p->set_min_contrast(o.min_contrast);
+}
+
+// The lists are replaced as a whole when the update holds any element, and kept when it is empty.
+void MergeSaliency(const v1::SaliencyConfig& p, extraction::SaliencyOptions& o) {
+  STEVI_MERGE(p, centre_level, o.centre_level);
+  if (!p.scales().empty()) o.scales.assign(p.scales().begin(), p.scales().end());
+  if (!p.surround_radii().empty()) {
+    o.surround_radii.assign(p.surround_radii().begin(), p.surround_radii().end());
+  }
+  STEVI_MERGE(p, uniqueness_weight, o.uniqueness_weight);
+  STEVI_MERGE(p, peak_fraction, o.peak_fraction);
+  STEVI_MERGE(p, min_contrast, o.min_contrast);
+}
+
+void ToProto(const extraction::GraphSegmentationOptions& o, v1::GraphSegmentationConfig* p) {
+  p->set_k(o.k);
+  p->set_sigma(o.sigma);
+  p->set_min_size(o.min_size);
+}
+
+void MergeGraph(const v1::GraphSegmentationConfig& p, extraction::GraphSegmentationOptions& o) {
+  STEVI_MERGE(p, k, o.k);
+  STEVI_MERGE(p, sigma, o.sigma);
+  STEVI_MERGE(p, min_size, o.min_size);
+}
+
+void ToProto(const detection::SteViEOptions& o, v1::SteViEConfig* p) {
+  ToProto(o.edges, p->mutable_edges());
+  ToProto(o.morphology, p->mutable_morphology());
+  ToProto(o.ground, p->mutable_ground());
+  ToProto(o.blobs, p->mutable_blobs());
+}
+
+void MergeSteViE(const v1::SteViEConfig& p, detection::SteViEOptions& o,
+                 std::vector<std::string>& problems) {
+  MergeEdges(p.edges(), o.edges);
+  MergeMorphology(p.morphology(), o.morphology, "stevie.morphology", problems);
+  MergeGround(p.ground(), o.ground);
+  MergeBlobs(p.blobs(), o.blobs);
+}
+
+using Segmentation = detection::SteViSOptions::Segmentation;
+
+v1::Segmentation ToProto(Segmentation segmentation) {
+  switch (segmentation) {
+    case Segmentation::kThreshold: return v1::SEGMENTATION_THRESHOLD;
+    case Segmentation::kGraph: return v1::SEGMENTATION_GRAPH;
+  }
+  return v1::SEGMENTATION_UNSPECIFIED;
+}
+
+void ToProto(const detection::SteViSOptions& o, v1::SteViSConfig* p) {
+  ToProto(o.saliency, p->mutable_saliency());
+  p->set_segmentation(ToProto(o.segmentation));
+  p->set_saliency_threshold(o.saliency_threshold);
+  ToProto(o.morphology, p->mutable_morphology());
+  ToProto(o.graph, p->mutable_graph());
+  p->set_graph_level(o.graph_level);
+  ToProto(o.ground, p->mutable_ground());
+  ToProto(o.blobs, p->mutable_blobs());
+}
+
+void MergeSteViS(const v1::SteViSConfig& p, detection::SteViSOptions& o,
+                 std::vector<std::string>& problems) {
+  MergeSaliency(p.saliency(), o.saliency);
+  switch (p.segmentation()) {
+    case v1::SEGMENTATION_UNSPECIFIED: break;
+    case v1::SEGMENTATION_THRESHOLD: o.segmentation = Segmentation::kThreshold; break;
+    case v1::SEGMENTATION_GRAPH: o.segmentation = Segmentation::kGraph; break;
+    default: UnknownEnum("stevis.segmentation", p.segmentation(), problems);
+  }
+  STEVI_MERGE(p, saliency_threshold, o.saliency_threshold);
+  MergeMorphology(p.morphology(), o.morphology, "stevis.morphology", problems);
+  MergeGraph(p.graph(), o.graph);
+  STEVI_MERGE(p, graph_level, o.graph_level);
+  MergeGround(p.ground(), o.ground);
+  MergeBlobs(p.blobs(), o.blobs);
 }
 
 }  // namespace
@@ -75,6 +247,7 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
   pbm->set_speckle_window_size(bm.speckle_window_size);
   pbm->set_speckle_range(bm.speckle_range);
   pbm->set_pad_left(bm.pad_left);
+  pbm->set_local_texture_threshold(bm.local_texture_threshold);
   pbm->set_prefilter_type(bm.prefilter_type == stereo::BlockMatchingOptions::PreFilter::kXSobel
                               ? v1::PRE_FILTER_X_SOBEL
                               : v1::PRE_FILTER_NORMALIZED_RESPONSE);
@@ -104,6 +277,9 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
   k->set_threshold_range_m(c.canonical.threshold_range_m);
   k->set_open_size_px(c.canonical.open_size_px);
   ToProto(c.canonical.blobs, k->mutable_blobs());
+
+  ToProto(c.stevie, p.mutable_stevie());
+  ToProto(c.stevis, p.mutable_stevis());
   return p;
 }
 
@@ -137,6 +313,7 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
   STEVI_MERGE(pbm, speckle_window_size, bm.speckle_window_size);
   STEVI_MERGE(pbm, speckle_range, bm.speckle_range);
   STEVI_MERGE(pbm, pad_left, bm.pad_left);
+  STEVI_MERGE(pbm, local_texture_threshold, bm.local_texture_threshold);
   switch (pbm.prefilter_type()) {
     case v1::PRE_FILTER_UNSPECIFIED: break;
     case v1::PRE_FILTER_X_SOBEL: bm.prefilter_type = stereo::BlockMatchingOptions::PreFilter::kXSobel; break;
@@ -181,6 +358,9 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
   STEVI_MERGE(k, threshold_range_m, c.canonical.threshold_range_m);
   STEVI_MERGE(k, open_size_px, c.canonical.open_size_px);
   MergeBlobs(k.blobs(), c.canonical.blobs);
+
+  MergeSteViE(u.stevie(), c.stevie, problems);
+  MergeSteViS(u.stevis(), c.stevis, problems);
   return problems;
 }
 

@@ -22,7 +22,7 @@ stevi.v1.TrackFrame per line as protobuf JSON (proto field names).
   --right PATTERN|VIDEO  images: right images, likewise
   --calibration FILE     images: calibration YAML (OpenCV FileStorage)
   --fps N                the sequence's frame rate, for capture times (default 10)
-  --algorithm NAME       canonical (default)
+  --algorithm NAME       canonical (default), stevie or stevis
   --config FILE          stevi.v1.ServerConfig (text format or JSON): its source and pipeline
   --frames N             process at most N frames (synthetic: default 100; images: all)
   --out FILE             write the frames here instead of stdout

@@ -23,7 +23,7 @@ With no flags: the built-in synthetic rig, the canonical algorithm, listening on
   --right PATTERN|VIDEO  images: right images, likewise
   --calibration FILE     images: calibration YAML (OpenCV FileStorage)
   --fps N                frames per second to run the source at (default 10)
-  --algorithm NAME       canonical (default); stevie and stevis arrive later
+  --algorithm NAME       canonical (default), stevie (stereo + edges) or stevis (stereo + saliency)
   --help                 this text
 )";
 

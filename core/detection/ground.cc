@@ -27,7 +27,10 @@ std::vector<std::string> GroundOptions::Validate() const {
   if (!(min_row_fraction > 0 && min_row_fraction <= 1)) {
     problems.push_back("min_row_fraction: must be in (0, 1]" + Got(min_row_fraction));
   }
+  if (!(min_row_spread >= 0 && min_row_spread <= 1)) problems.push_back("min_row_spread: must be in [0, 1]" + Got(min_row_spread));
+  if (min_row_pixels < 1) problems.push_back("min_row_pixels: must be >= 1" + Got(min_row_pixels));
   if (min_support_rows < 2) problems.push_back("min_support_rows: must be >= 2" + Got(min_support_rows));
+  if (!(min_mode_px >= 0 && min_mode_px <= 64)) problems.push_back("min_mode_px: must be in [0, 64]" + Got(min_mode_px));
   if (!(inlier_px > 0 && inlier_px <= 16)) problems.push_back("inlier_px: must be in (0, 16]" + Got(inlier_px));
   if (!(min_span_px >= 0 && min_span_px <= 256)) {
     problems.push_back("min_span_px: must be in [0, 256]" + Got(min_span_px));
@@ -49,26 +52,35 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
   std::vector<RowMode> modes;
   std::vector<int> bins(max_bin);
   std::vector<double> sums(max_bin);
+  std::vector<int> first_x(max_bin), last_x(max_bin);
   for (int y = 0; y < fixed.rows; ++y) {
     std::fill(bins.begin(), bins.end(), 0);
     std::fill(sums.begin(), sums.end(), 0.0);
+    std::fill(first_x.begin(), first_x.end(), fixed.cols);
+    std::fill(last_x.begin(), last_x.end(), -1);
     const int16_t* row = fixed[y];
+    int matched = 0;
     for (int x = 0; x < fixed.cols; ++x) {
       if (row[x] < stereo::DisparityMap::kScale) continue;  // unmatched, or below 1 px
       const int bin = std::min(max_bin - 1, row[x] / stereo::DisparityMap::kScale);
       ++bins[bin];
       sums[bin] += row[x];
+      first_x[bin] = std::min(first_x[bin], x);
+      last_x[bin] = x;
+      ++matched;
     }
     const auto best = std::max_element(bins.begin(), bins.end());
-    if (*best >= options.min_row_fraction * fixed.cols) {
-      const int bin = static_cast<int>(best - bins.begin());
-      modes.push_back({static_cast<double>(y), sums[bin] / *best / stereo::DisparityMap::kScale,
-                       *best});
+    const int bin = static_cast<int>(best - bins.begin());
+    if (*best >= options.min_row_pixels && *best >= options.min_row_fraction * matched &&
+        last_x[bin] - first_x[bin] >= options.min_row_spread * fixed.cols) {
+      const double mode_px = sums[bin] / *best / stereo::DisparityMap::kScale;
+      if (mode_px >= options.min_mode_px) modes.push_back({static_cast<double>(y), mode_px, *best});
     }
   }
   if (static_cast<int>(modes.size()) < options.min_support_rows) return std::nullopt;
 
-  // RANSAC over pairs of rows: the line with the most supporting rows (weighted by their counts).
+  // RANSAC over pairs of rows: the line with the most supporting rows. Rows count alike: far
+  // terrain fills its rows with many pixels, the ground near the camera often matches sparsely.
   std::mt19937 rng(12345);  // seeded: the same map gives the same model
   std::uniform_int_distribution<size_t> pick(0, modes.size() - 1);
   double best_slope = 0, best_horizon = 0, best_score = -1;
@@ -76,7 +88,7 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
     double score = 0;
     for (const RowMode& m : modes) {
       if (std::abs(slope * (m.row - horizon) - m.disparity_px) <= options.inlier_px) {
-        score += m.count;
+        score += 1;
         if (out) out->push_back(&m);
       }
     }

@@ -16,8 +16,16 @@ struct GroundOptions {
   // Model the ground and drop what lies on it.
   bool enabled = true;
   // A row supports the fit when its most common disparity (1 px bins) holds at least this fraction
-  // of the row's pixels.
+  // of the row's matched pixels, and at least min_row_pixels of them (block matching leaves much of
+  // a steeply slanted ground unmatched, so the row's width is the wrong yardstick).
   double min_row_fraction = 0.3;
+  int min_row_pixels = 15;
+  // ... and spread across at least this fraction of the image width (the ground spans the view;
+  // an aircraft filling a few rows does not).
+  double min_row_spread = 0.3;
+  // Rows whose mode lies below this disparity (pixels) are far terrain or the horizon, not the
+  // ground near enough to matter; they do not vote.
+  double min_mode_px = 2.0;
   // Rows that must support the fit for a model to be accepted.
   int min_support_rows = 20;
   // A row supports the line when its mode lies within this distance of it (pixels).
@@ -29,7 +37,7 @@ struct GroundOptions {
   // A pixel stands out from the ground when its disparity exceeds the ground's on its row by more
   // than max(margin_px, margin_fraction * ground disparity).
   double margin_px = 1.0;
-  double margin_fraction = 0.08;
+  double margin_fraction = 0.15;
 
   std::vector<std::string> Validate() const;
 };

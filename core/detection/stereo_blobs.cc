@@ -42,6 +42,35 @@ double Consistency(const stereo::DisparityMap& disparity, const cv::Mat1i& label
   return valid == 0 ? 0.0 : static_cast<double>(consistent) / valid;
 }
 
+// Least-squares slope dZ/dH of depth over height (metres per metre; H = -y, up) over the blob's
+// pixels whose disparity lies within 30 % of its median. 0 when the blob is too short to tell.
+double DepthPerHeight(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
+                      const cv::Rect& box, double median_px, const geometry::StereoRig& rig,
+                      double min_height_m) {
+  const double fb = rig.f_px() * rig.baseline_m();
+  if (box.height < 12 || box.height * (fb / median_px) / rig.f_px() < min_height_m) return 0;
+  const double lo = 0.7 * median_px * stereo::DisparityMap::kScale;
+  const double hi = 1.3 * median_px * stereo::DisparityMap::kScale;
+  double n = 0, sh = 0, sz = 0, shh = 0, shz = 0;
+  for (int y = box.y; y < box.y + box.height; ++y) {
+    const int* lab = labels[y];
+    const int16_t* d = disparity.fixed[y];
+    for (int x = box.x; x < box.x + box.width; ++x) {
+      if (lab[x] != label || d[x] < lo || d[x] > hi) continue;
+      const double z = fb * stereo::DisparityMap::kScale / d[x];
+      const double h = -(y - rig.cy()) * z / rig.f_px();
+      n += 1;
+      sh += h;
+      sz += z;
+      shh += h * h;
+      shz += h * z;
+    }
+  }
+  const double var = n * shh - sh * sh;
+  if (n < 30 || var <= 1e-9) return 0;
+  return (n * shz - sh * sz) / var;
+}
+
 }  // namespace
 
 std::vector<std::string> StereoBlobOptions::Validate() const {
@@ -56,6 +85,12 @@ std::vector<std::string> StereoBlobOptions::Validate() const {
   if (!(max_disparity_step_px >= 0 && max_disparity_step_px <= 1000)) {
     problems.push_back("max_disparity_step_px: must be in [0, 1000] pixels" +
                        Got(max_disparity_step_px));
+  }
+  if (!(max_depth_per_height >= 0 && max_depth_per_height <= 100)) {
+    problems.push_back("max_depth_per_height: must be in [0, 100]" + Got(max_depth_per_height));
+  }
+  if (!(min_terrain_height_m >= 0 && min_terrain_height_m <= 1000)) {
+    problems.push_back("min_terrain_height_m: must be in [0, 1000]" + Got(min_terrain_height_m));
   }
   if (interior_erode_px < 0 || interior_erode_px > 50) {
     problems.push_back("interior_erode_px: must be in 0..50" + Got(interior_erode_px));
@@ -84,6 +119,35 @@ void FillRange(Detection& d, const geometry::StereoRig& rig, const geometry::Ran
   d.range_m = geometry::RangeFromPoint(d.position_cam_m);
   const double depth_sigma = geometry::DepthSigma(d.depth_m, f, b, range.disparity_sigma_px);
   d.range_sigma_m = d.depth_m > 0 ? depth_sigma * d.range_m / d.depth_m : depth_sigma;
+}
+
+cv::Mat1b StereoCandidates(const cv::Mat1b& appearance, const stereo::DisparityMap& disparity,
+                           const geometry::StereoRig& rig, const geometry::RangeOptions& range,
+                           const std::optional<GroundModel>& ground, const GroundOptions& ground_options) {
+  const cv::Mat1s& fixed = disparity.fixed;
+  cv::Mat1b out(fixed.size(), uchar{0});
+  if (!appearance.empty() && appearance.size() != fixed.size()) return out;
+  const double fb = rig.f_px() * rig.baseline_m();
+  double floor_px = range.min_disparity_px;
+  if (range.max_range_m > 0) floor_px = std::max(floor_px, fb / range.max_range_m);
+  const int floor_fixed = static_cast<int>(std::ceil(floor_px * stereo::DisparityMap::kScale - 1e-9));
+  for (int y = 0; y < fixed.rows; ++y) {
+    const int16_t* d = fixed[y];
+    const uchar* a = appearance.empty() ? nullptr : appearance[y];
+    uchar* o = out[y];
+    // The ground's threshold is the same along a row.
+    const double ground_d = ground ? ground->DisparityAt(y) : 0.0;
+    const double above_fixed =
+        ground ? (ground_d + std::max(ground_options.margin_px,
+                                      ground_options.margin_fraction * ground_d)) *
+                     stereo::DisparityMap::kScale
+               : -1.0;
+    for (int x = 0; x < fixed.cols; ++x) {
+      if ((a != nullptr && a[x] == 0) || d[x] < floor_fixed || d[x] <= above_fixed) continue;
+      o[x] = 255;
+    }
+  }
+  return out;
 }
 
 std::vector<Detection> RangeBlobs(const cv::Mat1b& candidates, const stereo::DisparityMap& disparity,
@@ -127,6 +191,12 @@ std::vector<Detection> RangeBlobs(const cv::Mat1b& candidates, const stereo::Dis
     const double valid_fraction = static_cast<double>(valid) / blob.area_px;
     if (valid_fraction < options.min_valid_fraction) continue;
     if (!geometry::IsTrustedDisparity(*median, rig.f_px(), rig.baseline_m(), range)) continue;
+    if (options.max_depth_per_height > 0 &&
+        DepthPerHeight(disparity, blobs.labels, blob.label, blob.bbox, *median, rig,
+                       options.min_terrain_height_m) >
+            options.max_depth_per_height) {
+      continue;  // terrain
+    }
 
     Detection d;
     d.bbox = blob.bbox;

@@ -2,6 +2,7 @@
 // of its interior, a range, an uncertainty and a score.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -9,6 +10,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/detection/detection.h"
+#include "core/detection/ground.h"
 #include "core/geometry/range.h"
 #include "core/geometry/stereo_rig.h"
 #include "core/stereo/disparity.h"
@@ -29,6 +31,13 @@ struct StereoBlobOptions {
   // (0 = the whole mask), unless fewer than 30 interior pixels remain. Block matching spreads an
   // object's disparity a few pixels into its surroundings.
   int interior_erode_px = 5;
+  // Terrain is not an obstacle: a blob whose depth grows by more than this many metres per metre
+  // of height (least squares over its pixels: a surface leaning back, like a hillside) is dropped.
+  // Obstacles show vertical faces (about 0). 0 disables. Blobs spanning less than
+  // min_terrain_height_m of height (or fewer than 12 rows) are never judged: over a small height
+  // the slope is mostly disparity noise.
+  double max_depth_per_height = 0.6;
+  double min_terrain_height_m = 3.0;
 
   std::vector<std::string> Validate() const;
 };
@@ -40,6 +49,13 @@ std::vector<Detection> RangeBlobs(const cv::Mat1b& candidates, const stereo::Dis
                                   const geometry::StereoRig& rig,
                                   const geometry::RangeOptions& range,
                                   const StereoBlobOptions& options, std::string_view extractor);
+
+// The stereo test of a candidate pixel: non-zero in `appearance` (every pixel when it is empty),
+// with a trusted disparity (range options) that stands out from the ground model (when there is
+// one). 255 where all hold.
+cv::Mat1b StereoCandidates(const cv::Mat1b& appearance, const stereo::DisparityMap& disparity,
+                           const geometry::StereoRig& rig, const geometry::RangeOptions& range,
+                           const std::optional<GroundModel>& ground, const GroundOptions& ground_options);
 
 // Fills the fields derived from d.disparity_px (depth, range, sigma, position) from the rig.
 void FillRange(Detection& d, const geometry::StereoRig& rig, const geometry::RangeOptions& range);

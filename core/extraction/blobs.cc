@@ -9,9 +9,34 @@
 namespace stevi::extraction {
 namespace {
 
-// Length of the outer contour of `label` inside `bbox` of `labels`. Works on the ROI only, padded
-// by one pixel so that contours touching the box's edge are closed like any other.
-double OuterPerimeter(const cv::Mat1i& labels, int label, const cv::Rect& bbox) {
+struct Shape {
+  double perimeter_px = 0;
+  cv::Moments moments;
+};
+
+// Raw moments of a region moved by (dx, dy): sum of (x + dx)^p (y + dy)^q over the pixels. The
+// central and normalised moments do not change.
+cv::Moments Shifted(const cv::Moments& m, double dx, double dy) {
+  cv::Moments s = m;
+  const double dx2 = dx * dx, dy2 = dy * dy;
+  s.m10 = m.m10 + dx * m.m00;
+  s.m01 = m.m01 + dy * m.m00;
+  s.m20 = m.m20 + 2 * dx * m.m10 + dx2 * m.m00;
+  s.m11 = m.m11 + dx * m.m01 + dy * m.m10 + dx * dy * m.m00;
+  s.m02 = m.m02 + 2 * dy * m.m01 + dy2 * m.m00;
+  s.m30 = m.m30 + 3 * dx * m.m20 + 3 * dx2 * m.m10 + dx2 * dx * m.m00;
+  s.m21 = m.m21 + dy * m.m20 + 2 * dx * m.m11 + 2 * dx * dy * m.m10 + dx2 * m.m01 +
+          dx2 * dy * m.m00;
+  s.m12 = m.m12 + dx * m.m02 + 2 * dy * m.m11 + 2 * dx * dy * m.m01 + dy2 * m.m10 +
+          dx * dy2 * m.m00;
+  s.m03 = m.m03 + 3 * dy * m.m02 + 3 * dy2 * m.m01 + dy2 * dy * m.m00;
+  return s;
+}
+
+// Length of the outer contour of `label` inside `bbox` of `labels`, and the label's moments.
+// Works on the ROI only, padded by one pixel so that contours touching the box's edge are closed
+// like any other.
+Shape BlobShape(const cv::Mat1i& labels, int label, const cv::Rect& bbox) {
   cv::Mat1b roi_mask(bbox.height + 2, bbox.width + 2, uchar{0});
   const cv::Mat1i roi = labels(bbox);
   for (int y = 0; y < roi.rows; ++y) {
@@ -19,15 +44,19 @@ double OuterPerimeter(const cv::Mat1i& labels, int label, const cv::Rect& bbox) 
     uchar* dst = roi_mask[y + 1] + 1;
     for (int x = 0; x < roi.cols; ++x) dst[x] = src[x] == label ? 255 : 0;
   }
+  Shape shape;
+  // Moments in ROI coordinates (small numbers, no cancellation), then moved to the image.
+  const cv::Moments local =
+      cv::moments(roi_mask(cv::Rect(1, 1, bbox.width, bbox.height)), /*binaryImage=*/true);
+  shape.moments = Shifted(local, bbox.x, bbox.y);
   std::vector<std::vector<cv::Point>> contours;
   cv::findContours(roi_mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
   // One 8-connected component gives one outer contour; take the longest to be safe.
-  double longest = 0;
   for (const auto& contour : contours) {
     const double length = contour.size() == 1 ? 0.0 : cv::arcLength(contour, /*closed=*/true);
-    if (length > longest) longest = length;
+    if (length > shape.perimeter_px) shape.perimeter_px = length;
   }
-  return longest;
+  return shape;
 }
 
 // Union-find over pixel indices, with path halving.
@@ -110,7 +139,9 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
     blob.bbox = cv::Rect(a.x0, a.y0, a.x1 - a.x0 + 1, a.y1 - a.y0 + 1);
     blob.centroid_px = cv::Point2d(a.sx / a.area, a.sy / a.area);
     blob.area_px = a.area;
-    blob.perimeter_px = OuterPerimeter(set.labels, label, blob.bbox);
+    const Shape shape = BlobShape(set.labels, label, blob.bbox);
+    blob.perimeter_px = shape.perimeter_px;
+    blob.moments = shape.moments;
     set.blobs.push_back(blob);
   }
   return set;
@@ -135,7 +166,9 @@ BlobSet ExtractBlobs(const cv::Mat1b& mask, int min_area_px) {
                  stats.at<int>(label, cv::CC_STAT_WIDTH), stats.at<int>(label, cv::CC_STAT_HEIGHT));
     blob.centroid_px = cv::Point2d(centroids.at<double>(label, 0), centroids.at<double>(label, 1));
     blob.area_px = area;
-    blob.perimeter_px = OuterPerimeter(set.labels, label, blob.bbox);
+    const Shape shape = BlobShape(set.labels, label, blob.bbox);
+    blob.perimeter_px = shape.perimeter_px;
+    blob.moments = shape.moments;
     set.blobs.push_back(blob);
   }
   return set;

@@ -13,6 +13,10 @@ struct Blob {
   cv::Point2d centroid_px;
   int area_px = 0;          // pixel count
   double perimeter_px = 0;  // length of the outer contour
+  // Spatial moments of the blob's pixels (each pixel weighs 1) in image coordinates, pixels:
+  // m00 = area_px, (m10, m01) / m00 = centroid_px. The central (mu) and normalised (nu) moments
+  // are translation invariant.
+  cv::Moments moments;
 };
 
 struct BlobSet {

@@ -50,11 +50,8 @@ std::vector<std::string> PipelineConfig::Validate() const {
   std::vector<std::string> problems;
   switch (algorithm) {
     case Algorithm::kCanonical:
-      break;
     case Algorithm::kSteViE:
     case Algorithm::kSteViS:
-      problems.push_back("algorithm: '" + std::string(AlgorithmName(algorithm)) +
-                         "' is not available yet (only canonical)");
       break;
     default:
       problems.push_back("algorithm: unknown value " + std::to_string(static_cast<int>(algorithm)));
@@ -62,6 +59,8 @@ std::vector<std::string> PipelineConfig::Validate() const {
   AppendPrefixed(problems, "matcher.", matcher.Validate());
   AppendPrefixed(problems, "range.", range.Validate());
   AppendPrefixed(problems, "canonical.", canonical.Validate());
+  AppendPrefixed(problems, "stevie.", stevie.Validate());
+  AppendPrefixed(problems, "stevis.", stevis.Validate());
   return problems;
 }
 

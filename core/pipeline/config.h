@@ -10,6 +10,8 @@
 
 #include "core/common/error.h"
 #include "core/detection/canonical.h"
+#include "core/detection/stevie.h"
+#include "core/detection/stevis.h"
 #include "core/geometry/range.h"
 #include "core/stereo/matcher.h"
 
@@ -26,6 +28,8 @@ struct PipelineConfig {
   stereo::MatcherOptions matcher;
   geometry::RangeOptions range;
   detection::CanonicalOptions canonical;
+  detection::SteViEOptions stevie;
+  detection::SteViSOptions stevis;
 
   // Every problem of every stage, each as "field.path: problem".
   std::vector<std::string> Validate() const;

@@ -128,9 +128,13 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
           detection::DetectCanonical(result.disparity, rig, config.range, config.canonical);
       break;
     case Algorithm::kSteViE:
+      result.detections =
+          detection::DetectSteViE(rect_left, result.disparity, rig, config.range, config.stevie);
+      break;
     case Algorithm::kSteViS:
-      return Invalid("algorithm: '" + std::string(AlgorithmName(config.algorithm)) +
-                     "' is not available yet (only canonical)");
+      result.detections =
+          detection::DetectSteViS(rect_left, result.disparity, rig, config.range, config.stevis);
+      break;
   }
   result.timings.push_back({"extract", MsSince(t)});
 

@@ -175,6 +175,7 @@ std::vector<std::string> BlockMatchingOptions::Validate() const {
   CheckRange(problems, "prefilter_cap", prefilter_cap, 1, 63);
   CheckRange(problems, "block_size", block_size, 5, 255, /*odd=*/true);
   CheckDisparityRange(problems, num_disparities, min_disparity);
+  CheckAtLeast(problems, "local_texture_threshold", local_texture_threshold, 0);
   CheckAtLeast(problems, "texture_threshold", texture_threshold, 0);
   CheckRange(problems, "uniqueness_ratio", uniqueness_ratio, 0, 100);
   CheckAtLeast(problems, "speckle_window_size", speckle_window_size, 0);
@@ -274,7 +275,8 @@ std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options) {
   bm->setSpeckleRange(o.speckle_range * DisparityMap::kScale);
   // StereoBM's first valid column is min + num - 1 + block / 2: pad that far (plus one).
   const int pad = o.pad_left ? o.min_disparity + o.num_disparities + o.block_size / 2 : 0;
-  return std::make_unique<OpenCvMatcher>(options, std::move(bm), pad, o.block_size);
+  const TextureGate gate{o.local_texture_threshold, kMinTextureWindow};
+  return std::make_unique<OpenCvMatcher>(options, std::move(bm), pad, o.block_size, gate);
 }
 
 }  // namespace stevi::stereo

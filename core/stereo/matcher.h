@@ -42,6 +42,11 @@ struct BlockMatchingOptions {
   // replicating the border, so that the leftmost columns get disparities too (OpenCV leaves them
   // unmatched otherwise); the padding is cropped from the result.
   bool pad_left = true;
+  // Halo gate: a pixel keeps its disparity only when the mean |x-Sobel| of the left image over the
+  // 5x5 window centred on it reaches this (the measure of SemiGlobalOptions::texture_threshold).
+  // Block matching gives the flat sky within half a block of an object the object's disparity;
+  // the gate trims that halo to about 2 px, so boxes fit their objects. 0 disables.
+  int local_texture_threshold = 14;
 
   std::vector<std::string> Validate() const;
   friend bool operator==(const BlockMatchingOptions&, const BlockMatchingOptions&) = default;

@@ -1,6 +1,8 @@
 // A scene description for the synthetic rig. World frame = the left camera's frame at rest:
-// x right, y down, z forward, metres. The camera looks along +z; the ground is the plane
-// y = camera_height_m.
+// x right, y down, z forward, metres. The camera looks along +z (level, no pitch); the ground is
+// the plane y = camera_height_m. Besides the obstacles (boxes, the only things with an obstacle
+// id), the ground may carry hills (half-buried ellipsoids) and flat painted marks: they are
+// terrain, object_id 0 in the truth, like the ground.
 #pragma once
 
 #include <string>
@@ -39,6 +41,47 @@ struct Obstacle {
   double texture_cell_m = 0.15;  // finest texture detail, metres
 };
 
+// A smooth bump of the terrain: the part of the ellipsoid
+// ((x - cx) / rx)^2 + ((y - cy) / ry)^2 + ((z - cz) / rz)^2 <= 1 above the ground. The centre is
+// on or below the ground (centre_m[1] >= camera_height_m), so the hill rises
+// radii_m[1] - (centre_m[1] - camera_height_m) metres above the ground and its foot is the
+// ellipse where it meets the ground plane. Not an obstacle: object_id 0 in the truth.
+// Textured in world (x, z) like the ground and lit from above, so that its slopes show.
+struct Hill {
+  cv::Vec3d centre_m;                // world frame (y down): centre_m[1] >= camera_height_m
+  cv::Vec3d radii_m{1.0, 1.0, 1.0};  // semi-axes along x, y (vertical) and z, all > 0
+  double albedo = 0.45;              // mean grey level 0..1 of its texture
+  double contrast = 0.3;             // texture contrast 0..1
+  double texture_cell_m = 1.0;       // finest texture detail, metres
+};
+
+// A flat mark painted on the ground (a runway edge line, a threshold bar, a field of another
+// crop): the axis-aligned rectangle x in [x, x + width), z in [y, y + height) of the ground
+// plane (cv::Rect2d's y is the world z). Its grey is albedo + its own contrast times the ground's
+// texture; edges are anti-aliased (the pixel's footprint on the ground is box-filtered), so both
+// views see it alike at sub-pixel disparities. Marks listed later paint over earlier ones and over
+// the ground; hills and obstacles hide them. Not an obstacle: object_id 0.
+struct GroundMark {
+  cv::Rect2d area_xz_m;   // x = x0, y = z0, width = x extent, height = z extent; both > 0
+  double albedo = 0.9;    // mean grey 0..1 of the paint
+  double contrast = 0.05; // contrast 0..1 of the paint's texture (the ground's noise pattern)
+};
+
+// A dashed line along z on the ground (a runway centreline): dashes of length dash_m separated
+// by gaps of gap_m, the first dash starting at z_start_m, none beyond z_end_m (which may be
+// infinite); width_m wide, centred on x = x_m. One periodic pattern instead of many marks:
+// cheap for hundreds of dashes. Painted after the GroundMarks, same shading as a mark.
+struct DashedLine {
+  double x_m = 0.0;
+  double width_m = 0.9;
+  double z_start_m = 0.0;
+  double z_end_m = 2000.0;  // > z_start_m; may be +infinity
+  double dash_m = 30.0;     // > 0
+  double gap_m = 20.0;      // >= 0 (0 = a continuous line)
+  double albedo = 0.9;
+  double contrast = 0.05;
+};
+
 struct Scene {
   double camera_height_m = 40.0;  // the ground plane is y = camera_height_m
   double ground_albedo = 0.45;
@@ -47,6 +90,10 @@ struct Scene {
   double sky_top = 0.55;          // grey of the sky at the top row, 0..1
   double sky_horizon = 0.9;       // grey at the horizon
   std::vector<Obstacle> obstacles;
+  // Terrain (object_id 0, never in the truth's obstacle list).
+  std::vector<Hill> hills;
+  std::vector<GroundMark> marks;          // painted in order, later over earlier
+  std::vector<DashedLine> dashed_lines;   // painted after the marks
 
   std::vector<std::string> Validate() const;
 };

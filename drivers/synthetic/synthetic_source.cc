@@ -23,6 +23,16 @@ constexpr float kShadeBottom = 0.7f;  // normal +y (the underside, seen from bel
 constexpr int kOctaves = 3;
 constexpr double kOctaveScale[kOctaves] = {1.0, 3.0, 9.0};
 constexpr float kOctaveWeight[kOctaves] = {0.5f, 0.3f, 0.2f};
+// Hills are lit by a distant light from above, left and behind the camera: grey factor
+// kHillAmbient + kHillDiffuse * (normal . light), so that slopes and silhouettes show.
+constexpr double kHillAmbient = 0.8;
+constexpr double kHillDiffuse = 0.35;
+constexpr double kHillLight[3] = {-0.4, -1.0, -0.5};  // towards the light (normalised at use)
+// Texture footprints on slanted hill surfaces grow as 1 / cos(incidence), capped here.
+constexpr double kHillMaxStretch = 50.0;
+// Triplanar texture blend: a plane counts where its squared normal component exceeds this
+// fraction of the largest.
+constexpr double kHillBlendFloor = 0.6;
 
 uint64_t SplitMix64(uint64_t x) {
   x += 0x9E3779B97F4A7C15ull;
@@ -106,6 +116,47 @@ struct RowStat {
   int count = 0;
 };
 
+// One hill, prepared for ray casting. Static over the sequence.
+struct HillGeom {
+  cv::Vec3d centre;
+  cv::Vec3d inv_r;           // 1 / radii
+  double origin_s[2][3] = {};  // per view: (camera centre - hill centre) / radii
+  double c[2] = {0.0, 0.0};    // per view: |origin_s|^2 - 1 (> 0: the camera is outside)
+  PixelRect rect[2];           // per view: pixel bounds of the part above the ground
+  float albedo = 0, contrast = 0;
+  double cell_m = 0;
+  uint32_t seed = 0;
+};
+
+// The paint of one mark or dashed line, with its coverage of the current row (z footprint).
+struct MarkCandidate {
+  double x0, x1;     // x extent on the ground, metres
+  double cover_z;    // fraction of the row's z footprint that the mark covers
+  float albedo, contrast;
+};
+
+// Length of [z_start, z] covered by dashes of length dash starting every period metres at
+// z_start (z >= z_start).
+inline double DashedLength(double z, double z_start, double dash, double period) {
+  const double s = z - z_start;
+  const double k = std::floor(s / period);
+  return k * dash + std::min(s - k * period, dash);
+}
+
+// Fraction of the ground interval [z0, z1] (z1 may be infinite) that a dashed line covers.
+double DashedCoverZ(const DashedLine& line, double z0, double z1) {
+  const double period = line.dash_m + line.gap_m;
+  if (!std::isfinite(z1)) {
+    return std::isfinite(line.z_end_m) ? 0.0 : line.dash_m / period;
+  }
+  const double a = std::max(z0, line.z_start_m);
+  const double b = std::min(z1, line.z_end_m);
+  if (!(b > a)) return 0.0;
+  const double covered = DashedLength(b, line.z_start_m, line.dash_m, period) -
+                         DashedLength(a, line.z_start_m, line.dash_m, period);
+  return std::clamp(covered / (z1 - z0), 0.0, 1.0);
+}
+
 // Everything one frame's rows need; read-only while the rows render.
 struct FrameSetup {
   std::vector<Box> boxes;
@@ -120,6 +171,8 @@ struct SyntheticRenderer::Impl {
   double cx = 0, cy = 0;
   uint32_t ground_seed = 0;
   std::vector<std::array<uint32_t, 3>> face_seeds;  // per obstacle, per face axis
+  std::vector<HillGeom> hills;                      // static terrain
+  double hill_light[3] = {0.0, 0.0, 0.0};           // unit vector towards the light
 
   explicit Impl(SyntheticOptions o) : options(std::move(o)) {
     cx = options.width / 2.0;
@@ -132,6 +185,39 @@ struct SyntheticRenderer::Impl {
             Mix(options.seed, (static_cast<uint64_t>(static_cast<uint32_t>(ob.id)) << 2) | axis));
       }
       face_seeds.push_back(s);
+    }
+    const double light_norm =
+        std::sqrt(kHillLight[0] * kHillLight[0] + kHillLight[1] * kHillLight[1] +
+                  kHillLight[2] * kHillLight[2]);
+    for (int k = 0; k < 3; ++k) hill_light[k] = kHillLight[k] / light_norm;
+    const double h = options.scene.camera_height_m;
+    for (size_t i = 0; i < options.scene.hills.size(); ++i) {
+      const Hill& hill = options.scene.hills[i];
+      HillGeom g;
+      g.centre = hill.centre_m;
+      for (int k = 0; k < 3; ++k) g.inv_r[k] = 1.0 / hill.radii_m[k];
+      g.albedo = static_cast<float>(hill.albedo);
+      g.contrast = static_cast<float>(hill.contrast);
+      g.cell_m = hill.texture_cell_m;
+      g.seed = static_cast<uint32_t>(Mix(options.seed, 0x68696C6C00000000ull + i));  // "hill"
+      // The bounding box of the part above the ground (empty when the hill is buried).
+      Box bounds;
+      bounds.lo = hill.centre_m - hill.radii_m;
+      bounds.hi = hill.centre_m + hill.radii_m;
+      bounds.hi[1] = std::min(bounds.hi[1], h);
+      for (int view = 0; view < 2; ++view) {
+        const double ox = view == 0 ? 0.0 : options.baseline_m;
+        const double rel[3] = {ox - g.centre[0], -g.centre[1], -g.centre[2]};
+        double c = -1.0;
+        for (int k = 0; k < 3; ++k) {
+          g.origin_s[view][k] = rel[k] * g.inv_r[k];
+          c += g.origin_s[view][k] * g.origin_s[view][k];
+        }
+        g.c[view] = c;
+        // A camera inside a hill sees nothing of it.
+        if (bounds.lo[1] < bounds.hi[1] && c > 0.0) g.rect[view] = Project(bounds, ox);
+      }
+      hills.push_back(g);
     }
   }
 
@@ -201,6 +287,43 @@ struct SyntheticRenderer::Impl {
     return static_cast<float>(s.sky_horizon + (s.sky_top - s.sky_horizon) * frac);
   }
 
+  // Grey of the hill surface point (x, y, z). A function of the world point alone, so both
+  // views shade it alike: the texture is triplanar in world coordinates (blended by the normal),
+  // its footprint the pixel size at depth z stretched by the incidence seen from the rig's
+  // mid-baseline, and the light is fixed.
+  float ShadeHill(const HillGeom& g, double x, double y, double z) const {
+    double n[3] = {(x - g.centre[0]) * g.inv_r[0] * g.inv_r[0],
+                   (y - g.centre[1]) * g.inv_r[1] * g.inv_r[1],
+                   (z - g.centre[2]) * g.inv_r[2] * g.inv_r[2]};
+    const double n_norm = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    for (double& c : n) c /= n_norm;
+    const double w[3] = {0.5 * options.baseline_m - x, -y, -z};
+    const double w_norm = std::sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+    const double incidence = std::abs(n[0] * w[0] + n[1] * w[1] + n[2] * w[2]) / w_norm;
+    const double footprint = z / options.f_px * std::min(1.0 / incidence, kHillMaxStretch);
+    // Triplanar weights: n_i^2 above 0.6 times the largest n_j^2, normalised. Continuous in the
+    // normal, and only one or two planes are sampled per pixel (the texture is the cost).
+    const double n2[3] = {n[0] * n[0], n[1] * n[1], n[2] * n[2]};
+    const double floor2 = kHillBlendFloor * std::max({n2[0], n2[1], n2[2]});
+    const double wx = std::max(0.0, n2[0] - floor2);
+    const double wy = std::max(0.0, n2[1] - floor2);
+    const double wz = std::max(0.0, n2[2] - floor2);
+    const double w_sum = wx + wy + wz;
+    float tex = 0.0f;
+    if (wy > 0.0) {
+      tex += static_cast<float>(wy / w_sum) * Texture(g.seed, x, z, g.cell_m, footprint);
+    }
+    if (wz > 0.0) {
+      tex += static_cast<float>(wz / w_sum) * Texture(g.seed + 1u, x, y, g.cell_m, footprint);
+    }
+    if (wx > 0.0) {
+      tex += static_cast<float>(wx / w_sum) * Texture(g.seed + 2u, z, y, g.cell_m, footprint);
+    }
+    const double lit = n[0] * hill_light[0] + n[1] * hill_light[1] + n[2] * hill_light[2];
+    const auto shade = static_cast<float>(kHillAmbient + kHillDiffuse * lit);
+    return shade * (g.albedo + 2.0f * g.contrast * tex);
+  }
+
   // Ray-casts and shades row v of one view. `grey` (nullable) gets the 8-bit image row,
   // `disparity`, `ids` and `stats` (all nullable) the truth of the row.
   void RenderRow(const FrameSetup& setup, int view, int v, uint8_t* grey, float* disparity,
@@ -254,6 +377,68 @@ struct SyntheticRenderer::Impl {
     const float ground_albedo = static_cast<float>(scene.ground_albedo);
     const float ground_contrast = static_cast<float>(scene.ground_contrast);
 
+    // Hills this row may see, with the row's terms of the ray-ellipsoid quadratic
+    // A t^2 + 2 B t + C = 0 in the hill's scaled frame: A = (a/rx)^2 + a_row,
+    // B = ox_s a / rx + b_row.
+    struct HillCandidate {
+      int index;
+      int u0, u1;
+      double a_row, b_row;
+    };
+    HillCandidate hill_candidates[16];
+    std::vector<HillCandidate> many_hills;
+    HillCandidate* hill_cand = hill_candidates;
+    if (hills.size() > 16) {
+      many_hills.resize(hills.size());
+      hill_cand = many_hills.data();
+    }
+    int n_hill = 0;
+    for (size_t i = 0; i < hills.size(); ++i) {
+      const HillGeom& g = hills[i];
+      const PixelRect& r = g.rect[view];
+      if (v < r.v0 || v > r.v1 || r.u0 > r.u1) continue;
+      const double by = b * g.inv_r[1];
+      const double bz = g.inv_r[2];
+      hill_cand[n_hill++] = HillCandidate{static_cast<int>(i), r.u0, r.u1, by * by + bz * bz,
+                                          g.origin_s[view][1] * by + g.origin_s[view][2] * bz};
+    }
+
+    // Marks this row's ground may show (only to shade: the truth does not need them).
+    MarkCandidate mark_candidates[32];
+    std::vector<MarkCandidate> many_marks;
+    MarkCandidate* mark_cand = mark_candidates;
+    int n_mark = 0;
+    const size_t n_paint = scene.marks.size() + scene.dashed_lines.size();
+    if (grey != nullptr && sees_ground && n_paint > 0) {
+      if (n_paint > 32) {
+        many_marks.resize(n_paint);
+        mark_cand = many_marks.data();
+      }
+      // The row's footprint on the ground: depths seen by rays through v - 0.5 .. v + 0.5.
+      const double b_far = (v - 0.5 - cy) / f, b_near = (v + 0.5 - cy) / f;
+      const double z_near = scene.camera_height_m / b_near;
+      const double z_far =
+          b_far > 0.0 ? scene.camera_height_m / b_far : std::numeric_limits<double>::infinity();
+      for (const GroundMark& m : scene.marks) {
+        const double mz0 = m.area_xz_m.y, mz1 = m.area_xz_m.y + m.area_xz_m.height;
+        if (!std::isfinite(z_far)) continue;  // a finite mark covers none of an endless row
+        const double covered = std::min(z_far, mz1) - std::max(z_near, mz0);
+        if (!(covered > 0.0)) continue;
+        mark_cand[n_mark++] = MarkCandidate{m.area_xz_m.x, m.area_xz_m.x + m.area_xz_m.width,
+                                            covered / (z_far - z_near),
+                                            static_cast<float>(m.albedo),
+                                            static_cast<float>(m.contrast)};
+      }
+      for (const DashedLine& line : scene.dashed_lines) {
+        const double cover = DashedCoverZ(line, z_near, z_far);
+        if (!(cover > 0.0)) continue;
+        mark_cand[n_mark++] = MarkCandidate{line.x_m - 0.5 * line.width_m,
+                                            line.x_m + 0.5 * line.width_m, cover,
+                                            static_cast<float>(line.albedo),
+                                            static_cast<float>(line.contrast)};
+      }
+    }
+
     for (int u = 0; u < options.width; ++u) {
       const double a = (u - cx) / f;  // ray x-direction
       double best_t = std::numeric_limits<double>::infinity();
@@ -292,11 +477,37 @@ struct SyntheticRenderer::Impl {
           best_enters_hi = enters_hi;
         }
       }
+      // Hills: the nearest entry into an ellipsoid. An entry below the ground plane is always
+      // farther than the ray's ground hit (the ray crosses the plane first, outside the hill),
+      // so the plain nearest-hit rule is exact for the half-buried hills.
+      int best_hill = -1;
+      for (int k = 0; k < n_hill; ++k) {
+        const HillCandidate& c = hill_cand[k];
+        if (u < c.u0 || u > c.u1) continue;
+        const HillGeom& g = hills[c.index];
+        const double ax = a * g.inv_r[0];
+        const double qa = ax * ax + c.a_row;
+        const double qb = g.origin_s[view][0] * ax + c.b_row;
+        const double qc = g.c[view];
+        if (qb >= 0.0) continue;  // the camera is outside (qc > 0): both roots are behind
+        const double disc = qb * qb - qa * qc;
+        if (disc < 0.0) continue;
+        // The nearer root, in the cancellation-free form C / (-B + sqrt(B^2 - A C)).
+        const double t_hit = qc / (-qb + std::sqrt(disc));
+        if (t_hit > kNearM && t_hit < best_t) {
+          best_t = t_hit;
+          best_hill = k;
+        }
+      }
+      if (best_hill >= 0) best = -1;
       const bool ground = sees_ground && ground_t < best_t;
 
       if (disparity != nullptr) {
         if (ground) {
           disparity[u] = static_cast<float>(fb / ground_t);
+          ids[u] = 0;
+        } else if (best_hill >= 0) {
+          disparity[u] = static_cast<float>(fb / best_t);
           ids[u] = 0;
         } else if (best >= 0) {
           disparity[u] = static_cast<float>(fb / best_t);
@@ -319,6 +530,21 @@ struct SyntheticRenderer::Impl {
         const float n = Texture(ground_seed, x, ground_t, scene.ground_texture_cell_m,
                                 ground_footprint);
         value = ground_albedo + 2.0f * ground_contrast * n;
+        if (n_mark > 0) {
+          // Box filter of the pixel's footprint: ground_t / f wide in x, the row's z footprint.
+          const double half = 0.5 * ground_t / f;
+          for (int k = 0; k < n_mark; ++k) {
+            const MarkCandidate& m = mark_cand[k];
+            const double covered_x = std::min(x + half, m.x1) - std::max(x - half, m.x0);
+            if (!(covered_x > 0.0)) continue;
+            const auto cover = static_cast<float>(std::min(1.0, covered_x / (2.0 * half)) *
+                                                  m.cover_z);
+            const float paint = m.albedo + 2.0f * m.contrast * n;
+            value += cover * (paint - value);
+          }
+        }
+      } else if (best_hill >= 0) {
+        value = ShadeHill(hills[hill_cand[best_hill].index], ox + a * best_t, b * best_t, best_t);
       } else if (best >= 0) {
         const Box& box = setup.boxes[cand[best].index];
         // Surface point in the box's own frame, so the texture moves with the box.

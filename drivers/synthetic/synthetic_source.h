@@ -93,4 +93,19 @@ class SyntheticSource : public StereoSource {
 // Validates the options (every problem listed) and builds the source.
 Result<std::unique_ptr<SyntheticSource>> OpenSyntheticSource(SyntheticOptions options);
 
+// A named evaluation scene with truth: the rig, noise, seed and scene, and how many frames to
+// play (frame k at t = k / options.fps; moving obstacles loop every frames / fps seconds).
+struct Scenario {
+  std::string name;
+  std::string description;  // what is in it and what makes it hard
+  SyntheticOptions options;
+  int frames = 60;
+};
+
+// The scenarios for evaluating the obstacle detectors, on the default rig (640x480, f = 700 px,
+// B = 0.6 m, 10 fps): "clear_sky", "low_over_ground", "small_far", "close_pair", "low_contrast"
+// and "tower_on_ground". Every obstacle shows at least 8 px of disparity (all of its pixels) and
+// is mostly in frame. Defined in scene.cc, next to DefaultScene().
+std::vector<Scenario> EvaluationScenarios();
+
 }  // namespace stevi::drivers

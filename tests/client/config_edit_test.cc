@@ -29,6 +29,33 @@ TEST(SetFieldByPath, SetsNestedScalarsAndShortEnumNames) {
   EXPECT_TRUE(config.matcher().block_matching().has_pad_left());
 }
 
+TEST(SetFieldByPath, SetsStevieAndStevisFields) {
+  v1::PipelineConfig config;
+  EXPECT_EQ(SetFieldByPath(config, "algorithm", "stevie"), "");
+  EXPECT_EQ(config.algorithm(), v1::ALGORITHM_STEVIE);
+  EXPECT_EQ(SetFieldByPath(config, "stevie.edges.canny_high", "150"), "");
+  EXPECT_DOUBLE_EQ(config.stevie().edges().canny_high(), 150);
+  EXPECT_TRUE(config.stevie().edges().has_canny_high());
+  EXPECT_FALSE(config.stevie().edges().has_canny_low()) << "only what was set is sent";
+  EXPECT_EQ(SetFieldByPath(config, "stevie.morphology.shape", "cross"), "");
+  EXPECT_EQ(config.stevie().morphology().shape(), v1::STRUCTURING_SHAPE_CROSS);
+  EXPECT_EQ(SetFieldByPath(config, "stevie.ground.enabled", "false"), "");
+  EXPECT_TRUE(config.stevie().ground().has_enabled());
+  EXPECT_EQ(SetFieldByPath(config, "stevis.segmentation", "graph"), "");
+  EXPECT_EQ(config.stevis().segmentation(), v1::SEGMENTATION_GRAPH);
+  EXPECT_EQ(SetFieldByPath(config, "stevis.saliency_threshold", "0.2"), "");
+  EXPECT_DOUBLE_EQ(config.stevis().saliency_threshold(), 0.2);
+  EXPECT_EQ(SetFieldByPath(config, "stevis.graph.min_size", "80"), "");
+  EXPECT_EQ(config.stevis().graph().min_size(), 80);
+  EXPECT_EQ(SetFieldByPath(config, "stevis.blobs.min_area_px", "40"), "");
+  EXPECT_EQ(config.stevis().blobs().min_area_px(), 40);
+  EXPECT_FALSE(config.stevie().blobs().has_min_area_px());
+
+  EXPECT_THAT(SetFieldByPath(config, "stevis.segmentation", "magic"),
+              AllOf(HasSubstr("stevis.segmentation"), HasSubstr("SEGMENTATION_THRESHOLD")));
+  EXPECT_THAT(SetFieldByPath(config, "stevis.saliency.scales", "2"), HasSubstr("repeated"));
+}
+
 TEST(SetFieldByPath, NamesTheKeyAndWhatIsValid) {
   v1::PipelineConfig config;
   EXPECT_THAT(SetFieldByPath(config, "canonical.nope", "1"),

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <map>
 #include <string>
 #include <vector>
@@ -314,6 +315,91 @@ TEST(Validate, ListsEveryProblem) {
   EXPECT_THAT(source.error().message, HasSubstr("scene.obstacles[2].size_m"));
 
   EXPECT_THAT(SyntheticOptions{}.Validate(), ::testing::IsEmpty());
+}
+
+TEST(Validate, ListsEveryTerrainProblem) {
+  SyntheticOptions o;
+  o.scene.camera_height_m = 3.0;
+  Hill good;
+  good.centre_m = {0.0, 4.0, 80.0};
+  good.radii_m = {20.0, 10.0, 15.0};
+  o.scene.hills = {good, good, good, good};
+  o.scene.hills[1].radii_m = {20.0, 0.0, 15.0};
+  o.scene.hills[1].albedo = 1.5;
+  o.scene.hills[2].contrast = -0.1;
+  o.scene.hills[2].texture_cell_m = 0.0;
+  o.scene.hills[3].centre_m = {0.0, 2.0, 5.0};  // above the ground, and around the camera
+  GroundMark mark;
+  mark.area_xz_m = cv::Rect2d(-1.0, 10.0, 2.0, 30.0);
+  o.scene.marks = {mark, mark};
+  o.scene.marks[1].area_xz_m.width = 0.0;
+  o.scene.marks[1].albedo = 2.0;
+  DashedLine line;
+  o.scene.dashed_lines = {line, line};
+  o.scene.dashed_lines[1].dash_m = 0.0;
+  o.scene.dashed_lines[1].z_end_m = o.scene.dashed_lines[1].z_start_m;
+  o.scene.dashed_lines[1].width_m = -1.0;
+  EXPECT_THAT(o.Validate(),
+              ::testing::UnorderedElementsAre(
+                  "scene.hills[1].radii_m: every radius must be > 0",
+                  "scene.hills[1].albedo: must be in 0..1",
+                  "scene.hills[2].contrast: must be in 0..1",
+                  "scene.hills[2].texture_cell_m: must be > 0",
+                  "scene.hills[3].centre_m: must be on or below the ground (y >= camera_height_m)",
+                  "scene.hills[3].centre_m: the camera (0, 0, 0) must be outside the hill",
+                  "scene.marks[1].area_xz_m: must be finite with width and height > 0",
+                  "scene.marks[1].albedo: must be in 0..1",
+                  "scene.dashed_lines[1].width_m: must be > 0",
+                  "scene.dashed_lines[1].z_end_m: must be > z_start_m (may be infinite)",
+                  "scene.dashed_lines[1].dash_m: must be > 0"));
+  o.scene.hills.resize(1);
+  o.scene.marks.resize(1);
+  o.scene.dashed_lines.resize(1);
+  o.scene.dashed_lines[0].z_end_m = std::numeric_limits<double>::infinity();
+  EXPECT_THAT(o.Validate(), ::testing::IsEmpty());
+}
+
+// A hill is terrain (object_id 0) and hides the ground and the obstacles behind it; an obstacle
+// in front of it hides it.
+TEST(Render, HillsAreTerrainAndHideWhatIsBehindThem) {
+  SyntheticOptions o;
+  o.scene = Scene{};
+  o.scene.camera_height_m = 3.0;
+  Hill hill;
+  hill.centre_m = {0.0, 3.0, 60.0};
+  hill.radii_m = {20.0, 10.0, 10.0};  // 10 m high, its front foot at 50 m
+  o.scene.hills.push_back(hill);
+  Obstacle behind;
+  behind.id = 1;
+  behind.name = "behind";
+  behind.size_m = {2.0, 1.0, 1.0};
+  behind.path.start = {0.0, -2.0, 80.5};  // the line of sight passes through the hill
+  Obstacle front = behind;
+  front.id = 2;
+  front.name = "front";
+  front.path.start = {0.0, -2.0, 30.5};
+  o.scene.obstacles = {behind, front};
+  FrameTruth truth;
+  const StereoFrame frame = SyntheticRenderer(o).Render(0, &truth);
+  ASSERT_EQ(truth.obstacles.size(), 2u);
+  EXPECT_EQ(truth.obstacles[0].visible_px, 0);
+  EXPECT_TRUE(truth.obstacles[0].bbox.empty());
+  EXPECT_GT(truth.obstacles[1].visible_px, 1000);
+  // The hill's top (7 m above the camera at z = 60 m) shows above the horizon as terrain, seen
+  // on its front half (50..60 m); the sky is just above it.
+  const int top_row = static_cast<int>(std::ceil(240.0 - 700.0 * 7.0 / 60.0));
+  EXPECT_EQ(truth.object_id(top_row + 1, 320), 0);
+  EXPECT_GT(truth.disparity_px(top_row + 1, 320), kFB / 60.0);
+  EXPECT_LT(truth.disparity_px(top_row + 1, 320), kFB / 50.0);
+  EXPECT_EQ(truth.object_id(top_row - 2, 320), -1);
+  // Every pixel is sky, terrain or the front obstacle.
+  EXPECT_EQ(cv::countNonZero(truth.object_id == 1), 0);
+  EXPECT_EQ(cv::countNonZero(truth.object_id < -1) + cv::countNonZero(truth.object_id > 2), 0);
+  // The hill is shaded and textured.
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(frame.left, mean, stddev, (truth.object_id == 0) & (truth.disparity_px > 6.0f) &
+                                               (truth.disparity_px < 8.0f));
+  EXPECT_GT(stddev[0], 8.0);
 }
 
 TEST(SyntheticSource, ProducesAnEndlessSequenceWithTruth) {

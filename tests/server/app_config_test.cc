@@ -81,6 +81,54 @@ TEST(BuildPipelineConfig, NamesEveryBadField) {
                     HasSubstr("pipeline.range.min_disparity_px")));
 }
 
+TEST(BuildPipelineConfig, ReadsStevieAndStevisFromTextFormat) {
+  const std::string path = WriteFile("stevie.textproto", R"(
+    pipeline {
+      algorithm: ALGORITHM_STEVIE
+      stevie { edges { canny_low: 30 } morphology { shape: STRUCTURING_SHAPE_RECT } }
+      stevis { segmentation: SEGMENTATION_GRAPH saliency { scales: [1, 2] } graph { k: 400 } }
+    }
+  )");
+  Result<v1::ServerConfig> config = LoadServerConfig(path);
+  ASSERT_TRUE(config.ok()) << config.error().message;
+  Result<pipeline::PipelineConfig> pipeline = BuildPipelineConfig(config->pipeline());
+  ASSERT_TRUE(pipeline.ok()) << pipeline.error().message;
+  EXPECT_EQ(pipeline->algorithm, pipeline::Algorithm::kSteViE);
+  EXPECT_DOUBLE_EQ(pipeline->stevie.edges.canny_low, 30);
+  EXPECT_DOUBLE_EQ(pipeline->stevie.edges.canny_high, extraction::EdgeOptions().canny_high);
+  EXPECT_EQ(pipeline->stevie.morphology.shape, extraction::StructuringShape::kRect);
+  EXPECT_EQ(pipeline->stevis.segmentation, detection::SteViSOptions::Segmentation::kGraph);
+  EXPECT_EQ(pipeline->stevis.saliency.scales, (std::vector<int>{1, 2}));
+  EXPECT_EQ(pipeline->stevis.saliency.surround_radii, extraction::SaliencyOptions().surround_radii);
+  EXPECT_DOUBLE_EQ(pipeline->stevis.graph.k, 400);
+}
+
+TEST(BuildPipelineConfig, NamesBadStevieAndStevisFields) {
+  const std::string path = WriteFile("bad-stevis.textproto", R"(
+    pipeline {
+      algorithm: ALGORITHM_STEVIS
+      stevis { saliency_threshold: 0 saliency { surround_radii: [3, 3] } }
+      stevie { edges { canny_aperture: 4 } ground { min_support_rows: 1 } }
+    }
+  )");
+  Result<v1::ServerConfig> config = LoadServerConfig(path);
+  ASSERT_TRUE(config.ok()) << config.error().message;
+  Result<pipeline::PipelineConfig> built = BuildPipelineConfig(config->pipeline());
+  ASSERT_FALSE(built.ok());
+  EXPECT_EQ(built.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(built.error().message,
+              AllOf(HasSubstr("pipeline.stevis.saliency_threshold"),
+                    HasSubstr("pipeline.stevis.saliency.surround_radii[1]"),
+                    HasSubstr("pipeline.stevie.edges.canny_aperture"),
+                    HasSubstr("pipeline.stevie.ground.min_support_rows")));
+
+  v1::PipelineConfig bad_enum;
+  bad_enum.mutable_stevis()->set_segmentation(static_cast<v1::Segmentation>(7));
+  Result<pipeline::PipelineConfig> unknown = BuildPipelineConfig(bad_enum);
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_THAT(unknown.error().message, HasSubstr("pipeline.stevis.segmentation: unknown value 7"));
+}
+
 TEST(ParseFlags, AcceptsBothSpellingsAndRejectsTheUnknown) {
   Result<Flags> flags = Parse({"--listen", "127.0.0.1:7", "--fps=12.5", "--help"});
   ASSERT_TRUE(flags.ok()) << flags.error().message;

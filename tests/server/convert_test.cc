@@ -8,10 +8,38 @@ namespace {
 
 using ::testing::HasSubstr;
 
+// Paths of the fields of `m` that are not set: scalars without a value, enums left at 0, empty
+// lists. Sub-messages are walked.
+void UnsetFields(const google::protobuf::Message& m, const std::string& prefix,
+                 std::vector<std::string>& unset) {
+  const google::protobuf::Descriptor* d = m.GetDescriptor();
+  const google::protobuf::Reflection* r = m.GetReflection();
+  for (int i = 0; i < d->field_count(); ++i) {
+    const google::protobuf::FieldDescriptor* f = d->field(i);
+    const std::string path = prefix + f->name();
+    if (f->is_repeated()) {
+      if (r->FieldSize(m, f) == 0) unset.push_back(path);
+    } else if (f->type() == google::protobuf::FieldDescriptor::TYPE_MESSAGE) {
+      UnsetFields(r->GetMessage(m, f), path + ".", unset);
+    } else if (f->has_presence() ? !r->HasField(m, f)
+                                 : (f->type() == google::protobuf::FieldDescriptor::TYPE_ENUM &&
+                                    r->GetEnumValue(m, f) == 0)) {
+      unset.push_back(path);
+    }
+  }
+}
+
+TEST(ToProto, FillsEveryField) {
+  std::vector<std::string> unset;
+  UnsetFields(ToProto(pipeline::PipelineConfig{}), "", unset);
+  EXPECT_THAT(unset, ::testing::IsEmpty());
+}
+
 TEST(MergeFromProto, FullRoundTripKeepsEveryField) {
   pipeline::PipelineConfig original;
   original.matcher.kind = stereo::MatcherKind::kSemiGlobal;
   original.matcher.block_matching.block_size = 21;
+  original.matcher.block_matching.local_texture_threshold = 0;
   original.matcher.semi_global.p1 = 100;
   original.matcher.semi_global.p2 = 400;
   original.matcher.semi_global.mode = stereo::SemiGlobalOptions::Mode::kHH4;
@@ -50,6 +78,121 @@ TEST(MergeFromProto, OutOfRangeEnumsAreNamed) {
   ASSERT_EQ(problems.size(), 2u);
   EXPECT_THAT(problems[0], HasSubstr("algorithm"));
   EXPECT_THAT(problems[1], HasSubstr("matcher.kind"));
+}
+
+TEST(MergeFromProto, FullRoundTripKeepsEveryStevieAndStevisField) {
+  pipeline::PipelineConfig original;
+  original.algorithm = pipeline::Algorithm::kSteViS;
+  detection::SteViEOptions& e = original.stevie;
+  e.edges.blur_size = 5;
+  e.edges.blur_sigma = 1.25;
+  e.edges.canny_low = 33;
+  e.edges.canny_high = 150;
+  e.edges.canny_aperture = 5;
+  e.edges.l2_gradient = false;
+  e.morphology.shape = extraction::StructuringShape::kCross;
+  e.morphology.close_size = 9;
+  e.morphology.fill_holes = false;
+  e.ground.enabled = false;
+  e.ground.min_support_rows = 33;
+  e.ground.margin_fraction = 0.12;
+  e.ground.min_row_pixels = 25;
+  e.ground.min_mode_px = 3;
+  e.blobs.min_area_px = 120;
+  e.blobs.interior_erode_px = 2;
+  detection::SteViSOptions& s = original.stevis;
+  s.saliency.centre_level = 1;
+  s.saliency.scales = {1, 3};
+  s.saliency.surround_radii = {2, 5, 9};
+  s.saliency.uniqueness_weight = false;
+  s.saliency.peak_fraction = 0.7;
+  s.saliency.min_contrast = 4.5;
+  s.segmentation = detection::SteViSOptions::Segmentation::kGraph;
+  s.saliency_threshold = 0.25;
+  s.morphology.shape = extraction::StructuringShape::kRect;
+  s.morphology.open_size = 5;
+  s.graph.k = 500;
+  s.graph.sigma = 0.8;
+  s.graph.min_size = 80;
+  s.graph_level = 2;
+  s.ground.inlier_px = 2;
+  s.ground.min_span_px = 6;
+  s.ground.min_row_spread = 0.4;
+  s.blobs.max_width_fraction = 0.6;
+  s.blobs.max_depth_per_height = 0;
+  e.blobs.min_terrain_height_m = 5;
+
+  const v1::PipelineConfig proto = ToProto(original);
+  EXPECT_EQ(proto.stevie().morphology().shape(), v1::STRUCTURING_SHAPE_CROSS);
+  EXPECT_EQ(proto.stevis().segmentation(), v1::SEGMENTATION_GRAPH);
+  EXPECT_THAT(proto.stevis().saliency().surround_radii(), ::testing::ElementsAre(2, 5, 9));
+
+  pipeline::PipelineConfig copy;  // defaults, then everything from the proto
+  EXPECT_THAT(MergeFromProto(proto, copy), ::testing::IsEmpty());
+  EXPECT_EQ(ToProto(copy).SerializeAsString(), proto.SerializeAsString());
+  EXPECT_EQ(copy.algorithm, pipeline::Algorithm::kSteViS);
+  EXPECT_EQ(copy.stevie.edges.canny_aperture, 5);
+  EXPECT_FALSE(copy.stevie.edges.l2_gradient);
+  EXPECT_EQ(copy.stevie.morphology.shape, extraction::StructuringShape::kCross);
+  EXPECT_FALSE(copy.stevie.ground.enabled);
+  EXPECT_EQ(copy.stevie.blobs.min_area_px, 120);
+  EXPECT_EQ(copy.stevis.saliency.scales, (std::vector<int>{1, 3}));
+  EXPECT_EQ(copy.stevis.saliency.surround_radii, (std::vector<int>{2, 5, 9}));
+  EXPECT_EQ(copy.stevis.segmentation, detection::SteViSOptions::Segmentation::kGraph);
+  EXPECT_EQ(copy.stevis.morphology.shape, extraction::StructuringShape::kRect);
+  EXPECT_EQ(copy.stevis.morphology.close_size, detection::SteViSOptions().morphology.close_size)
+      << "SteViS keeps its own morphology default";
+  EXPECT_DOUBLE_EQ(copy.stevis.graph.k, 500);
+  EXPECT_EQ(copy.stevis.graph_level, 2);
+  EXPECT_DOUBLE_EQ(copy.stevis.blobs.max_width_fraction, 0.6);
+  EXPECT_DOUBLE_EQ(copy.stevis.blobs.max_depth_per_height, 0);
+  EXPECT_DOUBLE_EQ(copy.stevie.blobs.min_terrain_height_m, 5);
+  EXPECT_EQ(copy.stevie.ground.min_row_pixels, 25);
+  EXPECT_DOUBLE_EQ(copy.stevis.ground.min_row_spread, 0.4);
+  EXPECT_THAT(copy.Validate(), ::testing::IsEmpty());
+}
+
+TEST(MergeFromProto, UnsetStevieAndStevisFieldsKeepTheirValues) {
+  pipeline::PipelineConfig config;
+  config.stevie.edges.canny_high = 90;
+  config.stevie.morphology.shape = extraction::StructuringShape::kRect;
+  config.stevis.segmentation = detection::SteViSOptions::Segmentation::kGraph;
+  config.stevis.saliency.scales = {2, 4};
+  config.stevis.ground.margin_px = 2;
+  v1::PipelineConfig update;
+  update.mutable_stevie()->mutable_edges()->set_canny_low(10);
+  update.mutable_stevie()->mutable_ground()->set_enabled(false);
+  update.mutable_stevis()->mutable_saliency()->add_surround_radii(5);
+  update.mutable_stevis()->mutable_blobs()->set_min_area_px(30);
+  EXPECT_THAT(MergeFromProto(update, config), ::testing::IsEmpty());
+  EXPECT_DOUBLE_EQ(config.stevie.edges.canny_low, 10);
+  EXPECT_DOUBLE_EQ(config.stevie.edges.canny_high, 90);
+  EXPECT_EQ(config.stevie.morphology.shape, extraction::StructuringShape::kRect)
+      << "STRUCTURING_SHAPE_UNSPECIFIED keeps the shape";
+  EXPECT_FALSE(config.stevie.ground.enabled);
+  EXPECT_EQ(config.stevie.ground.min_support_rows, detection::GroundOptions().min_support_rows);
+  EXPECT_EQ(config.stevis.segmentation, detection::SteViSOptions::Segmentation::kGraph)
+      << "SEGMENTATION_UNSPECIFIED keeps the mode";
+  EXPECT_EQ(config.stevis.saliency.scales, (std::vector<int>{2, 4})) << "an empty list keeps";
+  EXPECT_EQ(config.stevis.saliency.surround_radii, (std::vector<int>{5})) << "a list replaces";
+  EXPECT_DOUBLE_EQ(config.stevis.ground.margin_px, 2);
+  EXPECT_EQ(config.stevis.blobs.min_area_px, 30);
+  EXPECT_EQ(config.stevie.blobs.min_area_px, detection::StereoBlobOptions().min_area_px);
+  EXPECT_EQ(config.canonical.blobs.min_area_px, detection::StereoBlobOptions().min_area_px);
+  EXPECT_EQ(config.stevis.morphology.close_size, detection::SteViSOptions().morphology.close_size);
+}
+
+TEST(MergeFromProto, OutOfRangeStevieAndStevisEnumsAreNamed) {
+  pipeline::PipelineConfig config;
+  v1::PipelineConfig update;
+  update.mutable_stevie()->mutable_morphology()->set_shape(static_cast<v1::StructuringShape>(9));
+  update.mutable_stevis()->set_segmentation(static_cast<v1::Segmentation>(5));
+  update.mutable_stevis()->mutable_morphology()->set_shape(static_cast<v1::StructuringShape>(-1));
+  const std::vector<std::string> problems = MergeFromProto(update, config);
+  ASSERT_EQ(problems.size(), 3u);
+  EXPECT_EQ(problems[0], "stevie.morphology.shape: unknown value 9");
+  EXPECT_EQ(problems[1], "stevis.segmentation: unknown value 5");
+  EXPECT_EQ(problems[2], "stevis.morphology.shape: unknown value -1");
 }
 
 TEST(ToTrackFrame, CopiesDetectionsAsPerFrameTracks) {

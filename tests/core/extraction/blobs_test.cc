@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <optional>
 
 #include <gtest/gtest.h>
@@ -100,6 +101,61 @@ TEST(ExtractBlobs, BlobAtTheImageBorderHasAClosedPerimeter) {
   const BlobSet set = ExtractBlobs(mask, 1);
   ASSERT_EQ(set.blobs.size(), 1u);
   EXPECT_NEAR(set.blobs[0].perimeter_px, 2.0 * (12 + 8 - 2), 0.05 * 2.0 * (12 + 8 - 2));
+}
+
+// Every raw, central and normalised moment of `got` near `want` (relative, with a floor).
+void ExpectMomentsNear(const cv::Moments& got, const cv::Moments& want) {
+  const double g[] = {got.m00,  got.m10,  got.m01,  got.m20,  got.m11,  got.m02,  got.m30,
+                      got.m21,  got.m12,  got.m03,  got.mu20, got.mu11, got.mu02, got.mu30,
+                      got.mu21, got.mu12, got.mu03, got.nu20, got.nu11, got.nu02, got.nu30,
+                      got.nu21, got.nu12, got.nu03};
+  const double w[] = {want.m00,  want.m10,  want.m01,  want.m20,  want.m11,  want.m02,
+                      want.m30,  want.m21,  want.m12,  want.m03,  want.mu20, want.mu11,
+                      want.mu02, want.mu30, want.mu21, want.mu12, want.mu03, want.nu20,
+                      want.nu11, want.nu02, want.nu30, want.nu21, want.nu12, want.nu03};
+  for (size_t i = 0; i < std::size(g); ++i) {
+    EXPECT_NEAR(g[i], w[i], 1e-9 * std::max(1.0, std::abs(w[i]))) << "moment #" << i;
+  }
+}
+
+TEST(ExtractBlobs, MomentsAreThoseOfTheBlobInImageCoordinates) {
+  cv::Mat1b mask(200, 300, uchar{0});
+  cv::ellipse(mask, cv::Point(210, 140), cv::Size(40, 18), 30, 0, 360, cv::Scalar(255),
+              cv::FILLED);
+  mask(cv::Rect(20, 30, 25, 40)).setTo(255);
+  const BlobSet set = ExtractBlobs(mask, 1);
+  ASSERT_EQ(set.blobs.size(), 2u);
+  for (const Blob& blob : set.blobs) {
+    const cv::Moments& m = blob.moments;
+    EXPECT_DOUBLE_EQ(m.m00, blob.area_px);
+    EXPECT_NEAR(m.m10 / m.m00, blob.centroid_px.x, 1e-9);
+    EXPECT_NEAR(m.m01 / m.m00, blob.centroid_px.y, 1e-9);
+    // The reference: OpenCV's moments of the blob's pixels over the whole image.
+    ExpectMomentsNear(m, cv::moments(set.labels == blob.label, /*binaryImage=*/true));
+  }
+  // The tilted ellipse's orientation from the central moments: 30 degrees (y down).
+  const Blob& ellipse = set.blobs[0].bbox.x > 100 ? set.blobs[0] : set.blobs[1];
+  const cv::Moments& m = ellipse.moments;
+  const double angle_deg = 0.5 * std::atan2(2 * m.mu11, m.mu20 - m.mu02) * 180 / CV_PI;
+  EXPECT_NEAR(angle_deg, 30.0, 1.0);
+}
+
+TEST(ExtractDisparityBlobs, MomentsAreThoseOfEachBlob) {
+  // Two touching rectangles at different disparities come out as two blobs.
+  cv::Mat1b mask(120, 160, uchar{0});
+  cv::Mat1s disparity(mask.size(), int16_t{0});
+  mask(cv::Rect(30, 40, 50, 30)).setTo(255);
+  disparity(cv::Rect(30, 40, 50, 30)).setTo(400);
+  mask(cv::Rect(80, 35, 40, 50)).setTo(255);
+  disparity(cv::Rect(80, 35, 40, 50)).setTo(160);
+  const BlobSet set = ExtractDisparityBlobs(mask, disparity, 16, 1);
+  ASSERT_EQ(set.blobs.size(), 2u);
+  for (const Blob& blob : set.blobs) {
+    EXPECT_DOUBLE_EQ(blob.moments.m00, blob.area_px);
+    EXPECT_NEAR(blob.moments.m10 / blob.moments.m00, blob.centroid_px.x, 1e-9);
+    EXPECT_NEAR(blob.moments.m01 / blob.moments.m00, blob.centroid_px.y, 1e-9);
+    ExpectMomentsNear(blob.moments, cv::moments(set.labels == blob.label, true));
+  }
 }
 
 }  // namespace

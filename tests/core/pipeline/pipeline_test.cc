@@ -151,12 +151,15 @@ TEST(ConfigStoreSet, RejectsABadConfigNamingEveryFieldAndKeepsTheActiveOne) {
   EXPECT_EQ(store.Get(), before);
   EXPECT_EQ(store.Get()->canonical.threshold_range_m, 55.0);
 
+  // A bad option of another stage is refused too, named with its stage.
   PipelineConfig stevie;
   stevie.algorithm = Algorithm::kSteViE;
+  stevie.stevie.edges.canny_aperture = 4;
   set = store.Set(stevie);
   ASSERT_FALSE(set.ok());
-  EXPECT_NE(set.error().message.find("algorithm: 'stevie' is not available yet"), std::string::npos)
+  EXPECT_NE(set.error().message.find("stevie.edges.canny_aperture"), std::string::npos)
       << set.error().message;
+  EXPECT_EQ(store.Get(), before);
 
   PipelineConfig good;
   good.canonical.threshold_range_m = 70.0;

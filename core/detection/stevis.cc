@@ -1,0 +1,85 @@
+#include "core/detection/stevis.h"
+
+#include <cstdio>
+
+#include <opencv2/imgproc.hpp>
+
+namespace stevi::detection {
+namespace {
+
+void Append(std::vector<std::string>& out, const char* prefix, const std::vector<std::string>& in) {
+  for (const std::string& p : in) out.push_back(prefix + p);
+}
+
+}  // namespace
+
+std::vector<std::string> SteViSOptions::Validate() const {
+  std::vector<std::string> problems;
+  Append(problems, "saliency.", saliency.Validate());
+  if (!(saliency_threshold > 0 && saliency_threshold <= 1)) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "saliency_threshold: must be in (0, 1] (got %g)",
+                  saliency_threshold);
+    problems.push_back(buf);
+  }
+  if (segmentation == Segmentation::kGraph) Append(problems, "graph.", graph.Validate());
+  Append(problems, "morphology.", morphology.Validate());
+  if (graph_level < 0 || graph_level > 3) {
+    problems.push_back("graph_level: must be in 0..3 (got " + std::to_string(graph_level) + ")");
+  }
+  Append(problems, "ground.", ground.Validate());
+  Append(problems, "blobs.", blobs.Validate());
+  return problems;
+}
+
+cv::Mat1b SalientRegions(const cv::Mat1b& left, const SteViSOptions& options) {
+  const cv::Mat1f saliency = extraction::SaliencyAtFullSize(left, options.saliency);
+  cv::Mat1b mask;
+  if (options.segmentation == SteViSOptions::Segmentation::kThreshold) {
+    cv::compare(saliency, options.saliency_threshold, mask, cv::CMP_GE);
+    return extraction::CloseFillOpen(mask, options.morphology);
+  }
+  // Graph segments at reduced scale; a segment is salient when its mean saliency is.
+  const double scale = 1.0 / (1 << options.graph_level);
+  cv::Mat1b small = left;
+  cv::Mat1f small_saliency = saliency;
+  if (options.graph_level > 0) {
+    cv::resize(left, small, cv::Size(), scale, scale, cv::INTER_AREA);
+    cv::resize(saliency, small_saliency, small.size(), 0, 0, cv::INTER_AREA);
+  }
+  const cv::Mat1i segments = extraction::SegmentGraph(small, options.graph);
+  double max_label = 0;
+  cv::minMaxLoc(segments, nullptr, &max_label);
+  std::vector<double> sum(static_cast<size_t>(max_label) + 1, 0.0);
+  std::vector<int> count(sum.size(), 0);
+  for (int y = 0; y < segments.rows; ++y) {
+    for (int x = 0; x < segments.cols; ++x) {
+      sum[segments(y, x)] += small_saliency(y, x);
+      ++count[segments(y, x)];
+    }
+  }
+  cv::Mat1b small_mask(segments.size());
+  for (int y = 0; y < segments.rows; ++y) {
+    for (int x = 0; x < segments.cols; ++x) {
+      const int s = segments(y, x);
+      small_mask(y, x) = sum[s] >= options.saliency_threshold * count[s] ? 255 : 0;
+    }
+  }
+  if (options.graph_level == 0) return small_mask;
+  cv::resize(small_mask, mask, left.size(), 0, 0, cv::INTER_NEAREST);
+  return mask;
+}
+
+std::vector<Detection> DetectSteViS(const cv::Mat1b& left, const stereo::DisparityMap& disparity,
+                                    const geometry::StereoRig& rig,
+                                    const geometry::RangeOptions& range,
+                                    const SteViSOptions& options) {
+  if (left.empty() || disparity.empty() || left.size() != disparity.fixed.size()) return {};
+  const cv::Mat1b salient = SalientRegions(left, options);
+  const std::optional<GroundModel> ground =
+      options.ground.enabled ? FitGround(disparity, options.ground) : std::nullopt;
+  const cv::Mat1b candidates = StereoCandidates(salient, disparity, rig, range, ground, options.ground);
+  return RangeBlobs(candidates, disparity, rig, range, options.blobs, "stevis");
+}
+
+}  // namespace stevi::detection

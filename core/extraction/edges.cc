@@ -1,0 +1,59 @@
+#include "core/extraction/edges.h"
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <opencv2/imgproc.hpp>
+
+namespace stevi::extraction {
+namespace {
+
+std::string Got(double value) {
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), " (got %g)", value);
+  return buf;
+}
+
+}  // namespace
+
+std::vector<std::string> EdgeOptions::Validate() const {
+  std::vector<std::string> problems;
+  if (blur_size < 1 || blur_size % 2 == 0 || blur_size > 31) {
+    problems.push_back("blur_size: must be odd and in 1..31 pixels" + Got(blur_size));
+  }
+  if (!(blur_sigma >= 0) || !std::isfinite(blur_sigma)) {
+    problems.push_back("blur_sigma: must be >= 0 pixels" + Got(blur_sigma));
+  }
+  if (!(canny_low >= 0) || !std::isfinite(canny_low)) {
+    problems.push_back("canny_low: must be >= 0" + Got(canny_low));
+  }
+  if (!(canny_high >= 0) || !std::isfinite(canny_high)) {
+    problems.push_back("canny_high: must be >= 0" + Got(canny_high));
+  } else if (canny_high < canny_low) {
+    problems.push_back("canny_high: must be >= canny_low" + Got(canny_high));
+  }
+  if (canny_aperture != 3 && canny_aperture != 5 && canny_aperture != 7) {
+    problems.push_back("canny_aperture: must be 3, 5 or 7" + Got(canny_aperture));
+  }
+  return problems;
+}
+
+cv::Mat1b DetectEdges(const cv::Mat1b& grey, const EdgeOptions& options) {
+  cv::Mat1b edges;
+  if (grey.empty()) return edges;
+  // A fresh buffer: blurring into a header that shares `grey`'s data would overwrite the input.
+  cv::Mat1b smoothed;
+  if (options.blur_size > 1) {
+    cv::GaussianBlur(grey, smoothed, cv::Size(options.blur_size, options.blur_size),
+                     options.blur_sigma, options.blur_sigma);
+  } else {
+    smoothed = grey;
+  }
+  cv::Canny(smoothed, edges, options.canny_low, options.canny_high, options.canny_aperture,
+            options.l2_gradient);
+  return edges;
+}
+
+}  // namespace stevi::extraction
