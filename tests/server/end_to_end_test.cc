@@ -121,6 +121,24 @@ TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
   EXPECT_THAT(get.out, HasSubstr("\"threshold_range_m\":80"));
 
   ASSERT_EQ(Stevi({"watch", "--count", "2", "--json"}).exit_code, 0);
+
+  // The detectors switch while running; their parameters are validated by name.
+  for (const char* algorithm : {"stevie", "stevis"}) {
+    const testing::RunResult set = Stevi({"config", "set", std::string("algorithm=") + algorithm});
+    ASSERT_EQ(set.exit_code, 0) << set.err;
+    // Frames already queued may still carry the old algorithm: wait for a new one (bounded).
+    const testing::RunResult frames = Stevi({"watch", "--count", "12", "--json"});
+    ASSERT_EQ(frames.exit_code, 0) << frames.err;
+    const std::string name =
+        std::string("ALGORITHM_") + (std::string(algorithm) == "stevie" ? "STEVIE" : "STEVIS");
+    EXPECT_THAT(frames.out, HasSubstr(name));
+  }
+  const testing::RunResult bad_stevis = Stevi({"config", "set", "stevis.saliency_threshold=0"});
+  EXPECT_EQ(bad_stevis.exit_code, 1);
+  EXPECT_THAT(bad_stevis.err, HasSubstr("stevis.saliency_threshold"));
+  const testing::RunResult still = Stevi({"config", "get", "--json"});
+  EXPECT_THAT(still.out, HasSubstr("ALGORITHM_STEVIS")) << "a refused change leaves the active config";
+
   const testing::RunResult status = Stevi({"status"});
   ASSERT_EQ(status.exit_code, 0) << status.err;
   EXPECT_THAT(status.out, HasSubstr("(running)"));
