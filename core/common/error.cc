@@ -1,5 +1,7 @@
 #include "core/common/error.h"
 
+#include <cstdio>
+
 namespace stevi {
 
 std::string_view ErrorCodeName(ErrorCode code) {
@@ -13,6 +15,17 @@ std::string_view ErrorCodeName(ErrorCode code) {
     case ErrorCode::kInternal: return "internal";
   }
   return "unknown";
+}
+
+std::string Got(double value) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, " (got %g)", value);
+  return buf;
+}
+
+void AppendPrefixed(std::vector<std::string>& out, std::string_view prefix,
+                    const std::vector<std::string>& problems) {
+  for (const std::string& p : problems) out.push_back(std::string(prefix) + p);
 }
 
 Error Error::Invalid(const std::vector<std::string>& problems) {

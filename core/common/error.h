@@ -23,6 +23,13 @@ enum class ErrorCode {
 
 std::string_view ErrorCodeName(ErrorCode code);
 
+// Helpers for Validate() messages ("field: problem (got 3.5)").
+// " (got VALUE)", the value formatted like printf's %g.
+std::string Got(double value);
+// Appends each of `problems` to `out`, prefixed with `prefix` (a sub-struct's name and a dot).
+void AppendPrefixed(std::vector<std::string>& out, std::string_view prefix,
+                    const std::vector<std::string>& problems);
+
 struct Error {
   ErrorCode code = ErrorCode::kInternal;
   std::string message;

@@ -1,5 +1,7 @@
 #include "core/detection/canonical.h"
 
+#include "core/common/error.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -14,12 +16,6 @@
 
 namespace stevi::detection {
 namespace {
-
-std::string Got(double value) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), " (got %g)", value);
-  return buf;
-}
 
 // The smallest fixed-point disparity that is an obstacle candidate: nearer than the threshold
 // range, above the trusted floor and, when set, within the trusted maximum range.

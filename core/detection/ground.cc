@@ -1,5 +1,7 @@
 #include "core/detection/ground.h"
 
+#include "core/common/error.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -13,12 +15,6 @@ struct RowMode {
   double disparity_px;  // the mode bin's mean disparity
   int count;
 };
-
-std::string Got(double value) {
-  char buf[48];
-  std::snprintf(buf, sizeof buf, " (got %g)", value);
-  return buf;
-}
 
 }  // namespace
 

@@ -1,5 +1,7 @@
 #include "core/detection/stereo_blobs.h"
 
+#include "core/common/error.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -15,12 +17,6 @@ namespace {
 
 // Fewer interior pixels than this and the whole blob gives the disparity.
 constexpr int kMinInteriorPixels = 30;
-
-std::string Got(double value) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), " (got %g)", value);
-  return buf;
-}
 
 // Fraction of the blob's valid disparities within a band around the median: near 1 for one
 // surface at one range, lower for blobs that merge surfaces at different ranges.

@@ -1,20 +1,14 @@
 #include "core/detection/stevie.h"
 
+#include "core/common/error.h"
+
 namespace stevi::detection {
-namespace {
-
-void Append(std::vector<std::string>& out, const char* prefix, const std::vector<std::string>& in) {
-  for (const std::string& p : in) out.push_back(prefix + p);
-}
-
-}  // namespace
-
 std::vector<std::string> SteViEOptions::Validate() const {
   std::vector<std::string> problems;
-  Append(problems, "edges.", edges.Validate());
-  Append(problems, "morphology.", morphology.Validate());
-  Append(problems, "ground.", ground.Validate());
-  Append(problems, "blobs.", blobs.Validate());
+  AppendPrefixed(problems, "edges.", edges.Validate());
+  AppendPrefixed(problems, "morphology.", morphology.Validate());
+  AppendPrefixed(problems, "ground.", ground.Validate());
+  AppendPrefixed(problems, "blobs.", blobs.Validate());
   return problems;
 }
 

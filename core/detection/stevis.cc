@@ -1,34 +1,28 @@
 #include "core/detection/stevis.h"
 
+#include "core/common/error.h"
+
 #include <cstdio>
 
 #include <opencv2/imgproc.hpp>
 
 namespace stevi::detection {
-namespace {
-
-void Append(std::vector<std::string>& out, const char* prefix, const std::vector<std::string>& in) {
-  for (const std::string& p : in) out.push_back(prefix + p);
-}
-
-}  // namespace
-
 std::vector<std::string> SteViSOptions::Validate() const {
   std::vector<std::string> problems;
-  Append(problems, "saliency.", saliency.Validate());
+  AppendPrefixed(problems, "saliency.", saliency.Validate());
   if (!(saliency_threshold > 0 && saliency_threshold <= 1)) {
     char buf[96];
     std::snprintf(buf, sizeof buf, "saliency_threshold: must be in (0, 1] (got %g)",
                   saliency_threshold);
     problems.push_back(buf);
   }
-  if (segmentation == Segmentation::kGraph) Append(problems, "graph.", graph.Validate());
-  Append(problems, "morphology.", morphology.Validate());
+  if (segmentation == Segmentation::kGraph) AppendPrefixed(problems, "graph.", graph.Validate());
+  AppendPrefixed(problems, "morphology.", morphology.Validate());
   if (graph_level < 0 || graph_level > 3) {
     problems.push_back("graph_level: must be in 0..3 (got " + std::to_string(graph_level) + ")");
   }
-  Append(problems, "ground.", ground.Validate());
-  Append(problems, "blobs.", blobs.Validate());
+  AppendPrefixed(problems, "ground.", ground.Validate());
+  AppendPrefixed(problems, "blobs.", blobs.Validate());
   return problems;
 }
 

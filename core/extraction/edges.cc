@@ -1,5 +1,7 @@
 #include "core/extraction/edges.h"
 
+#include "core/common/error.h"
+
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -8,16 +10,6 @@
 #include <opencv2/imgproc.hpp>
 
 namespace stevi::extraction {
-namespace {
-
-std::string Got(double value) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), " (got %g)", value);
-  return buf;
-}
-
-}  // namespace
-
 std::vector<std::string> EdgeOptions::Validate() const {
   std::vector<std::string> problems;
   if (blur_size < 1 || blur_size % 2 == 0 || blur_size > 31) {

@@ -1,5 +1,7 @@
 #include "core/extraction/morphology.h"
 
+#include "core/common/error.h"
+
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -8,12 +10,6 @@
 
 namespace stevi::extraction {
 namespace {
-
-std::string Got(double value) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), " (got %g)", value);
-  return buf;
-}
 
 // Largest accepted element size (pixels).
 constexpr int kMaxElementSize = 101;

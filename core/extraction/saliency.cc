@@ -1,5 +1,7 @@
 #include "core/extraction/saliency.h"
 
+#include "core/common/error.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -14,12 +16,6 @@ namespace {
 
 constexpr int kMaxLevel = 8;
 constexpr int kMaxRadius = 64;
-
-std::string Got(double value) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), " (got %g)", value);
-  return buf;
-}
 
 // Problems of a list of integers that must be non-empty, distinct and within [lo, hi].
 void CheckList(const char* name, const std::vector<int>& values, int lo, int hi,

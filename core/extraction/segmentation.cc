@@ -1,5 +1,7 @@
 #include "core/extraction/segmentation.h"
 
+#include "core/common/error.h"
+
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -10,12 +12,6 @@
 
 namespace stevi::extraction {
 namespace {
-
-std::string Got(double value) {
-  char buf[64];
-  std::snprintf(buf, sizeof(buf), " (got %g)", value);
-  return buf;
-}
 
 bool InRange(double v, double lo, double hi) { return v >= lo && v <= hi; }
 

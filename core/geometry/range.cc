@@ -1,17 +1,10 @@
 #include "core/geometry/range.h"
 
+#include "core/common/error.h"
+
 #include <cmath>
-#include <sstream>
 
 namespace stevi::geometry {
-
-namespace {
-std::string Got(double v) {
-  std::ostringstream s;
-  s << " (got " << v << ")";
-  return s.str();
-}
-}  // namespace
 
 std::vector<std::string> RangeOptions::Validate() const {
   std::vector<std::string> problems;

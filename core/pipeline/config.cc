@@ -1,16 +1,13 @@
 #include "core/pipeline/config.h"
 
+#include "core/common/error.h"
+
 #include <cctype>
 #include <string>
 #include <utility>
 
 namespace stevi::pipeline {
 namespace {
-
-void AppendPrefixed(std::vector<std::string>& out, std::string_view prefix,
-                    const std::vector<std::string>& problems) {
-  for (const std::string& p : problems) out.push_back(std::string(prefix) + p);
-}
 
 bool EqualsIgnoreCase(std::string_view a, std::string_view b) {
   if (a.size() != b.size()) return false;

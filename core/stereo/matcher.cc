@@ -8,6 +8,8 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/error.h"
+
 namespace stevi::stereo {
 namespace {
 
@@ -15,8 +17,6 @@ namespace {
 constexpr int kMaxNumDisparities = 512;
 constexpr int kMaxMinDisparity = 512;
 constexpr int kMaxSpeckleRange = 1024;
-
-std::string Got(int v) { return " (got " + std::to_string(v) + ")"; }
 
 // Appends the problems of an int field that must lie in [lo, hi] and, when `odd`, be odd.
 void CheckRange(std::vector<std::string>& problems, const char* field, int v, int lo, int hi,
