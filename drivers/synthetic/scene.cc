@@ -36,6 +36,28 @@ void ValidatePath(const Path& path, const std::string& prefix, std::vector<std::
   Check(!std::isfinite(path.phase_rad), prefix + "phase_rad", "must be finite", problems);
 }
 
+// An obstacle of the scenes below.
+Obstacle MakeObstacle(int id, std::string name, cv::Vec3d size_m, Path path, double albedo,
+                      double contrast, double cell_m) {
+  Obstacle o;
+  o.id = id;
+  o.name = std::move(name);
+  o.size_m = size_m;
+  o.path = path;
+  o.albedo = albedo;
+  o.contrast = contrast;
+  o.texture_cell_m = cell_m;
+  return o;
+}
+
+// A path that stays at `centre`.
+Path Fixed(cv::Vec3d centre) {
+  Path p;
+  p.kind = Path::Kind::kStatic;
+  p.start = centre;
+  return p;
+}
+
 }  // namespace
 
 cv::Vec3d Path::PositionAt(double t_s) const {
@@ -165,21 +187,8 @@ Scene DefaultScene() {
 
   auto add = [&scene](int id, std::string name, cv::Vec3d size_m, Path path, double albedo,
                       double contrast, double cell_m) {
-    Obstacle o;
-    o.id = id;
-    o.name = std::move(name);
-    o.size_m = size_m;
-    o.path = path;
-    o.albedo = albedo;
-    o.contrast = contrast;
-    o.texture_cell_m = cell_m;
-    scene.obstacles.push_back(std::move(o));
-  };
-  auto fixed = [](cv::Vec3d centre) {
-    Path p;
-    p.kind = Path::Kind::kStatic;
-    p.start = centre;
-    return p;
+    scene.obstacles.push_back(
+        MakeObstacle(id, std::move(name), size_m, path, albedo, contrast, cell_m));
   };
   auto linear = [loop_s](cv::Vec3d start, cv::Vec3d velocity_mps) {
     Path p;
@@ -191,9 +200,9 @@ Scene DefaultScene() {
   };
 
   // Tower: 4 x 50 x 4 m, front face at z = 43 m (9.8 px), columns ~60..125, rows 77..bottom.
-  add(1, "tower", {4.0, 50.0, 4.0}, fixed({-14.0, h - 25.0, 45.0}), 0.5, 0.4, 0.2);
+  add(1, "tower", {4.0, 50.0, 4.0}, Fixed({-14.0, h - 25.0, 45.0}), 0.5, 0.4, 0.2);
   // Hangar: 20 x 36 x 15 m, front face at z = 48 m (8.75 px), columns ~335..626, rows 298..bottom.
-  add(2, "hangar", {20.0, 36.0, 15.0}, fixed({11.0, h - 18.0, 55.5}), 0.62, 0.35, 0.25);
+  add(2, "hangar", {20.0, 36.0, 15.0}, Fixed({11.0, h - 18.0, 55.5}), 0.62, 0.35, 0.25);
   // aircraft-1: 6 x 2 x 2 m at z = 30 m (14 px), x -12 -> +12 m over 20 s (140 x 47 px).
   add(3, "aircraft-1", {6.0, 2.0, 2.0}, linear({-12.0, -7.0, 31.0}, {1.2, 0.0, 0.0}), 0.3, 0.45,
       0.15);
@@ -227,26 +236,6 @@ namespace {
 // Scenario building blocks. All scenarios use the default rig: f = 700 px, B = 0.6 m
 // (f B = 420 px m), 640 x 480, principal point (320, 240), 10 fps. A point (x, y, z) shows at
 // u = 320 + 700 x / z, v = 240 + 700 y / z, with disparity 420 / z px (8 px at 52.5 m).
-
-Obstacle MakeObstacle(int id, std::string name, cv::Vec3d size_m, Path path, double albedo,
-                      double contrast, double cell_m) {
-  Obstacle o;
-  o.id = id;
-  o.name = std::move(name);
-  o.size_m = size_m;
-  o.path = path;
-  o.albedo = albedo;
-  o.contrast = contrast;
-  o.texture_cell_m = cell_m;
-  return o;
-}
-
-Path Fixed(cv::Vec3d centre) {
-  Path p;
-  p.kind = Path::Kind::kStatic;
-  p.start = centre;
-  return p;
-}
 
 // Straight flight from `start` (box centre) to `end` over period_s seconds, then again.
 Path Leg(cv::Vec3d start, cv::Vec3d end, double period_s) {
