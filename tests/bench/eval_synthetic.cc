@@ -110,17 +110,31 @@ std::vector<Variant> Variants() {
 int main(int argc, char** argv) {
   int max_frames = 0;
   std::string only_scenario, only_algorithm;
-  for (int i = 1; i + 1 < argc; i += 2) {
+  const auto usage = [](const std::string& problem) {
+    std::fprintf(stderr, "stevi-eval: %s\nusage: stevi-eval [--frames N] [--scenario NAME] "
+                 "[--algorithm canonical|stevie|stevis|stevis-graph]\n", problem.c_str());
+    return 2;
+  };
+  for (int i = 1; i < argc; i += 2) {
     const std::string flag = argv[i];
+    if (i + 1 >= argc) return usage(flag + " needs a value");
+    const std::string value = argv[i + 1];
     if (flag == "--frames") {
-      max_frames = std::max(1, std::atoi(argv[i + 1]));
+      size_t used = 0;
+      try {
+        max_frames = std::stoi(value, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used != value.size() || max_frames < 1) {
+        return usage("--frames: expected a whole number >= 1, got '" + value + "'");
+      }
     } else if (flag == "--scenario") {
-      only_scenario = argv[i + 1];
+      only_scenario = value;
     } else if (flag == "--algorithm") {
-      only_algorithm = argv[i + 1];
+      only_algorithm = value;
     } else {
-      std::fprintf(stderr, "usage: stevi-eval [--frames N] [--scenario NAME] [--algorithm NAME]\n");
-      return 2;
+      return usage("unknown flag " + flag);
     }
   }
 
@@ -130,6 +144,19 @@ int main(int argc, char** argv) {
   demo.description = "the server's default scene (20 s loop)";
   demo.frames = 200;
   scenarios.insert(scenarios.begin(), demo);
+  if (!only_scenario.empty() &&
+      std::none_of(scenarios.begin(), scenarios.end(),
+                   [&](const drivers::Scenario& sc) { return sc.name == only_scenario; })) {
+    std::string names;
+    for (const drivers::Scenario& sc : scenarios) names += " " + sc.name;
+    return usage("unknown scenario '" + only_scenario + "' (one of:" + names + ")");
+  }
+  const std::vector<Variant> variants = Variants();
+  if (!only_algorithm.empty() &&
+      std::none_of(variants.begin(), variants.end(),
+                   [&](const Variant& v) { return v.name == only_algorithm; })) {
+    return usage("unknown algorithm '" + only_algorithm + "'");
+  }
 
   std::printf("rule: IoU >= 0.3 one-to-one; expected = visible >= %d px and disparity >= 8 px; "
               "matcher BM (default)\n\n", kMinVisible);
@@ -145,7 +172,7 @@ int main(int argc, char** argv) {
     std::vector<StereoFrame> rendered;
     std::vector<drivers::FrameTruth> truths(frames);
     for (int k = 0; k < frames; ++k) rendered.push_back(renderer.Render(k, &truths[k]));
-    for (const Variant& variant : Variants()) {
+    for (const Variant& variant : variants) {
       if (!only_algorithm.empty() && variant.name != only_algorithm) continue;
       pipeline::Pipeline pipe;
       const pipeline::Snapshot snapshot{
@@ -171,7 +198,7 @@ int main(int argc, char** argv) {
   }
 
   std::printf("\nall scenarios: recall, precision, depth error (rms / max) by band, mean ms per stage\n");
-  for (const Variant& variant : Variants()) {
+  for (const Variant& variant : variants) {
     auto it = overall.find(variant.name);
     if (it == overall.end()) continue;
     const Totals& t = it->second;
