@@ -37,6 +37,7 @@ void ToProto(const detection::StereoBlobOptions& o, v1::BlobConfig* p) {
   p->set_interior_erode_px(o.interior_erode_px);
   p->set_max_depth_per_height(o.max_depth_per_height);
   p->set_min_terrain_height_m(o.min_terrain_height_m);
+  p->set_max_attached_fraction(o.max_attached_fraction);
 }
 
 void MergeBlobs(const v1::BlobConfig& p, detection::StereoBlobOptions& o) {
@@ -47,6 +48,7 @@ void MergeBlobs(const v1::BlobConfig& p, detection::StereoBlobOptions& o) {
   STEVI_MERGE(p, interior_erode_px, o.interior_erode_px);
   STEVI_MERGE(p, max_depth_per_height, o.max_depth_per_height);
   STEVI_MERGE(p, min_terrain_height_m, o.min_terrain_height_m);
+  STEVI_MERGE(p, max_attached_fraction, o.max_attached_fraction);
 }
 
 // "<path>: unknown value <n>", the problem of an enum value the schema does not know.

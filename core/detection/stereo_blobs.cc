@@ -17,6 +17,12 @@ namespace {
 
 // Fewer interior pixels than this and the whole blob gives the disparity.
 constexpr int kMinInteriorPixels = 30;
+// Blobs shorter than this (rows) are never given the slope test: too few rows to fit.
+constexpr int kMinTerrainRows = 12;
+
+double DepthFromDisparityPx(double d_px, const geometry::StereoRig& rig) {
+  return rig.f_px() * rig.baseline_m() / d_px;
+}
 
 // Fraction of the blob's valid disparities within a band around the median: near 1 for one
 // surface at one range, lower for blobs that merge surfaces at different ranges.
@@ -38,33 +44,80 @@ double Consistency(const stereo::DisparityMap& disparity, const cv::Mat1i& label
   return valid == 0 ? 0.0 : static_cast<double>(consistent) / valid;
 }
 
-// Least-squares slope dZ/dH of depth over height (metres per metre; H = -y, up) over the blob's
-// pixels whose disparity lies within 30 % of its median. 0 when the blob is too short to tell.
+// The slope dZ/dH of depth over height (metres per metre; H = -y, up) of the plane
+// Z = a + b H + c X fitted by least squares to the blob's pixels whose disparity lies within 30 %
+// of its median. Fitting the lateral tilt c as well keeps a surface that recedes sideways (a
+// hillside seen obliquely, whose blob is taller on its near side) from hiding its lean-back.
+// 0 when the blob is too short to tell.
 double DepthPerHeight(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
                       const cv::Rect& box, double median_px, const geometry::StereoRig& rig,
                       double min_height_m) {
   const double fb = rig.f_px() * rig.baseline_m();
-  if (box.height < 12 || box.height * (fb / median_px) / rig.f_px() < min_height_m) return 0;
+  if (box.height < kMinTerrainRows ||
+      box.height * DepthFromDisparityPx(median_px, rig) / rig.f_px() < min_height_m) {
+    return 0;
+  }
   const double lo = 0.7 * median_px * stereo::DisparityMap::kScale;
   const double hi = 1.3 * median_px * stereo::DisparityMap::kScale;
-  double n = 0, sh = 0, sz = 0, shh = 0, shz = 0;
+  // Normal equations of [1 H X] (centred on the first sample for conditioning).
+  cv::Matx33d ata = cv::Matx33d::zeros();
+  cv::Vec3d atz(0, 0, 0);
+  int n = 0;
   for (int y = box.y; y < box.y + box.height; ++y) {
     const int* lab = labels[y];
     const int16_t* d = disparity.fixed[y];
     for (int x = box.x; x < box.x + box.width; ++x) {
       if (lab[x] != label || d[x] < lo || d[x] > hi) continue;
       const double z = fb * stereo::DisparityMap::kScale / d[x];
-      const double h = -(y - rig.cy()) * z / rig.f_px();
-      n += 1;
-      sh += h;
-      sz += z;
-      shh += h * h;
-      shz += h * z;
+      const cv::Vec3d row(1.0, -(y - rig.cy()) * z / rig.f_px(), (x - rig.cx()) * z / rig.f_px());
+      ata += row * row.t();
+      atz += row * z;
+      ++n;
     }
   }
-  const double var = n * shh - sh * sh;
-  if (n < 30 || var <= 1e-9) return 0;
-  return (n * shz - sh * sz) / var;
+  if (n < 30) return 0;
+  cv::Vec3d plane;
+  if (!cv::solve(ata, atz, plane, cv::DECOMP_CHOLESKY)) return 0;
+  return plane[1];
+}
+
+// The fraction of the trusted disparities in a ring around the blob (kRingInPx to kRingOutPx
+// from its mask) that lie at the blob's own range: within max(1 px, 10 %) of its median. A patch of
+// terrain that a threshold cut out of a continuous surface (the ground margin, the disparity
+// floor, an edge mask) is surrounded by that surface continuing at its range (fraction near 1); an
+// obstacle stands out in depth from what lies around it (near 0). The ring starts a few pixels out
+// because block matching spreads an object's disparity into its surroundings. -1 when the ring holds
+// fewer than kMinRingPixels trusted disparities: no evidence either way.
+double AttachedFraction(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
+                        const cv::Rect& box, double median_px, double min_disparity_px) {
+  constexpr int kRingInPx = 6, kRingOutPx = 12, kMinRingPixels = 20;
+  const cv::Rect outer =
+      (box + cv::Point(-kRingOutPx, -kRingOutPx) + cv::Size(2 * kRingOutPx, 2 * kRingOutPx)) &
+      cv::Rect(0, 0, labels.cols, labels.rows);
+  const cv::Mat1b mask = (labels(outer) == label);
+  cv::Mat1b inner_disc, outer_disc;
+  cv::dilate(mask, inner_disc,
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kRingInPx + 1, 2 * kRingInPx + 1)));
+  cv::dilate(mask, outer_disc,
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kRingOutPx + 1, 2 * kRingOutPx + 1)));
+  const double band = std::max(1.0, 0.1 * median_px);
+  const double lo = std::max((median_px - band), min_disparity_px) * stereo::DisparityMap::kScale;
+  const double hi = (median_px + band) * stereo::DisparityMap::kScale;
+  int ring = 0, attached = 0;
+  for (int y = 0; y < outer.height; ++y) {
+    const int16_t* d = disparity.fixed[outer.y + y] + outer.x;
+    const uchar* in = inner_disc[y];
+    const uchar* out = outer_disc[y];
+    for (int x = 0; x < outer.width; ++x) {
+      if (!out[x] || in[x] || d[x] < 0 ||
+          d[x] < min_disparity_px * stereo::DisparityMap::kScale) {
+        continue;
+      }
+      ++ring;
+      if (d[x] >= lo && d[x] <= hi) ++attached;
+    }
+  }
+  return ring < kMinRingPixels ? -1.0 : static_cast<double>(attached) / ring;
 }
 
 }  // namespace
@@ -87,6 +140,9 @@ std::vector<std::string> StereoBlobOptions::Validate() const {
   }
   if (!(min_terrain_height_m >= 0 && min_terrain_height_m <= 1000)) {
     problems.push_back("min_terrain_height_m: must be in [0, 1000]" + Got(min_terrain_height_m));
+  }
+  if (!(max_attached_fraction >= 0 && max_attached_fraction <= 1)) {
+    problems.push_back("max_attached_fraction: must be in [0, 1]" + Got(max_attached_fraction));
   }
   if (interior_erode_px < 0 || interior_erode_px > 50) {
     problems.push_back("interior_erode_px: must be in 0..50" + Got(interior_erode_px));
@@ -149,7 +205,8 @@ cv::Mat1b StereoCandidates(const cv::Mat1b& appearance, const stereo::DisparityM
 std::vector<Detection> RangeBlobs(const cv::Mat1b& candidates, const stereo::DisparityMap& disparity,
                                   const geometry::StereoRig& rig,
                                   const geometry::RangeOptions& range,
-                                  const StereoBlobOptions& options, std::string_view extractor) {
+                                  const StereoBlobOptions& options, std::string_view extractor,
+                                  const std::optional<GroundModel>& ground) {
   std::vector<Detection> out;
   if (disparity.empty() || candidates.empty()) return out;
   const extraction::BlobSet blobs =
@@ -191,6 +248,16 @@ std::vector<Detection> RangeBlobs(const cv::Mat1b& candidates, const stereo::Dis
         DepthPerHeight(disparity, blobs.labels, blob.label, blob.bbox, *median, rig,
                        options.min_terrain_height_m) >
             options.max_depth_per_height) {
+      continue;  // terrain
+    }
+    // A blob too short for the slope test, reaching below the horizon (where terrain is), whose
+    // surroundings continue at its range is a patch of terrain cut out by a threshold.
+    const double height_m = blob.bbox.height * DepthFromDisparityPx(*median, rig) / rig.f_px();
+    const bool too_short = blob.bbox.height < kMinTerrainRows || height_m < options.min_terrain_height_m;
+    if (options.max_attached_fraction < 1 && too_short && ground &&
+        blob.bbox.y + blob.bbox.height > ground->horizon_row &&
+        AttachedFraction(disparity, blobs.labels, blob.label, blob.bbox, *median,
+                         range.min_disparity_px) > options.max_attached_fraction) {
       continue;  // terrain
     }
 

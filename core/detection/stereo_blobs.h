@@ -38,17 +38,25 @@ struct StereoBlobOptions {
   // the slope is mostly disparity noise.
   double max_depth_per_height = 0.6;
   double min_terrain_height_m = 3.0;
+  // Blobs too short for that test are judged by their surroundings, when the ground model says they
+  // reach below the horizon: one whose ring of trusted disparities 6..12 px out lies at its own
+  // range (within max(1 px, 10 %)) for more than this fraction is a patch of a continuous surface
+  // that a threshold cut out (the ground margin, the disparity floor), not something standing out
+  // from it. 1 disables.
+  double max_attached_fraction = 0.5;
 
   std::vector<std::string> Validate() const;
 };
 
 // Blobs of `candidates` (non-zero pixels; with max_disparity_step_px > 0 they must hold valid
 // disparities), filtered (width, area, valid fraction, trusted range) and ranged. `extractor` names
-// the detector in each Detection.
+// the detector in each Detection. `ground` (the detector's ground model, if any) tells where terrain
+// can be, for the test of short blobs against their surroundings.
 std::vector<Detection> RangeBlobs(const cv::Mat1b& candidates, const stereo::DisparityMap& disparity,
                                   const geometry::StereoRig& rig,
                                   const geometry::RangeOptions& range,
-                                  const StereoBlobOptions& options, std::string_view extractor);
+                                  const StereoBlobOptions& options, std::string_view extractor,
+                                  const std::optional<GroundModel>& ground = std::nullopt);
 
 // The stereo test of a candidate pixel: non-zero in `appearance` (every pixel when it is empty),
 // with a trusted disparity (range options) that stands out from the ground model (when there is

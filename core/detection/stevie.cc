@@ -23,7 +23,7 @@ std::vector<Detection> DetectSteViE(const cv::Mat1b& left, const stereo::Dispari
       options.ground.enabled ? FitGround(disparity, options.ground) : std::nullopt;
   const cv::Mat1b candidates =
       StereoCandidates(regions, disparity, rig, range, ground, options.ground);
-  std::vector<Detection> out = RangeBlobs(candidates, disparity, rig, range, options.blobs, "stevie");
+  std::vector<Detection> out = RangeBlobs(candidates, disparity, rig, range, options.blobs, "stevie", ground);
   return out;
 }
 

@@ -73,7 +73,7 @@ std::vector<Detection> DetectSteViS(const cv::Mat1b& left, const stereo::Dispari
   const std::optional<GroundModel> ground =
       options.ground.enabled ? FitGround(disparity, options.ground) : std::nullopt;
   const cv::Mat1b candidates = StereoCandidates(salient, disparity, rig, range, ground, options.ground);
-  return RangeBlobs(candidates, disparity, rig, range, options.blobs, "stevis");
+  return RangeBlobs(candidates, disparity, rig, range, options.blobs, "stevis", ground);
 }
 
 }  // namespace stevi::detection

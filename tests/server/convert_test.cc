@@ -121,6 +121,7 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryStevieAndStevisField) {
   s.blobs.max_width_fraction = 0.6;
   s.blobs.max_depth_per_height = 0;
   e.blobs.min_terrain_height_m = 5;
+  e.blobs.max_attached_fraction = 0.7;
 
   const v1::PipelineConfig proto = ToProto(original);
   EXPECT_EQ(proto.stevie().morphology().shape(), v1::STRUCTURING_SHAPE_CROSS);
@@ -147,6 +148,7 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryStevieAndStevisField) {
   EXPECT_DOUBLE_EQ(copy.stevis.blobs.max_width_fraction, 0.6);
   EXPECT_DOUBLE_EQ(copy.stevis.blobs.max_depth_per_height, 0);
   EXPECT_DOUBLE_EQ(copy.stevie.blobs.min_terrain_height_m, 5);
+  EXPECT_DOUBLE_EQ(copy.stevie.blobs.max_attached_fraction, 0.7);
   EXPECT_EQ(copy.stevie.ground.min_row_pixels, 25);
   EXPECT_DOUBLE_EQ(copy.stevis.ground.min_row_spread, 0.4);
   EXPECT_THAT(copy.Validate(), ::testing::IsEmpty());

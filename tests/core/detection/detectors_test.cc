@@ -72,11 +72,7 @@ TEST_P(DetectorsOnScenarios, ReachRecallAndPrecisionWithAccurateDepth) {
                 std::string(pipeline::AlgorithmName(algorithm)).c_str(), scenario.name.c_str(),
                 100 * s.recall(), 100 * s.precision(), s.depth_within_2pct, s.matched);
     EXPECT_GE(s.recall(), 0.9) << scenario.name;
-    // Known shortfall: SteViE over low ground keeps small hill fragments just above the fitted
-    // ground (measured 69 % precision); every other case meets 80 %.
-    const bool known_shortfall =
-        algorithm == pipeline::Algorithm::kSteViE && scenario.name == "low_over_ground";
-    EXPECT_GE(s.precision(), known_shortfall ? 0.6 : 0.8) << scenario.name;
+    EXPECT_GE(s.precision(), 0.8) << scenario.name;
     EXPECT_GE(s.depth_within_2pct, 0.97 * s.matched) << scenario.name;
   }
 }

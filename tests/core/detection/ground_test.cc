@@ -1,4 +1,5 @@
 #include "core/detection/ground.h"
+#include "core/detection/stereo_blobs.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -101,6 +102,67 @@ TEST(GroundOptions, ValidateNamesEveryProblem) {
   EXPECT_THAT(::testing::PrintToString(problems),
               AllOf(HasSubstr("min_row_fraction"), HasSubstr("min_support_rows"),
                     HasSubstr("margin_fraction")));
+}
+
+// RangeBlobs' test of short blobs against their surroundings (stereo_blobs.h), on an analytic map:
+// a camera 3 m over flat ground, a hillside band at 9 px (46.7 m) standing out from the ground
+// rows 250..300, and candidate patches the same size cut out of it or standing free.
+class ShortBlobSurroundings : public ::testing::Test {
+ protected:
+  static constexpr double kHeight = 3.0;
+  const geometry::StereoRig rig = geometry::StereoRig::Ideal(cv::Size(640, 480), kF, kB, 320, 240);
+  stereo::DisparityMap map;
+  cv::Mat1b candidates = cv::Mat1b(480, 640, uchar{0});
+  GroundModel ground{kB / kHeight, 240.0, 100};
+  const cv::Rect hill_patch{80, 262, 20, 15};   // inside the hillside: same range all around
+  const cv::Rect aircraft{400, 262, 20, 15};    // 12 px (35 m) against the ground (4..7 px)
+  const cv::Rect sky_patch{80, 100, 20, 15};    // above the horizon: never judged
+
+  void SetUp() override {
+    map.num_disparities = 64;
+    map.fixed = cv::Mat1s(480, 640, stereo::DisparityMap::kInvalid);
+    for (int v = 241; v < 480; ++v) {
+      map.fixed.row(v).setTo(std::lround(ground.DisparityAt(v) * 16));
+    }
+    map.fixed(cv::Rect(0, 250, 200, 50)).setTo(9 * 16);
+    map.fixed(cv::Rect(40, 80, 120, 60)).setTo(9 * 16);  // a wall in the sky at the same range
+    map.fixed(aircraft).setTo(12 * 16);
+    for (const cv::Rect& r : {hill_patch, aircraft, sky_patch}) candidates(r).setTo(255);
+  }
+
+  bool Found(const std::vector<Detection>& detections, const cv::Rect& r) {
+    for (const Detection& d : detections) {
+      if (d.bbox == r) return true;
+    }
+    return false;
+  }
+};
+
+TEST_F(ShortBlobSurroundings, APatchOfAContinuousSurfaceBelowTheHorizonIsTerrain) {
+  const StereoBlobOptions options;
+  const std::vector<Detection> found =
+      RangeBlobs(candidates, map, rig, geometry::RangeOptions{}, options, "test", ground);
+  EXPECT_FALSE(Found(found, hill_patch)) << "the hillside continues at its range all around it";
+  EXPECT_TRUE(Found(found, aircraft)) << "it stands out in depth from the ground around it";
+  EXPECT_TRUE(Found(found, sky_patch)) << "above the horizon there is no terrain to be part of";
+  EXPECT_EQ(found.size(), 2u);
+}
+
+TEST_F(ShortBlobSurroundings, DisabledOrWithoutAGroundModelEveryPatchStays) {
+  StereoBlobOptions off;
+  off.max_attached_fraction = 1.0;
+  EXPECT_EQ(RangeBlobs(candidates, map, rig, geometry::RangeOptions{}, off, "test", ground).size(), 3u);
+  EXPECT_EQ(RangeBlobs(candidates, map, rig, geometry::RangeOptions{}, StereoBlobOptions{}, "test",
+                       std::nullopt)
+                .size(),
+            3u);
+}
+
+TEST(StereoBlobOptions, ValidateNamesTheAttachedFraction) {
+  StereoBlobOptions options;
+  options.max_attached_fraction = 1.5;
+  EXPECT_THAT(options.Validate(), ::testing::ElementsAre(AllOf(HasSubstr("max_attached_fraction"),
+                                                               HasSubstr("[0, 1]"), HasSubstr("1.5"))));
 }
 
 }  // namespace
