@@ -1,0 +1,102 @@
+// A constant-velocity Kalman filter in the camera frame, and the measurement model that turns a
+// detection's pixel and disparity noise into metres. The model and its units are derived in
+// core/tracking/README.md.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace stevi::tracking {
+
+// The rectified left camera and the baseline: all the tracker needs to go between pixels and the
+// cam frame (x right, y down, z forward, metres).
+struct CameraModel {
+  double f_px = 0;  // focal length, pixels
+  double cx = 0;    // principal point, pixels
+  double cy = 0;
+  double baseline_m = 0;  // stereo baseline, metres
+
+  // Lists every problem ("f_px: must be > 0 (got 0)").
+  std::vector<std::string> Validate() const;
+};
+
+// Pixel (u, v) of a cam-frame point. The point must be in front of the camera (z > 0).
+Eigen::Vector2d Project(const CameraModel& camera, const Eigen::Vector3d& point_in_cam_m);
+
+// Independent noise of variance `variance_px2` on each pixel measurement (u, v and the disparity),
+// mapped to the cam-frame point through the Jacobian of the stereo back-projection at
+// `point_in_cam_m`: (z/f)^2 variance on x and y, plus variance * (z^2 / (f B))^2 along the viewing
+// ray (a disparity error moves the point along its ray, not along z). Square metres.
+Eigen::Matrix3d PixelNoiseCovariance(const CameraModel& camera,
+                                     const Eigen::Vector3d& point_in_cam_m, double variance_px2);
+
+// A detection's position covariance (square metres): centroid noise of variance
+// `centroid_variance_px2` on u and v, and the detector's own 1-sigma `range_sigma_m` along the
+// viewing ray. When range_sigma_m is not finite and positive, the disparity gets the centroid's
+// pixel variance instead.
+Eigen::Matrix3d DetectionCovariance(const CameraModel& camera,
+                                    const Eigen::Vector3d& point_in_cam_m,
+                                    double centroid_variance_px2, double range_sigma_m);
+
+// The noises of the filter. Defaults are the thesis's numbers, given units in this model
+// (README.md): process noises are white-acceleration densities in the cam frame, measurement noises
+// are pixel variances.
+struct KalmanOptions {
+  // Process noise while the track is measured: power spectral density of the white acceleration on
+  // each cam axis (m^2/s^3). 1e-2 lets the velocity wander by 0.1 m/s in one second.
+  double process_noise = 1e-2;
+  // Measurement noise: variance of a detection's centroid on u and v (pixel^2; 0.1 is a 0.32 px
+  // sigma). The depth noise is the detection's own range_sigma_m.
+  double measurement_noise = 1e-1;
+  // Process noise while occluded (no detection), m^2/s^3. Smaller than process_noise, as in the
+  // thesis: the track runs in free prediction and trusts its constant-velocity model.
+  double occluded_process_noise = 1e-5;
+  // While occluded, the prediction itself is fed back as a pseudo-measurement with this variance
+  // on u, v and the disparity (pixel^2). It never moves the state (its innovation is zero) and only
+  // shrinks the covariance; 1e7 makes it a no-op, the thesis's free prediction.
+  double occluded_measurement_noise = 1e7;
+  // 1-sigma of a new track's unknown velocity on each axis (m/s): about the fastest relative speed
+  // expected.
+  double initial_velocity_sigma_mps = 20;
+
+  std::vector<std::string> Validate() const;
+};
+
+// State [x y z vx vy vz] in the cam frame (metres, m/s); measurement: the position.
+// Thread-compatible.
+class ConstantVelocityKalman {
+ public:
+  using State = Eigen::Matrix<double, 6, 1>;
+  using Covariance = Eigen::Matrix<double, 6, 6>;
+
+  // Starts at `position_m` with covariance `position_cov_m2`, at rest, with a velocity sigma of
+  // `velocity_sigma_mps` on each axis.
+  void Initialize(const Eigen::Vector3d& position_m, const Eigen::Matrix3d& position_cov_m2,
+                  double velocity_sigma_mps);
+
+  // The position `dt_s` seconds ahead, leaving the filter unchanged. The predicted mean does not
+  // depend on the process noise, so gating can use it before the noise is chosen.
+  Eigen::Vector3d PredictedPosition(double dt_s) const;
+
+  // Advances the state by `dt_s` seconds (negative is read as 0) with white-acceleration noise of
+  // density `process_noise` (m^2/s^3), discretised exactly for dt.
+  void Predict(double dt_s, double process_noise);
+
+  // Corrects with a measured position (metres) of covariance `covariance_m2` (Joseph form, which
+  // keeps the covariance symmetric and positive). Returns false, leaving the filter unchanged, when
+  // the innovation covariance is not positive definite (a NaN in the input).
+  bool Update(const Eigen::Vector3d& measured_m, const Eigen::Matrix3d& covariance_m2);
+
+  const State& state() const { return x_; }
+  const Covariance& covariance() const { return P_; }
+  Eigen::Vector3d position() const { return x_.head<3>(); }
+  Eigen::Vector3d velocity() const { return x_.tail<3>(); }
+
+ private:
+  State x_ = State::Zero();
+  Covariance P_ = Covariance::Identity();
+};
+
+}  // namespace stevi::tracking

@@ -1,0 +1,156 @@
+// The multi-target tracker: one constant-velocity Kalman filter per obstacle in the cam frame,
+// Hungarian assignment on the pixel distance between detections and predictions, gates on depth,
+// area, perimeter and distance, a tentative / confirmed / coasting life cycle, range smoothing with
+// the fading-memory filter and a straight-line time to collision. Derivations: README.md.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "core/detection/detection.h"
+#include "core/tracking/fading_filter.h"
+#include "core/tracking/hungarian.h"
+#include "core/tracking/kalman.h"
+
+namespace stevi::tracking {
+
+// A detection and a track are paired only when every gate passes. A ratio gate compares the larger
+// of two values with the smaller; a value <= 0 on either side (unknown) passes it. To disable a
+// gate, make it very large.
+struct GateOptions {
+  // Detection depth against the track's predicted depth (depth ratio = disparity ratio), >= 1.
+  // 1.3 separates obstacles whose depths differ by 30 %, while the depth noise of a trusted
+  // disparity (>= 3 px at 0.25 px sigma) is at most 8 %.
+  double max_depth_ratio = 1.3;
+  // Detection area against the track's last measured area (pixels^2 ratio), >= 1.
+  double max_area_ratio = 3.0;
+  // Detection perimeter against the track's last measured perimeter, >= 1.
+  double max_perimeter_ratio = 2.5;
+  // Distance (pixels) between the detection's centroid and the track's predicted centre, > 0.
+  double max_distance_px = 80;
+
+  std::vector<std::string> Validate() const;
+};
+
+struct TrackerOptions {
+  KalmanOptions kalman;
+  GateOptions gates;
+  // A tentative track becomes confirmed at this many hits (frames with a detection), >= 1.
+  int confirm_hits = 3;
+  // A tentative track is deleted at this many consecutive misses, 1..delete_misses. 2 lets it
+  // survive one dropped detection (detectors recognise 60-80 % of obstacles per frame) while
+  // clutter dies within two frames.
+  int tentative_delete_misses = 2;
+  // A confirmed track is deleted at this many consecutive misses, >= 1. Until then it coasts on
+  // its prediction: 15 frames carry an obstacle through an occlusion of 14 frames.
+  int delete_misses = 15;
+  // Memory of the range smoothing (fading_filter.h), in (0, 1].
+  double fading_beta = 0.7;
+  // Detections scoring below this (0..1) are ignored: they neither update nor start tracks.
+  std::optional<double> min_score;
+  // Frame intervals longer than this (seconds, > 0) are predicted as this long: a stalled source
+  // or a clock jump must not fling the predictions away (the gates then decide).
+  double max_dt_s = 1.0;
+
+  // Every problem, as "field: problem" ("gates.max_depth_ratio: must be >= 1 (got 0.5)").
+  std::vector<std::string> Validate() const;
+};
+
+enum class TrackState {
+  kTentative,  // not yet confirm_hits hits
+  kConfirmed,  // measured this frame
+  kCoasting,   // confirmed, not measured this frame: the state is predicted
+};
+
+std::string_view TrackStateName(TrackState state);
+
+// One live track after an update. Positions and velocities are in the cam frame, relative to the
+// camera.
+struct Track {
+  std::uint64_t id = 0;  // from 1, strictly increasing, never reused by a Tracker
+  TrackState state = TrackState::kTentative;
+  int age_frames = 0;  // updates since creation, counting the creating one
+  int hits = 0;        // updates with a detection
+  int misses = 0;      // consecutive updates without one
+  // The last detection. When it is not from this frame, bbox and centroid_px are moved to the
+  // predicted centre (same size); the other fields are those of the last detection.
+  detection::Detection detection;
+  cv::Vec3d position_cam_m;    // filtered (Kalman)
+  cv::Vec3d velocity_cam_mps;  // filtered (Kalman)
+  // 1-sigma of each cam axis from the filter's covariance (the diagonal; depth noise lies along
+  // the viewing ray, so off-axis x and y share some of it).
+  cv::Vec3d position_sigma_m;
+  cv::Vec3d velocity_sigma_mps;
+  double range_m = 0;           // raw: the last detection's range
+  double smoothed_range_m = 0;  // fading filter, predicted to this frame when not measured
+  double range_rate_mps = 0;    // d|p|/dt of the Kalman state; negative = closing
+  // Straight-line extrapolation of the filtered relative position p and velocity v: the time of
+  // the closest approach t* = -p.v / |v|^2 (seconds from this frame) and the miss distance
+  // |p + v t*| (metres). Set only for a closing obstacle (t* > 0); whether it is a collision is
+  // for the caller to judge from closest_approach_m and the vehicle's size.
+  std::optional<double> time_to_collision_s;
+  std::optional<double> closest_approach_m;
+};
+
+// Thread-compatible: call Update() from one thread at a time.
+class Tracker {
+ public:
+  // The options must be valid (call Validate() first); invalid options are a programming error
+  // (std::invalid_argument listing the problems).
+  explicit Tracker(TrackerOptions options = {});
+
+  // Tracks the detections of one frame captured at `t_ns` (any monotonic clock, nanoseconds) and
+  // returns every live track (tentative, confirmed, coasting) in increasing id order. The time step
+  // is the real interval since the previous update (0 for a repeated or earlier timestamp, at most
+  // max_dt_s). Detections without a finite position in front of the camera are ignored. The camera
+  // must be valid (else std::invalid_argument).
+  std::vector<Track> Update(const std::vector<detection::Detection>& detections, int64_t t_ns,
+                            const CameraModel& camera);
+
+  // Drops every track and the time reference. Ids keep increasing: an id is never reused.
+  void Reset();
+
+  // Replaces the options between updates, keeping the tracks (std::invalid_argument if invalid).
+  // Existing tracks keep the fading_beta they started with.
+  void SetOptions(TrackerOptions options);
+  const TrackerOptions& options() const { return options_; }
+
+  // The id the next new track will get.
+  std::uint64_t next_id() const { return next_id_; }
+
+ private:
+  struct Entry {
+    std::uint64_t id = 0;
+    TrackState state = TrackState::kTentative;
+    int age_frames = 0;
+    int hits = 0;
+    int misses = 0;
+    detection::Detection last;  // the last detection, as measured
+    ConstantVelocityKalman kalman;
+    FadingMemoryFilter range_filter;
+    double since_measured_s = 0;  // (clamped) time since the last detection
+  };
+
+  Entry NewEntry(const detection::Detection& detection, const CameraModel& camera);
+  Track Output(const Entry& entry, const CameraModel& camera) const;
+
+  TrackerOptions options_;
+  std::vector<Entry> tracks_;
+  std::uint64_t next_id_ = 1;
+  std::optional<int64_t> last_t_ns_;
+
+  // Per-update buffers, kept to avoid reallocating every frame.
+  std::vector<int> usable_;              // indices of the detections that can be tracked
+  std::vector<AllowedPair> allowed_;     // (track, index into usable_, pixel distance) in gates
+  std::vector<int> track_to_detection_;  // index into usable_, or -1
+  std::vector<char> detection_used_;
+  AssignmentSolver solver_;
+};
+
+}  // namespace stevi::tracking
