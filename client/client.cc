@@ -71,6 +71,9 @@ grpc::Status Client::GetDisparitySnapshot(v1::DisparitySnapshot* response, bool 
 grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,
                                   const StreamOptions& options) {
   cancelled_ = false;
+  v1::StreamTracksRequest request;
+  request.set_confirmed_only(options.confirmed_only);
+  request.set_min_score(options.min_score);
   uint64_t received = 0;
   int failures = 0;
   auto backoff = std::chrono::milliseconds(200);
@@ -91,7 +94,7 @@ grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&
                                 std::to_string(options_.timeout.count()) + " ms");
     } else {
       std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader =
-          stub_->StreamTracks(&context, v1::StreamTracksRequest());
+          stub_->StreamTracks(&context, request);
       v1::TrackFrame frame;
       while (reader->Read(&frame)) {
         failures = 0;

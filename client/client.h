@@ -29,6 +29,9 @@ struct StreamOptions {
   bool reconnect = false;
   // Give up reconnecting after this many failed attempts in a row (0 = never give up).
   int max_reconnect_attempts = 10;
+  // Server-side filters: no TENTATIVE tracks; only tracks scoring at least min_score (0..1).
+  bool confirmed_only = false;
+  double min_score = 0.0;
 };
 
 // Thread-safe, except that one StreamTracks() runs at a time per Client.

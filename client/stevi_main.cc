@@ -27,7 +27,10 @@ namespace v1 = stevi::v1;
 constexpr char kUsage[] = R"(usage: stevi [--server HOST:PORT] [--timeout SECONDS] COMMAND [ARGS]
 
 Commands:
-  watch [--count N] [--json]   live obstacles: a table, or one TrackFrame JSON per line
+  watch [--count N] [--json] [--confirmed] [--min-score S]
+                               live tracks: a table, or one TrackFrame JSON per line;
+                               --confirmed hides tentative tracks, --min-score S (0..1)
+                               those whose detection scored below S
   status [--json]              source state, frame rates, drops, stage timings, subscribers
   config get [--json]          the active pipeline configuration
   config set KEY=VALUE...      change it while running, e.g. algorithm=canonical,
@@ -84,16 +87,30 @@ void PrintFrameTable(const v1::TrackFrame& f) {
   if (f.dropped_frames() > 0) out << "  (dropped " << f.dropped_frames() << ")";
   out << "\n";
   if (f.tracks_size() > 0) {
-    out << "    id        box (x,y wxh)   depth m   range m  sigma m   disp px\n";
+    out << "    id  state       age        box (x,y wxh)   depth m   range m  sigma m   disp px"
+           "  rate m/s     ttc s   miss m\n";
   }
   out << std::setprecision(2);
   for (const v1::Track& t : f.tracks()) {
     std::ostringstream box;
     box << t.bbox().x() << "," << t.bbox().y() << " " << t.bbox().width() << "x"
         << t.bbox().height();
-    out << std::setw(6) << t.track_id() << std::setw(22) << box.str() << std::setw(10)
+    const auto optional = [](bool has, double value) {
+      std::ostringstream s;
+      if (has) {
+        s << std::fixed << std::setprecision(1) << value;
+      } else {
+        s << "-";
+      }
+      return s.str();
+    };
+    out << std::setw(6) << t.track_id() << "  " << std::left << std::setw(10)
+        << ShortEnum(v1::TrackState_Name(t.state()), "TRACK_STATE_") << std::right
+        << std::setw(5) << t.age_frames() << std::setw(21) << box.str() << std::setw(10)
         << t.depth_m() << std::setw(10) << t.range_m() << std::setw(9) << t.range_sigma_m()
-        << std::setw(10) << t.disparity_px() << "\n";
+        << std::setw(10) << t.disparity_px() << std::setw(10) << t.range_rate_mps()
+        << std::setw(10) << optional(t.has_time_to_collision_s(), t.time_to_collision_s())
+        << std::setw(9) << optional(t.has_closest_approach_m(), t.closest_approach_m()) << "\n";
   }
   std::cout << out.str() << std::flush;
 }
@@ -101,9 +118,24 @@ void PrintFrameTable(const v1::TrackFrame& f) {
 int Watch(Client& client, const std::vector<std::string>& args) {
   uint64_t count = 0;
   bool json = false;
+  stevi::client::StreamOptions options;
   for (size_t i = 0; i < args.size(); ++i) {
     if (args[i] == "--json") {
       json = true;
+    } else if (args[i] == "--confirmed") {
+      options.confirmed_only = true;
+    } else if (args[i] == "--min-score" && i + 1 < args.size()) {
+      size_t used = 0;
+      double s = -1;
+      try {
+        s = std::stod(args[++i], &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used != args[i].size() || !(s >= 0 && s <= 1)) {
+        return Usage("watch --min-score: expected a number in [0, 1], got '" + args[i] + "'");
+      }
+      options.min_score = s;
     } else if (args[i] == "--count" && i + 1 < args.size()) {
       try {
         size_t used = 0;
@@ -117,7 +149,6 @@ int Watch(Client& client, const std::vector<std::string>& args) {
       return Usage("watch: unexpected argument '" + args[i] + "'");
     }
   }
-  stevi::client::StreamOptions options;
   options.max_frames = count;
   // Ctrl-C or SIGTERM ends the stream cleanly: a thread waits for them (a signal handler may not
   // take the client's lock). It is detached; the process exits when the stream ends.

@@ -230,6 +230,44 @@ v1::Algorithm ToProto(Algorithm algorithm) {
   return v1::ALGORITHM_UNSPECIFIED;
 }
 
+void ToProto(const tracking::TrackerOptions& o, v1::TrackingConfig* p) {
+  v1::KalmanConfig* k = p->mutable_kalman();
+  k->set_process_noise(o.kalman.process_noise);
+  k->set_measurement_noise(o.kalman.measurement_noise);
+  k->set_occluded_process_noise(o.kalman.occluded_process_noise);
+  k->set_occluded_measurement_noise(o.kalman.occluded_measurement_noise);
+  k->set_initial_velocity_sigma_mps(o.kalman.initial_velocity_sigma_mps);
+  v1::GateConfig* g = p->mutable_gates();
+  g->set_max_depth_ratio(o.gates.max_depth_ratio);
+  g->set_max_area_ratio(o.gates.max_area_ratio);
+  g->set_max_perimeter_ratio(o.gates.max_perimeter_ratio);
+  g->set_max_distance_px(o.gates.max_distance_px);
+  p->set_confirm_hits(o.confirm_hits);
+  p->set_tentative_delete_misses(o.tentative_delete_misses);
+  p->set_delete_misses(o.delete_misses);
+  p->set_fading_beta(o.fading_beta);
+  p->set_min_score(o.min_score);
+  p->set_max_dt_s(o.max_dt_s);
+}
+
+void MergeTracking(const v1::TrackingConfig& p, tracking::TrackerOptions& o) {
+  STEVI_MERGE(p.kalman(), process_noise, o.kalman.process_noise);
+  STEVI_MERGE(p.kalman(), measurement_noise, o.kalman.measurement_noise);
+  STEVI_MERGE(p.kalman(), occluded_process_noise, o.kalman.occluded_process_noise);
+  STEVI_MERGE(p.kalman(), occluded_measurement_noise, o.kalman.occluded_measurement_noise);
+  STEVI_MERGE(p.kalman(), initial_velocity_sigma_mps, o.kalman.initial_velocity_sigma_mps);
+  STEVI_MERGE(p.gates(), max_depth_ratio, o.gates.max_depth_ratio);
+  STEVI_MERGE(p.gates(), max_area_ratio, o.gates.max_area_ratio);
+  STEVI_MERGE(p.gates(), max_perimeter_ratio, o.gates.max_perimeter_ratio);
+  STEVI_MERGE(p.gates(), max_distance_px, o.gates.max_distance_px);
+  STEVI_MERGE(p, confirm_hits, o.confirm_hits);
+  STEVI_MERGE(p, tentative_delete_misses, o.tentative_delete_misses);
+  STEVI_MERGE(p, delete_misses, o.delete_misses);
+  STEVI_MERGE(p, fading_beta, o.fading_beta);
+  STEVI_MERGE(p, min_score, o.min_score);
+  STEVI_MERGE(p, max_dt_s, o.max_dt_s);
+}
+
 v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
   v1::PipelineConfig p;
   p.set_algorithm(ToProto(c.algorithm));
@@ -282,6 +320,7 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
 
   ToProto(c.stevie, p.mutable_stevie());
   ToProto(c.stevis, p.mutable_stevis());
+  ToProto(c.tracking, p.mutable_tracking());
   return p;
 }
 
@@ -363,6 +402,7 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
 
   MergeSteViE(u.stevie(), c.stevie, problems);
   MergeSteViS(u.stevis(), c.stevis, problems);
+  MergeTracking(u.tracking(), c.tracking);
   return problems;
 }
 
@@ -418,6 +458,15 @@ std::string ToJsonLine(const google::protobuf::Message& message) {
   return out;
 }
 
+v1::TrackState ToProto(tracking::TrackState state) {
+  switch (state) {
+    case tracking::TrackState::kTentative: return v1::TRACK_STATE_TENTATIVE;
+    case tracking::TrackState::kConfirmed: return v1::TRACK_STATE_CONFIRMED;
+    case tracking::TrackState::kCoasting: return v1::TRACK_STATE_COASTING;
+  }
+  return v1::TRACK_STATE_UNSPECIFIED;
+}
+
 v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
   v1::TrackFrame f;
   f.set_frame_id(result.frame_id);
@@ -427,19 +476,38 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
   f.set_algorithm(ToProto(result.algorithm));
   if (result.rig) f.set_calibration_id(result.rig->calibration_id());
   ToProto(result.timings, f.mutable_timings());
-  uint64_t id = 1;
-  for (const detection::Detection& d : result.detections) {
+  for (const tracking::Track& track : result.tracks) {
+    const detection::Detection& d = track.detection;
     v1::Track* t = f.add_tracks();
-    t->set_track_id(id++);
+    t->set_track_id(track.id);
     SetBox(d.bbox, t->mutable_bbox());
-    t->set_depth_m(d.depth_m);
-    t->set_range_m(d.range_m);
+    if (track.state == tracking::TrackState::kCoasting) {
+      // Not detected this frame: depth and range are the prediction's.
+      t->set_depth_m(track.position_cam_m[2]);
+      t->set_range_m(cv::norm(track.position_cam_m));
+    } else {
+      t->set_depth_m(d.depth_m);
+      t->set_range_m(d.range_m);
+    }
     t->set_range_sigma_m(d.range_sigma_m);
-    SetPoint(d.position_cam_m, t->mutable_position_cam());
+    SetPoint(track.position_cam_m, t->mutable_position_cam());
     t->set_disparity_px(d.disparity_px);
     t->set_score(d.score);
     t->set_extractor(d.extractor);
     t->set_area_px(d.area_px);
+    t->set_state(ToProto(track.state));
+    t->set_age_frames(static_cast<uint32_t>(std::max(track.age_frames, 0)));
+    t->set_hits(static_cast<uint32_t>(std::max(track.hits, 0)));
+    t->set_misses(static_cast<uint32_t>(std::max(track.misses, 0)));
+    v1::VelocityCam* v = t->mutable_velocity_cam();
+    v->set_x_mps(track.velocity_cam_mps[0]);
+    v->set_y_mps(track.velocity_cam_mps[1]);
+    v->set_z_mps(track.velocity_cam_mps[2]);
+    t->set_range_rate_mps(track.range_rate_mps);
+    if (track.time_to_collision_s) t->set_time_to_collision_s(*track.time_to_collision_s);
+    if (track.closest_approach_m) t->set_closest_approach_m(*track.closest_approach_m);
+    t->set_smoothed_range_m(track.smoothed_range_m);
+    SetPoint(track.position_sigma_m, t->mutable_position_sigma_cam());
   }
   return f;
 }
@@ -464,7 +532,7 @@ Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result, bo
   if (!encode(stereo::ToFixedPoint16U(result.disparity), s.mutable_disparity_png16()) ||
       !encode(stereo::ToColour(result.disparity), s.mutable_disparity_colour_png()) ||
       !encode(result.rectified_left, s.mutable_left_png()) ||
-      (annotated && !encode(pipeline::AnnotateDetections(result), s.mutable_annotated_png()))) {
+      (annotated && !encode(pipeline::AnnotateTracks(result), s.mutable_annotated_png()))) {
     return Error{ErrorCode::kInternal, "snapshot: PNG encoding failed"};
   }
   if (result.rig) {

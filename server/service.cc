@@ -22,8 +22,16 @@ v1::SourceState ToProto(SourceState state) {
 // Lifetime: deleted in OnDone(), after detaching from the subscription.
 class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame> {
  public:
-  TrackStreamReactor(FrameBroadcaster& broadcaster, std::shared_ptr<Subscription<FramePtr>> sub)
-      : broadcaster_(broadcaster), sub_(std::move(sub)) {
+  // A refusal: finishes at once with `status`.
+  explicit TrackStreamReactor(FrameBroadcaster& broadcaster, const grpc::Status& status)
+      : broadcaster_(broadcaster) {
+    finished_ = true;
+    Finish(status);
+  }
+
+  TrackStreamReactor(FrameBroadcaster& broadcaster, std::shared_ptr<Subscription<FramePtr>> sub,
+                     v1::StreamTracksRequest filter)
+      : broadcaster_(broadcaster), sub_(std::move(sub)), filter_(std::move(filter)) {
     if (sub_ == nullptr) {
       finished_ = true;
       Finish(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
@@ -79,6 +87,7 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
         return;
       case Subscription<FramePtr>::PopState::kItem:
         current_ = **popped.item;
+        FilterTracks(filter_, current_);
         current_.set_dropped_frames(popped.dropped);
         writing_ = true;
         StartWrite(&current_);
@@ -94,6 +103,7 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
 
   FrameBroadcaster& broadcaster_;
   std::shared_ptr<Subscription<FramePtr>> sub_;
+  const v1::StreamTracksRequest filter_;
   std::mutex mu_;
   bool writing_ = false;
   bool finished_ = false;
@@ -108,6 +118,28 @@ grpc::ServerUnaryReactor* Reply(grpc::CallbackServerContext* context, const grpc
 }
 
 }  // namespace
+
+grpc::Status ValidateStreamTracksRequest(const v1::StreamTracksRequest& request) {
+  const double s = request.min_score();
+  if (!(s >= 0.0 && s <= 1.0)) {
+    return ToGrpcStatus(Error::Invalid({"min_score: must be in [0, 1]" + Got(s)}));
+  }
+  return grpc::Status::OK;
+}
+
+void FilterTracks(const v1::StreamTracksRequest& request, v1::TrackFrame& frame) {
+  if (!request.confirmed_only() && request.min_score() <= 0) return;
+  google::protobuf::RepeatedPtrField<v1::Track>* tracks = frame.mutable_tracks();
+  int kept = 0;
+  for (int i = 0; i < tracks->size(); ++i) {
+    const v1::Track& t = tracks->Get(i);
+    if (request.confirmed_only() && t.state() == v1::TRACK_STATE_TENTATIVE) continue;
+    if (t.score() < request.min_score()) continue;
+    if (kept != i) tracks->SwapElements(kept, i);
+    ++kept;
+  }
+  tracks->DeleteSubrange(kept, tracks->size() - kept);
+}
 
 grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadcaster,
                            v1::GetStatusResponse* response) {
@@ -174,8 +206,11 @@ grpc::Status GetDisparitySnapshotImpl(const Engine& engine,
 }
 
 grpc::ServerWriteReactor<v1::TrackFrame>* ObstacleServiceImpl::StreamTracks(
-    grpc::CallbackServerContext* context, const v1::StreamTracksRequest* /*request*/) {
-  return new TrackStreamReactor(broadcaster_, broadcaster_.Subscribe(context->peer()));
+    grpc::CallbackServerContext* context, const v1::StreamTracksRequest* request) {
+  if (grpc::Status status = ValidateStreamTracksRequest(*request); !status.ok()) {
+    return new TrackStreamReactor(broadcaster_, status);
+  }
+  return new TrackStreamReactor(broadcaster_, broadcaster_.Subscribe(context->peer()), *request);
 }
 
 grpc::ServerUnaryReactor* ObstacleServiceImpl::GetStatus(grpc::CallbackServerContext* context,

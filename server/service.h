@@ -16,6 +16,12 @@ namespace stevi::server {
 using FramePtr = std::shared_ptr<const v1::TrackFrame>;
 using FrameBroadcaster = Broadcaster<FramePtr>;
 
+// StreamTracks' request: INVALID_ARGUMENT naming the bad field (min_score outside [0, 1]).
+grpc::Status ValidateStreamTracksRequest(const v1::StreamTracksRequest& request);
+// Drops, in place and keeping the order, the tracks the request's filters exclude: TENTATIVE ones
+// with confirmed_only, and those scoring below min_score.
+void FilterTracks(const v1::StreamTracksRequest& request, v1::TrackFrame& frame);
+
 grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadcaster,
                            v1::GetStatusResponse* response);
 grpc::Status GetPipelineConfigImpl(Engine& engine, v1::PipelineConfig* response);

@@ -7,7 +7,7 @@
 
 namespace stevi::pipeline {
 
-cv::Mat3b AnnotateDetections(const FrameResult& result) {
+cv::Mat3b AnnotateTracks(const FrameResult& result) {
   cv::Mat3b out;
   if (result.rectified_left.empty()) return out;
   if (result.rectified_left.channels() == 1) {
@@ -15,19 +15,34 @@ cv::Mat3b AnnotateDetections(const FrameResult& result) {
   } else {
     result.rectified_left.copyTo(out);
   }
-  const cv::Scalar box_colour(0, 200, 255), text_colour(0, 0, 0);
+  const cv::Scalar text_colour(0, 0, 0);
   const int font = cv::FONT_HERSHEY_SIMPLEX;
   const double scale = 0.45;
-  int id = 1;
-  for (const detection::Detection& d : result.detections) {
-    cv::rectangle(out, d.bbox, box_colour, 2);
-    char label[64];
-    std::snprintf(label, sizeof label, "#%d %.1f m +-%.1f", id++, d.range_m, d.range_sigma_m);
+  for (const tracking::Track& t : result.tracks) {
+    const detection::Detection& d = t.detection;
+    // Confirmed: orange, thick. Coasting (predicted): blue-grey. Tentative: thin yellow.
+    cv::Scalar box_colour(0, 200, 255);
+    int thickness = 2;
+    if (t.state == tracking::TrackState::kCoasting) {
+      box_colour = cv::Scalar(200, 160, 120);
+    } else if (t.state == tracking::TrackState::kTentative) {
+      box_colour = cv::Scalar(0, 255, 255);
+      thickness = 1;
+    }
+    cv::rectangle(out, d.bbox, box_colour, thickness);
+    char label[96];
+    const double range = t.state == tracking::TrackState::kCoasting ? cv::norm(t.position_cam_m)
+                                                                     : d.range_m;
+    std::snprintf(label, sizeof label, "#%llu %.1f m +-%.1f%s",
+                  static_cast<unsigned long long>(t.id), range, d.range_sigma_m,
+                  t.state == tracking::TrackState::kCoasting    ? " (pred)"
+                  : t.state == tracking::TrackState::kTentative ? " ?"
+                                                                : "");
     int baseline = 0;
     const cv::Size size = cv::getTextSize(label, font, scale, 1, &baseline);
     // Above the box when there is room, else inside its top edge.
     const int top = d.bbox.y - size.height - baseline - 2 >= 0 ? d.bbox.y - size.height - baseline - 2
-                                                               : d.bbox.y;
+                                                               : std::max(0, d.bbox.y);
     // Inside the image on the right too.
     const int left = std::max(0, std::min(d.bbox.x, out.cols - size.width - 4));
     const cv::Rect tag(left, top, size.width + 4, size.height + baseline + 2);

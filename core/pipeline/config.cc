@@ -58,6 +58,7 @@ std::vector<std::string> PipelineConfig::Validate() const {
   AppendPrefixed(problems, "canonical.", canonical.Validate());
   AppendPrefixed(problems, "stevie.", stevie.Validate());
   AppendPrefixed(problems, "stevis.", stevis.Validate());
+  AppendPrefixed(problems, "tracking.", tracking.Validate());
   return problems;
 }
 

@@ -14,6 +14,7 @@
 #include "core/detection/stevis.h"
 #include "core/geometry/range.h"
 #include "core/stereo/matcher.h"
+#include "core/tracking/tracker.h"
 
 namespace stevi::pipeline {
 
@@ -30,6 +31,8 @@ struct PipelineConfig {
   detection::CanonicalOptions canonical;
   detection::SteViEOptions stevie;
   detection::SteViSOptions stevis;
+  // Tracking of the detections over frames; can change while serving (the tracks are kept).
+  tracking::TrackerOptions tracking;
 
   // Every problem of every stage, each as "field.path: problem".
   std::vector<std::string> Validate() const;

@@ -52,6 +52,8 @@ struct Pipeline::State {
   // Rectified right image: only read during Process(), so its buffer is reused frame to frame.
   // (The rectified left image is published in the FrameResult and gets a fresh buffer.)
   cv::Mat rect_right;
+  // Tracks across frames; created at the first frame with the config's options.
+  std::unique_ptr<tracking::Tracker> tracker;
 };
 
 Pipeline::Pipeline() : state_(std::make_unique<State>()) {}
@@ -79,7 +81,7 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
   result.source_index = frame.index;
   result.algorithm = config.algorithm;
   result.rig = snapshot.rig;
-  result.timings.reserve(4);
+  result.timings.reserve(5);
 
   // Stage: rectify. The left output is a fresh buffer (published with the result).
   Clock::time_point t = Clock::now();
@@ -137,6 +139,25 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
       break;
   }
   result.timings.push_back({"extract", MsSince(t)});
+
+  // Stage: track.
+  t = Clock::now();
+  if (state_->tracker == nullptr || !(state_->tracker->options() == config.tracking)) {
+    const std::vector<std::string> problems = config.tracking.Validate();
+    if (!problems.empty()) {
+      std::vector<std::string> prefixed;
+      AppendPrefixed(prefixed, "tracking.", problems);
+      return Error::Invalid(prefixed);
+    }
+    if (state_->tracker == nullptr) {
+      state_->tracker = std::make_unique<tracking::Tracker>(config.tracking);
+    } else {
+      state_->tracker->SetOptions(config.tracking);
+    }
+  }
+  const tracking::CameraModel camera{rig.f_px(), rig.cx(), rig.cy(), rig.baseline_m()};
+  result.tracks = state_->tracker->Update(result.detections, frame.t_ns, camera);
+  result.timings.push_back({"track", MsSince(t)});
 
   result.rectified_left = std::move(rect_left);
   result.frame_id = next_frame_id_++;

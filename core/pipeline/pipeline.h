@@ -1,4 +1,4 @@
-// Assembles the stages: rectify -> disparity -> extract -> detections.
+// Assembles the stages: rectify -> disparity -> extract -> detections -> tracks.
 #pragma once
 
 #include <cstdint>
@@ -15,11 +15,12 @@
 #include "core/pipeline/config.h"
 #include "core/stereo/disparity.h"
 #include "core/stereo/matcher.h"
+#include "core/tracking/tracker.h"
 
 namespace stevi::pipeline {
 
 struct StageTiming {
-  std::string stage;  // "rectify", "disparity", "extract", "total"
+  std::string stage;  // "rectify", "disparity", "extract", "track", "total"
   double ms = 0;
 };
 
@@ -31,6 +32,8 @@ struct FrameResult {
   int64_t source_index = 0;
   Algorithm algorithm = Algorithm::kCanonical;
   std::vector<detection::Detection> detections;
+  // Every live track after this frame's detections (tentative, confirmed, coasting), by id.
+  std::vector<tracking::Track> tracks;
   stereo::DisparityMap disparity;
   cv::Mat rectified_left;         // 8-bit grey
   std::vector<StageTiming> timings;
@@ -52,7 +55,8 @@ class Pipeline {
   Pipeline& operator=(const Pipeline&) = delete;
 
   // Processes one frame. The frame must match the rig's image size (else kInvalidArgument).
-  // The matcher is rebuilt only when the matcher options change.
+  // The matcher is rebuilt only when the matcher options change. The tracker lives across frames:
+  // a change of its options, of the algorithm or of the rig keeps the tracks (ids never reuse).
   Result<FrameResult> Process(const StereoFrame& frame, const Snapshot& snapshot);
 
  private:

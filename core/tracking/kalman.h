@@ -62,6 +62,7 @@ struct KalmanOptions {
   double initial_velocity_sigma_mps = 20;
 
   std::vector<std::string> Validate() const;
+  bool operator==(const KalmanOptions&) const = default;
 };
 
 // State [x y z vx vy vz] in the cam frame (metres, m/s); measurement: the position.

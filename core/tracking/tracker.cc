@@ -19,13 +19,13 @@ cv::Vec3d ToCv(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 
 // A detection the tracker can use: a finite centroid and a finite position in front of the camera,
 // scoring at least min_score.
-bool Usable(const detection::Detection& d, const std::optional<double>& min_score) {
+bool Usable(const detection::Detection& d, double min_score) {
   const cv::Vec3d& p = d.position_cam_m;
   if (!(std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]) && p[2] > kMinDepthM)) {
     return false;
   }
   if (!(std::isfinite(d.centroid_px.x) && std::isfinite(d.centroid_px.y))) return false;
-  return !min_score || d.score >= *min_score;
+  return d.score >= min_score;
 }
 
 // The detection's range, or the norm of its position when the range field is not set.
@@ -81,8 +81,8 @@ std::vector<std::string> TrackerOptions::Validate() const {
   if (!(fading_beta > 0 && fading_beta <= 1)) {
     problems.push_back("fading_beta: must be in (0, 1]" + Got(fading_beta));
   }
-  if (min_score && !(*min_score >= 0 && *min_score <= 1)) {
-    problems.push_back("min_score: must be in [0, 1]" + Got(*min_score));
+  if (!(min_score >= 0 && min_score <= 1)) {
+    problems.push_back("min_score: must be in [0, 1]" + Got(min_score));
   }
   if (!(std::isfinite(max_dt_s) && max_dt_s > 0)) {
     problems.push_back("max_dt_s: must be > 0 seconds and finite" + Got(max_dt_s));

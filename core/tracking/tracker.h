@@ -36,6 +36,7 @@ struct GateOptions {
   double max_distance_px = 80;
 
   std::vector<std::string> Validate() const;
+  bool operator==(const GateOptions&) const = default;
 };
 
 struct TrackerOptions {
@@ -53,13 +54,15 @@ struct TrackerOptions {
   // Memory of the range smoothing (fading_filter.h), in (0, 1].
   double fading_beta = 0.7;
   // Detections scoring below this (0..1) are ignored: they neither update nor start tracks.
-  std::optional<double> min_score;
+  // 0 takes every detection.
+  double min_score = 0.0;
   // Frame intervals longer than this (seconds, > 0) are predicted as this long: a stalled source
   // or a clock jump must not fling the predictions away (the gates then decide).
   double max_dt_s = 1.0;
 
   // Every problem, as "field: problem" ("gates.max_depth_ratio: must be >= 1 (got 0.5)").
   std::vector<std::string> Validate() const;
+  bool operator==(const TrackerOptions&) const = default;
 };
 
 enum class TrackState {

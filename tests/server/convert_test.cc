@@ -122,6 +122,14 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryStevieAndStevisField) {
   s.blobs.max_depth_per_height = 0;
   e.blobs.min_terrain_height_m = 5;
   e.blobs.max_attached_fraction = 0.7;
+  original.tracking.kalman.process_noise = 0.5;
+  original.tracking.kalman.occluded_measurement_noise = 1e5;
+  original.tracking.gates.max_depth_ratio = 1.5;
+  original.tracking.gates.max_distance_px = 40;
+  original.tracking.confirm_hits = 5;
+  original.tracking.delete_misses = 20;
+  original.tracking.fading_beta = 0.5;
+  original.tracking.min_score = 0.25;
 
   const v1::PipelineConfig proto = ToProto(original);
   EXPECT_EQ(proto.stevie().morphology().shape(), v1::STRUCTURING_SHAPE_CROSS);
@@ -149,6 +157,8 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryStevieAndStevisField) {
   EXPECT_DOUBLE_EQ(copy.stevis.blobs.max_depth_per_height, 0);
   EXPECT_DOUBLE_EQ(copy.stevie.blobs.min_terrain_height_m, 5);
   EXPECT_DOUBLE_EQ(copy.stevie.blobs.max_attached_fraction, 0.7);
+  EXPECT_TRUE(copy.tracking == original.tracking);
+  EXPECT_DOUBLE_EQ(copy.tracking.min_score, 0.25);
   EXPECT_EQ(copy.stevie.ground.min_row_pixels, 25);
   EXPECT_DOUBLE_EQ(copy.stevis.ground.min_row_spread, 0.4);
   EXPECT_THAT(copy.Validate(), ::testing::IsEmpty());
@@ -197,21 +207,39 @@ TEST(MergeFromProto, OutOfRangeStevieAndStevisEnumsAreNamed) {
   EXPECT_EQ(problems[2], "stevis.morphology.shape: unknown value -1");
 }
 
-TEST(ToTrackFrame, CopiesDetectionsAsPerFrameTracks) {
+TEST(ToTrackFrame, CopiesEveryTrackWithItsStateAndKinematics) {
   pipeline::FrameResult result;
   result.frame_id = 7;
   result.capture_time_ns = 123456789;
   result.source_index = 41;
   result.timings = {{"disparity", 4.5}, {"total", 9.0}};
-  detection::Detection d;
-  d.bbox = cv::Rect(10, 20, 30, 40);
-  d.depth_m = 25;
-  d.range_m = 26;
-  d.range_sigma_m = 0.4;
-  d.position_cam_m = cv::Vec3d(1, -2, 25);
-  d.disparity_px = 16.8;
-  d.extractor = "canonical";
-  result.detections = {d, d};
+  tracking::Track confirmed;
+  confirmed.id = 12;
+  confirmed.state = tracking::TrackState::kConfirmed;
+  confirmed.age_frames = 9;
+  confirmed.hits = 8;
+  confirmed.detection.bbox = cv::Rect(10, 20, 30, 40);
+  confirmed.detection.depth_m = 25;
+  confirmed.detection.range_m = 26;
+  confirmed.detection.range_sigma_m = 0.4;
+  confirmed.detection.disparity_px = 16.8;
+  confirmed.detection.score = 0.9;
+  confirmed.detection.extractor = "stevie";
+  confirmed.position_cam_m = cv::Vec3d(1, -2, 25.1);
+  confirmed.velocity_cam_mps = cv::Vec3d(0.5, 0, -10);
+  confirmed.position_sigma_m = cv::Vec3d(0.01, 0.01, 0.3);
+  confirmed.range_rate_mps = -9.9;
+  confirmed.smoothed_range_m = 25.9;
+  confirmed.time_to_collision_s = 2.5;
+  confirmed.closest_approach_m = 1.2;
+  tracking::Track coasting = confirmed;
+  coasting.id = 30;
+  coasting.state = tracking::TrackState::kCoasting;
+  coasting.misses = 2;
+  coasting.position_cam_m = cv::Vec3d(0, 3, 4);  // predicted: depth 4, range 5
+  coasting.time_to_collision_s.reset();
+  coasting.closest_approach_m.reset();
+  result.tracks = {confirmed, coasting};
 
   const v1::TrackFrame f = ToTrackFrame(result);
   EXPECT_EQ(f.frame_id(), 7u);
@@ -219,11 +247,31 @@ TEST(ToTrackFrame, CopiesDetectionsAsPerFrameTracks) {
   EXPECT_EQ(f.source_index(), 41);
   EXPECT_EQ(f.algorithm(), v1::ALGORITHM_CANONICAL);
   ASSERT_EQ(f.tracks_size(), 2);
-  EXPECT_EQ(f.tracks(0).track_id(), 1u);
-  EXPECT_EQ(f.tracks(1).track_id(), 2u);
-  EXPECT_EQ(f.tracks(0).bbox().width(), 30);
-  EXPECT_DOUBLE_EQ(f.tracks(0).depth_m(), 25);
-  EXPECT_DOUBLE_EQ(f.tracks(0).position_cam().y_m(), -2);
+  const v1::Track& a = f.tracks(0);
+  EXPECT_EQ(a.track_id(), 12u);
+  EXPECT_EQ(a.state(), v1::TRACK_STATE_CONFIRMED);
+  EXPECT_EQ(a.age_frames(), 9u);
+  EXPECT_EQ(a.hits(), 8u);
+  EXPECT_EQ(a.misses(), 0u);
+  EXPECT_EQ(a.bbox().width(), 30);
+  EXPECT_DOUBLE_EQ(a.depth_m(), 25);
+  EXPECT_DOUBLE_EQ(a.range_m(), 26);
+  EXPECT_DOUBLE_EQ(a.position_cam().z_m(), 25.1);
+  EXPECT_DOUBLE_EQ(a.velocity_cam().z_mps(), -10);
+  EXPECT_DOUBLE_EQ(a.position_sigma_cam().z_m(), 0.3);
+  EXPECT_DOUBLE_EQ(a.range_rate_mps(), -9.9);
+  EXPECT_DOUBLE_EQ(a.smoothed_range_m(), 25.9);
+  ASSERT_TRUE(a.has_time_to_collision_s());
+  EXPECT_DOUBLE_EQ(a.time_to_collision_s(), 2.5);
+  EXPECT_DOUBLE_EQ(a.closest_approach_m(), 1.2);
+  EXPECT_EQ(a.extractor(), "stevie");
+  const v1::Track& b = f.tracks(1);
+  EXPECT_EQ(b.state(), v1::TRACK_STATE_COASTING);
+  EXPECT_EQ(b.misses(), 2u);
+  EXPECT_DOUBLE_EQ(b.depth_m(), 4) << "a coasting track reports its predicted depth";
+  EXPECT_DOUBLE_EQ(b.range_m(), 5);
+  EXPECT_FALSE(b.has_time_to_collision_s());
+  EXPECT_FALSE(b.has_closest_approach_m());
   ASSERT_EQ(f.timings_size(), 2);
   EXPECT_EQ(f.timings(1).stage(), "total");
 }

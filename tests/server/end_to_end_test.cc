@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <regex>
+#include <set>
 #include <sstream>
 
 #include <opencv2/imgcodecs.hpp>
@@ -93,10 +94,40 @@ TEST_F(ServerProcessTest, WatchShowsObstaclesWithDepthWithinTwoPercent) {
             << " %\n";
   EXPECT_GE(check.recall(), 0.85);
   EXPECT_EQ(check.within, check.matched) << ::testing::PrintToString(check.failures);
+  // Tracking through the real server: each obstacle keeps its track id over the 30 frames.
+  std::cout << "id consistency " << check.IdConsistency() << "\n";
+  EXPECT_GE(check.IdConsistency(), 0.9);
+  std::set<uint64_t> seen_this_frame;
+  for (const v1::TrackFrame& f : frames) {
+    seen_this_frame.clear();
+    for (const v1::Track& t : f.tracks()) {
+      EXPECT_TRUE(seen_this_frame.insert(t.track_id()).second) << "duplicate id in a frame";
+      EXPECT_NE(t.state(), v1::TRACK_STATE_UNSPECIFIED);
+      EXPECT_GE(t.hits(), 1u);
+    }
+  }
 
   const testing::RunResult table = Stevi({"watch", "--count", "2"});
   ASSERT_EQ(table.exit_code, 0) << table.err;
   EXPECT_THAT(table.out, HasSubstr("depth m"));
+  EXPECT_THAT(table.out, HasSubstr("state"));
+
+  // Server-side filters: confirmed only, and a score floor.
+  const testing::RunResult confirmed =
+      Stevi({"watch", "--count", "5", "--json", "--confirmed", "--min-score", "0.5"});
+  ASSERT_EQ(confirmed.exit_code, 0) << confirmed.err;
+  int kept = 0;
+  for (const v1::TrackFrame& f : ParseJsonLines<v1::TrackFrame>(confirmed.out)) {
+    for (const v1::Track& t : f.tracks()) {
+      ++kept;
+      EXPECT_NE(t.state(), v1::TRACK_STATE_TENTATIVE);
+      EXPECT_GE(t.score(), 0.5);
+    }
+  }
+  EXPECT_GT(kept, 0);
+  const testing::RunResult bad_score = Stevi({"watch", "--count", "1", "--min-score", "2"});
+  EXPECT_EQ(bad_score.exit_code, 2);
+  EXPECT_THAT(bad_score.err, HasSubstr("--min-score"));
   EXPECT_THAT(table.out, HasSubstr("canonical"));
 }
 

@@ -6,9 +6,12 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include <cmath>
 #include <thread>
+#include <tuple>
 
 #include "client/client.h"
+#include "server/service.h"
 #include "tests/server/truth_check.h"
 
 namespace stevi::server {
@@ -184,6 +187,67 @@ TEST_F(ServerTest, StatusCountsSubscribersAndShutdownEndsStreams) {
   streaming.join();
   EXPECT_EQ(stream_status.error_code(), grpc::StatusCode::UNAVAILABLE);
   EXPECT_THAT(stream_status.error_message(), HasSubstr("shutting down"));
+}
+
+TEST_F(ServerTest, StreamFiltersAreAppliedAndABadOneIsRefused) {
+  client::StreamOptions options;
+  options.max_frames = 10;
+  options.confirmed_only = true;
+  int kept = 0;
+  grpc::Status status = client_->StreamTracks(
+      [&](const v1::TrackFrame& f) {
+        for (const v1::Track& t : f.tracks()) {
+          ++kept;
+          EXPECT_NE(t.state(), v1::TRACK_STATE_TENTATIVE);
+        }
+        return true;
+      },
+      options);
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  EXPECT_GT(kept, 0);
+
+  options.min_score = 1.5;  // the client's own check is bypassed here: the server must refuse it
+  status = client_->StreamTracks([](const v1::TrackFrame&) { return true; }, options);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(status.error_message(), HasSubstr("min_score"));
+}
+
+TEST(FilterTracks, DropsTentativeAndLowScoringTracksKeepingTheOrder) {
+  v1::TrackFrame frame;
+  const std::vector<std::tuple<uint64_t, v1::TrackState, double>> tracks = {
+      {1, v1::TRACK_STATE_CONFIRMED, 0.9}, {2, v1::TRACK_STATE_TENTATIVE, 0.9},
+      {3, v1::TRACK_STATE_COASTING, 0.3},  {4, v1::TRACK_STATE_CONFIRMED, 0.6},
+      {5, v1::TRACK_STATE_TENTATIVE, 0.1}};
+  for (const auto& [id, state, score] : tracks) {
+    v1::Track* t = frame.add_tracks();
+    t->set_track_id(id);
+    t->set_state(state);
+    t->set_score(score);
+  }
+  const auto ids = [](const v1::TrackFrame& f) {
+    std::vector<uint64_t> out;
+    for (const v1::Track& t : f.tracks()) out.push_back(t.track_id());
+    return out;
+  };
+  v1::StreamTracksRequest request;
+  v1::TrackFrame all = frame;
+  FilterTracks(request, all);
+  EXPECT_THAT(ids(all), ::testing::ElementsAre(1, 2, 3, 4, 5));
+  request.set_confirmed_only(true);
+  v1::TrackFrame confirmed = frame;
+  FilterTracks(request, confirmed);
+  EXPECT_THAT(ids(confirmed), ::testing::ElementsAre(1, 3, 4));
+  request.set_min_score(0.5);
+  v1::TrackFrame both = frame;
+  FilterTracks(request, both);
+  EXPECT_THAT(ids(both), ::testing::ElementsAre(1, 4));
+
+  EXPECT_TRUE(ValidateStreamTracksRequest(request).ok());
+  for (const double bad : {-0.1, 1.01, std::nan("")}) {
+    request.set_min_score(bad);
+    EXPECT_EQ(ValidateStreamTracksRequest(request).error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << bad;
+  }
 }
 
 TEST(ServerStart, RefusesABadConfigBeforeOpeningAnything) {

@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
+#include "core/pipeline/annotate.h"
 #include "core/pipeline/config.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/testing/truth_match.h"
@@ -92,7 +93,7 @@ TEST(PipelineProcess, SyntheticFramesGiveDetectionsAndTimings) {
     EXPECT_NE(result->rectified_left.data, previous_left.data);
     previous_left = result->rectified_left;
     std::printf("frame %lld:", static_cast<long long>(index));
-    for (const char* stage : {"rectify", "disparity", "extract", "total"}) {
+    for (const char* stage : {"rectify", "disparity", "extract", "track", "total"}) {
       const double ms = TimingMs(*result, stage);
       EXPECT_GE(ms, 0.0) << stage;
       std::printf(" %s %.2f ms", stage, ms);
@@ -104,6 +105,84 @@ TEST(PipelineProcess, SyntheticFramesGiveDetectionsAndTimings) {
   }
   EXPECT_GT(detections, 0);
   EXPECT_GT(checked, 0);
+}
+
+// Consecutive frames: every detection is tracked, and the obstacles keep their ids from frame to
+// frame (the tracker itself is tested in tests/core/tracking).
+TEST(PipelineProcess, ConsecutiveFramesKeepTrackIds) {
+  Fixture fx;
+  ConfigStore store;
+  Pipeline pipeline;
+  std::map<int, std::map<uint64_t, int>> ids;  // truth id -> track id -> frames
+  int confirmed = 0;
+  for (int64_t index = 0; index < 12; ++index) {
+    drivers::FrameTruth truth;
+    const StereoFrame frame = fx.renderer.Render(index, &truth);
+    Result<FrameResult> result = pipeline.Process(frame, Snapshot{store.Get(), fx.rig});
+    ASSERT_TRUE(result.ok()) << result.error().message;
+    // Each detection of this frame is the last detection of a track.
+    int measured = 0;
+    for (const tracking::Track& t : result->tracks) {
+      if (t.misses == 0) ++measured;
+      if (t.state == tracking::TrackState::kConfirmed) ++confirmed;
+    }
+    EXPECT_EQ(measured, static_cast<int>(result->detections.size())) << "frame " << index;
+    std::vector<cv::Rect> boxes, truth_boxes;
+    std::vector<uint64_t> track_ids;
+    std::vector<int> truth_ids;
+    for (const tracking::Track& t : result->tracks) {
+      if (t.misses > 0) continue;
+      boxes.push_back(t.detection.bbox);
+      track_ids.push_back(t.id);
+    }
+    for (const drivers::ObstacleTruth& o : truth.obstacles) {
+      if (o.visible_px < 300) continue;
+      truth_boxes.push_back(o.bbox);
+      truth_ids.push_back(o.id);
+    }
+    for (const auto& [d, t] : testing::MatchByIoU(boxes, truth_boxes, 0.3)) {
+      ++ids[truth_ids[t]][track_ids[d]];
+    }
+  }
+  EXPECT_GT(confirmed, 0);
+  ASSERT_FALSE(ids.empty());
+  for (const auto& [truth_id, counts] : ids) {
+    EXPECT_EQ(counts.size(), 1u) << "obstacle " << truth_id << " changed track id";
+  }
+}
+
+TEST(PipelineProcess, BadTrackingOptionsAreInvalidArgumentNamingTheField) {
+  Fixture fx;
+  PipelineConfig config;
+  config.tracking.gates.max_depth_ratio = 0.5;
+  Pipeline pipeline;
+  const StereoFrame frame = fx.renderer.Render(0);
+  Result<FrameResult> result =
+      pipeline.Process(frame, Snapshot{std::make_shared<const PipelineConfig>(config), fx.rig});
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(result.error().message.find("tracking.gates.max_depth_ratio"), std::string::npos)
+      << result.error().message;
+}
+
+TEST(AnnotateTracks, DrawsEachTrackBoxInItsStateColourAndLeavesTheRest) {
+  FrameResult result;
+  result.rectified_left = cv::Mat1b(120, 200, uchar{100});
+  tracking::Track confirmed, coasting;
+  confirmed.id = 7;
+  confirmed.state = tracking::TrackState::kConfirmed;
+  confirmed.detection.bbox = cv::Rect(20, 60, 40, 30);
+  coasting.id = 9;
+  coasting.state = tracking::TrackState::kCoasting;
+  coasting.detection.bbox = cv::Rect(120, 60, 40, 30);
+  coasting.position_cam_m = cv::Vec3d(0, 0, 30);
+  result.tracks = {confirmed, coasting};
+  const cv::Mat3b out = AnnotateTracks(result);
+  ASSERT_EQ(out.size(), result.rectified_left.size());
+  EXPECT_EQ(out(89, 40), cv::Vec3b(0, 200, 255)) << "confirmed: the bottom edge, orange";
+  EXPECT_EQ(out(89, 140), cv::Vec3b(200, 160, 120)) << "coasting: blue-grey";
+  EXPECT_EQ(out(75, 100), cv::Vec3b(100, 100, 100)) << "between the boxes: untouched";
+  EXPECT_EQ(out(75, 40), cv::Vec3b(100, 100, 100)) << "inside a box: untouched";
 }
 
 TEST(PipelineProcess, WrongSizeIsInvalidArgument) {
