@@ -155,7 +155,8 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
       state_->tracker->SetOptions(config.tracking);
     }
   }
-  const tracking::CameraModel camera{rig.f_px(), rig.cx(), rig.cy(), rig.baseline_m()};
+  const tracking::CameraModel camera{rig.f_px(), rig.cx(), rig.cy(), rig.baseline_m(),
+                                     rig.image_size().width, rig.image_size().height};
   result.tracks = state_->tracker->Update(result.detections, frame.t_ns, camera);
   result.timings.push_back({"track", MsSince(t)});
 

@@ -1,5 +1,5 @@
-// A constant-velocity Kalman filter in the camera frame, and the measurement model that turns a
-// detection's pixel and disparity noise into metres. The model and its units are derived in
+// A constant-velocity Kalman filter on three independent axes, and the measurement model of a
+// detection (image position over f, and depth). The model and its units are derived in
 // core/tracking/README.md.
 #pragma once
 
@@ -17,6 +17,10 @@ struct CameraModel {
   double cx = 0;    // principal point, pixels
   double cy = 0;
   double baseline_m = 0;  // stereo baseline, metres
+  // The image size (pixels; 0 = unknown): blobs cut by the border are anchored on their inner edge
+  // and tracks predicted out of the image are dropped.
+  int width = 0;
+  int height = 0;
 
   // Lists every problem ("f_px: must be > 0 (got 0)").
   std::vector<std::string> Validate() const;
@@ -25,20 +29,23 @@ struct CameraModel {
 // Pixel (u, v) of a cam-frame point. The point must be in front of the camera (z > 0).
 Eigen::Vector2d Project(const CameraModel& camera, const Eigen::Vector3d& point_in_cam_m);
 
-// Independent noise of variance `variance_px2` on each pixel measurement (u, v and the disparity),
-// mapped to the cam-frame point through the Jacobian of the stereo back-projection at
-// `point_in_cam_m`: (z/f)^2 variance on x and y, plus variance * (z^2 / (f B))^2 along the viewing
-// ray (a disparity error moves the point along its ray, not along z). Square metres.
-Eigen::Matrix3d PixelNoiseCovariance(const CameraModel& camera,
-                                     const Eigen::Vector3d& point_in_cam_m, double variance_px2);
+// What the tracker filters: s = (a, b, z), a = (u - cx) / f and b = (v - cy) / f the image
+// position over the focal length (the tangents of the viewing angles) and z the depth. Their noises
+// are independent (the centroid's pixel noise on a and b, the disparity's on z), so the filter
+// never explains a sideways miss by a change of depth (README.md: why not x, y, z).
+struct AngleDepth {
+  Eigen::Vector3d s;           // (a, b, z): dimensionless, dimensionless, metres
+  Eigen::Matrix3d covariance;  // diagonal
+};
 
-// A detection's position covariance (square metres): centroid noise of variance
-// `centroid_variance_px2` on u and v, and the detector's own 1-sigma `range_sigma_m` along the
-// viewing ray. When range_sigma_m is not finite and positive, the disparity gets the centroid's
-// pixel variance instead.
-Eigen::Matrix3d DetectionCovariance(const CameraModel& camera,
-                                    const Eigen::Vector3d& point_in_cam_m,
-                                    double centroid_variance_px2, double range_sigma_m);
+// The measurement of a detection centred at pixel (u, v) at depth `depth_m` with 1-sigma
+// `depth_sigma_m` (when not finite and positive: the centroid's pixel variance on the disparity,
+// z^2 / (f B) per pixel), with centroid variance `centroid_variance_px2` on u and v.
+AngleDepth MeasureAngleDepth(const CameraModel& camera, double u_px, double v_px, double depth_m,
+                             double depth_sigma_m, double centroid_variance_px2);
+
+// The cam-frame point (a z, b z, z) of s = (a, b, z).
+Eigen::Vector3d PointFromAngleDepth(const Eigen::Vector3d& s);
 
 // The noises of the filter. Defaults are the thesis's numbers, given units in this model
 // (README.md): process noises are white-acceleration densities in the cam frame, measurement noises
@@ -73,9 +80,11 @@ class ConstantVelocityKalman {
   using Covariance = Eigen::Matrix<double, 6, 6>;
 
   // Starts at `position_m` with covariance `position_cov_m2`, at rest, with a velocity sigma of
-  // `velocity_sigma_mps` on each axis.
+  // `velocity_sigma_mps` on each axis (or per axis).
   void Initialize(const Eigen::Vector3d& position_m, const Eigen::Matrix3d& position_cov_m2,
                   double velocity_sigma_mps);
+  void Initialize(const Eigen::Vector3d& position_m, const Eigen::Matrix3d& position_cov_m2,
+                  const Eigen::Vector3d& velocity_sigma);
 
   // The position `dt_s` seconds ahead, leaving the filter unchanged. The predicted mean does not
   // depend on the process noise, so gating can use it before the noise is chosen.
@@ -84,6 +93,16 @@ class ConstantVelocityKalman {
   // Advances the state by `dt_s` seconds (negative is read as 0) with white-acceleration noise of
   // density `process_noise` (m^2/s^3), discretised exactly for dt.
   void Predict(double dt_s, double process_noise);
+  // The same with a density per axis (in the axis' units squared per s^3).
+  void Predict(double dt_s, const Eigen::Vector3d& process_noise);
+
+  // For a state s = (a, b, z) and its rates (MeasureAngleDepth): the obstacle moves on a straight
+  // line at constant velocity in the camera frame (not in s, where a passing or closing obstacle
+  // accelerates), with white acceleration of density `process_noise` (m^2/s^3) on each cam axis.
+  // An extended Kalman prediction: the mean goes through the exact motion, the covariance through
+  // its Jacobian. PredictedAngleDepth() is the mean alone, leaving the filter unchanged.
+  void PredictAngleDepth(double dt_s, double process_noise);
+  Eigen::Vector3d PredictedAngleDepth(double dt_s) const;
 
   // Corrects with a measured position (metres) of covariance `covariance_m2` (Joseph form, which
   // keeps the covariance symmetric and positive). Returns false, leaving the filter unchanged, when

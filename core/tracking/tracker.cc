@@ -14,7 +14,6 @@ namespace {
 // gets there has passed the camera and only coasts to its deletion.
 constexpr double kMinDepthM = 1e-3;
 
-Eigen::Vector3d ToEigen(const cv::Vec3d& v) { return {v[0], v[1], v[2]}; }
 cv::Vec3d ToCv(const Eigen::Vector3d& v) { return {v.x(), v.y(), v.z()}; }
 
 // A detection the tracker can use: a finite centroid and a finite position in front of the camera,
@@ -104,6 +103,89 @@ void Tracker::Reset() {
   last_t_ns_.reset();
 }
 
+namespace {
+
+// A nearer detection cuts another when it is at least this much nearer (depth ratio) and their
+// boxes touch (within kTouchPx).
+constexpr double kNearerRatio = 1.15;
+constexpr int kTouchPx = 2;
+// A cut blob narrower (shorter) than this fraction of the track's full size is re-centred.
+constexpr double kCutFraction = 0.9;
+
+double DepthOf(const detection::Detection& d) {
+  return std::isfinite(d.depth_m) && d.depth_m > 0 ? d.depth_m : d.position_cam_m[2];
+}
+
+double DepthSigmaOf(const detection::Detection& d) {
+  const double range = RawRange(d);
+  if (!(std::isfinite(d.range_sigma_m) && d.range_sigma_m > 0 && range > 0)) return 0;
+  return d.range_sigma_m * DepthOf(d) / range;
+}
+
+}  // namespace
+
+void Tracker::FindCuts(const std::vector<detection::Detection>& detections,
+                       const CameraModel& camera) {
+  cuts_.assign(usable_.size(), Cut{});
+  for (size_t k = 0; k < usable_.size(); ++k) {
+    const detection::Detection& d = detections[usable_[k]];
+    Cut& cut = cuts_[k];
+    if (camera.width > 0) {
+      cut.left = d.bbox.x <= 0;
+      cut.right = d.bbox.x + d.bbox.width >= camera.width;
+    }
+    if (camera.height > 0) {
+      cut.top = d.bbox.y <= 0;
+      cut.bottom = d.bbox.y + d.bbox.height >= camera.height;
+    }
+    const cv::Rect grown(d.bbox.x - kTouchPx, d.bbox.y - kTouchPx, d.bbox.width + 2 * kTouchPx,
+                         d.bbox.height + 2 * kTouchPx);
+    const cv::Point2d centre(d.bbox.x + 0.5 * d.bbox.width, d.bbox.y + 0.5 * d.bbox.height);
+    for (size_t j = 0; j < usable_.size(); ++j) {
+      const detection::Detection& o = detections[usable_[j]];
+      if (j == k || !(DepthOf(o) * kNearerRatio < DepthOf(d))) continue;
+      const cv::Rect overlap = grown & o.bbox;
+      if (overlap.empty()) continue;
+      // The side the nearer blob is on: the axis along which the overlap is thinner relative to
+      // the blob's size.
+      const cv::Point2d other(o.bbox.x + 0.5 * o.bbox.width, o.bbox.y + 0.5 * o.bbox.height);
+      if (overlap.width * d.bbox.height <= overlap.height * d.bbox.width) {
+        (other.x < centre.x ? cut.left : cut.right) = true;
+      } else {
+        (other.y < centre.y ? cut.top : cut.bottom) = true;
+      }
+    }
+  }
+}
+
+cv::Point2d Tracker::MeasuredCentre(const Entry& e, const detection::Detection& d,
+                                    const Cut& cut) const {
+  cv::Point2d c = d.centroid_px;
+  if (!cut.any() || !(e.full_size.width > 0)) return c;
+  const double w = e.full_size.width, h = e.full_size.height;
+  if (d.bbox.width < kCutFraction * w && cut.left != cut.right) {
+    c.x = (cut.left ? d.bbox.x + d.bbox.width - 0.5 * w : d.bbox.x + 0.5 * w) + e.centroid_offset.x;
+  }
+  if (d.bbox.height < kCutFraction * h && cut.top != cut.bottom) {
+    c.y = (cut.top ? d.bbox.y + d.bbox.height - 0.5 * h : d.bbox.y + 0.5 * h) + e.centroid_offset.y;
+  }
+  return c;
+}
+
+void Tracker::Correct(Entry& e, const detection::Detection& d, const Cut& cut,
+                      const CameraModel& camera) {
+  if (!cut.any() || !(e.full_size.width > 0)) {
+    e.full_size = cv::Size2d(d.bbox.width, d.bbox.height);
+    e.centroid_offset = cv::Point2d(d.centroid_px.x - (d.bbox.x + 0.5 * d.bbox.width),
+                                    d.centroid_px.y - (d.bbox.y + 0.5 * d.bbox.height));
+  }
+  e.last_cut = cut.any();
+  const cv::Point2d centre = MeasuredCentre(e, d, cut);
+  const AngleDepth m = MeasureAngleDepth(camera, centre.x, centre.y, DepthOf(d), DepthSigmaOf(d),
+                                         options_.kalman.measurement_noise);
+  e.kalman.Update(m.s, m.covariance);
+}
+
 Tracker::Entry Tracker::NewEntry(const detection::Detection& d, const CameraModel& camera) {
   Entry e{.id = next_id_++,
           .state = options_.confirm_hits <= 1 ? TrackState::kConfirmed : TrackState::kTentative,
@@ -113,12 +195,15 @@ Tracker::Entry Tracker::NewEntry(const detection::Detection& d, const CameraMode
           .last = d,
           .kalman = {},
           .range_filter = FadingMemoryFilter(options_.fading_beta),
-          .since_measured_s = 0};
-  const Eigen::Vector3d position = ToEigen(d.position_cam_m);
-  e.kalman.Initialize(
-      position,
-      DetectionCovariance(camera, position, options_.kalman.measurement_noise, d.range_sigma_m),
-      options_.kalman.initial_velocity_sigma_mps);
+          .since_measured_s = 0,
+          .full_size = cv::Size2d(d.bbox.width, d.bbox.height),
+          .centroid_offset = cv::Point2d(d.centroid_px.x - (d.bbox.x + 0.5 * d.bbox.width),
+                                         d.centroid_px.y - (d.bbox.y + 0.5 * d.bbox.height))};
+  const double z = DepthOf(d);
+  const AngleDepth m = MeasureAngleDepth(camera, d.centroid_px.x, d.centroid_px.y, z,
+                                         DepthSigmaOf(d), options_.kalman.measurement_noise);
+  const double v = options_.kalman.initial_velocity_sigma_mps;
+  e.kalman.Initialize(m.s, m.covariance, Eigen::Vector3d(v / z, v / z, v));
   e.range_filter.Update(RawRange(d), 0);
   return e;
 }
@@ -141,25 +226,31 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
   }
   const int num_tracks = static_cast<int>(tracks_.size());
   const int num_detections = static_cast<int>(usable_.size());
+  FindCuts(detections, camera);
 
-  // Cost: pixel distance between the detection's centroid and the track's predicted centre. Only
-  // the pairs inside every gate are listed; all others are forbidden and never assigned.
+  // Cost: pixel distance between the detection's centre (re-centred when cut) and the track's
+  // predicted centre. Only the pairs inside every gate are listed; all others are forbidden and
+  // never assigned.
   const GateOptions& gates = options_.gates;
   const double max_distance2 = gates.max_distance_px * gates.max_distance_px;
   allowed_.clear();
   for (int t = 0; t < num_tracks; ++t) {
     const Entry& e = tracks_[t];
-    const Eigen::Vector3d p = e.kalman.PredictedPosition(dt);
-    if (!(p.z() > kMinDepthM)) continue;
-    const Eigen::Vector2d centre = Project(camera, p);
+    const Eigen::Vector3d s = e.kalman.PredictedAngleDepth(dt);
+    if (!(s.z() > kMinDepthM)) continue;
+    const double u = camera.cx + camera.f_px * s.x(), v = camera.cy + camera.f_px * s.y();
     for (int k = 0; k < num_detections; ++k) {
       const detection::Detection& d = detections[usable_[k]];
-      const double dx = d.centroid_px.x - centre.x(), dy = d.centroid_px.y - centre.y();
+      const cv::Point2d c = MeasuredCentre(e, d, cuts_[k]);
+      const double dx = c.x - u, dy = c.y - v;
       const double distance2 = dx * dx + dy * dy;
       if (!(distance2 <= max_distance2)) continue;
-      if (!WithinRatio(d.position_cam_m[2], p.z(), gates.max_depth_ratio)) continue;
-      if (!WithinRatio(d.area_px, e.last.area_px, gates.max_area_ratio)) continue;
-      if (!WithinRatio(d.perimeter_px, e.last.perimeter_px, gates.max_perimeter_ratio)) continue;
+      if (!WithinRatio(DepthOf(d), s.z(), gates.max_depth_ratio)) continue;
+      // A cut blob's area and perimeter are partial: the shape gates compare uncut blobs only.
+      if (!cuts_[k].any() && !e.last_cut) {
+        if (!WithinRatio(d.area_px, e.last.area_px, gates.max_area_ratio)) continue;
+        if (!WithinRatio(d.perimeter_px, e.last.perimeter_px, gates.max_perimeter_ratio)) continue;
+      }
       allowed_.push_back({.row = t, .col = k, .cost = std::sqrt(distance2)});
     }
   }
@@ -175,10 +266,8 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
     if (k >= 0) {
       const detection::Detection& d = detections[usable_[k]];
       detection_used_[k] = 1;
-      const Eigen::Vector3d measured = ToEigen(d.position_cam_m);
-      e.kalman.Predict(dt, kalman.process_noise);
-      e.kalman.Update(measured, DetectionCovariance(camera, measured, kalman.measurement_noise,
-                                                    d.range_sigma_m));
+      e.kalman.PredictAngleDepth(dt, kalman.process_noise);
+      Correct(e, d, cuts_[k], camera);
       e.range_filter.Update(RawRange(d), e.since_measured_s);
       e.since_measured_s = 0;
       e.last = d;
@@ -190,19 +279,32 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
     } else {
       // Occluded (or missed): free prediction with the occlusion noises. The pseudo-measurement is
       // the prediction itself, so it leaves the state and only (barely) shrinks the covariance.
-      e.kalman.Predict(dt, kalman.occluded_process_noise);
-      const Eigen::Vector3d p = e.kalman.position();
-      if (p.z() > kMinDepthM) {
-        e.kalman.Update(p, PixelNoiseCovariance(camera, p, kalman.occluded_measurement_noise));
+      e.kalman.PredictAngleDepth(dt, kalman.occluded_process_noise);
+      const Eigen::Vector3d s = e.kalman.position();
+      if (s.z() > kMinDepthM) {
+        const AngleDepth pseudo = MeasureAngleDepth(
+            camera, camera.cx + camera.f_px * s.x(), camera.cy + camera.f_px * s.y(), s.z(), 0,
+            kalman.occluded_measurement_noise);
+        e.kalman.Update(pseudo.s, pseudo.covariance);
       }
       ++e.misses;
       if (e.state == TrackState::kConfirmed) e.state = TrackState::kCoasting;
     }
   }
 
-  std::erase_if(tracks_, [this](const Entry& e) {
-    return e.misses >= (e.state == TrackState::kTentative ? options_.tentative_delete_misses
-                                                          : options_.delete_misses);
+  // Deleted: after too many misses, or predicted wholly out of the image (nothing can be seen
+  // there; an obstacle that left the view is gone).
+  std::erase_if(tracks_, [&](const Entry& e) {
+    if (e.misses >= (e.state == TrackState::kTentative ? options_.tentative_delete_misses
+                                                       : options_.delete_misses)) {
+      return true;
+    }
+    if (e.misses == 0 || camera.width <= 0 || camera.height <= 0) return false;
+    const Eigen::Vector3d s = e.kalman.position();
+    const double u = camera.cx + camera.f_px * s.x(), v = camera.cy + camera.f_px * s.y();
+    return s.z() <= kMinDepthM || u + 0.5 * e.full_size.width < 0 ||
+           u - 0.5 * e.full_size.width > camera.width || v + 0.5 * e.full_size.height < 0 ||
+           v - 0.5 * e.full_size.height > camera.height;
   });
   for (int k = 0; k < num_detections; ++k) {
     if (!detection_used_[k]) tracks_.push_back(NewEntry(detections[usable_[k]], camera));
@@ -222,11 +324,24 @@ Track Tracker::Output(const Entry& e, const CameraModel& camera) const {
   track.hits = e.hits;
   track.misses = e.misses;
   track.detection = e.last;
-  const Eigen::Vector3d p = e.kalman.position();
-  const Eigen::Vector3d v = e.kalman.velocity();
-  if (e.misses > 0 && p.z() > kMinDepthM) {
+  // From s = (a, b, z) and its rates to the cam frame: p = (a z, b z, z),
+  // v = (a' z + a z', b' z + b z', z'); the covariance through the Jacobian.
+  const ConstantVelocityKalman::State& x = e.kalman.state();
+  const double a = x(0), b = x(1), z = x(2), da = x(3), db = x(4), dz = x(5);
+  const Eigen::Vector3d p(a * z, b * z, z);
+  const Eigen::Vector3d v(da * z + a * dz, db * z + b * dz, dz);
+  Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Zero();
+  J(0, 0) = z, J(0, 2) = a;
+  J(1, 1) = z, J(1, 2) = b;
+  J(2, 2) = 1;
+  J(3, 0) = dz, J(3, 2) = da, J(3, 3) = z, J(3, 5) = a;
+  J(4, 1) = dz, J(4, 2) = db, J(4, 4) = z, J(4, 5) = b;
+  J(5, 5) = 1;
+  const Eigen::Matrix<double, 6, 1> variance =
+      (J * e.kalman.covariance() * J.transpose()).diagonal();
+  if (e.misses > 0 && z > kMinDepthM) {
     // Not measured this frame: the box follows the prediction, keeping its size.
-    const Eigen::Vector2d centre = Project(camera, p);
+    const Eigen::Vector2d centre(camera.cx + camera.f_px * a, camera.cy + camera.f_px * b);
     const cv::Point2d shift(centre.x() - e.last.centroid_px.x, centre.y() - e.last.centroid_px.y);
     track.detection.centroid_px = cv::Point2d(centre.x(), centre.y());
     // Clamped so that a prediction that nears the camera plane cannot overflow an int.
@@ -238,7 +353,6 @@ Track Tracker::Output(const Entry& e, const CameraModel& camera) const {
   }
   track.position_cam_m = ToCv(p);
   track.velocity_cam_mps = ToCv(v);
-  const ConstantVelocityKalman::State variance = e.kalman.covariance().diagonal();
   track.position_sigma_m = ToCv(variance.head<3>().cwiseMax(0.0).cwiseSqrt());
   track.velocity_sigma_mps = ToCv(variance.tail<3>().cwiseMax(0.0).cwiseSqrt());
   track.range_m = RawRange(e.last);

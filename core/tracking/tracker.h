@@ -135,10 +135,27 @@ class Tracker {
     int hits = 0;
     int misses = 0;
     detection::Detection last;  // the last detection, as measured
-    ConstantVelocityKalman kalman;
+    ConstantVelocityKalman kalman;  // on s = (a, b, z): see MeasureAngleDepth
     FadingMemoryFilter range_filter;
     double since_measured_s = 0;  // (clamped) time since the last detection
+    // The obstacle's whole size in the image and its centroid's offset from the box centre, from
+    // the last detection that nothing cut: a blob cut by a nearer obstacle or the image border is
+    // centred from its uncut edge with this size.
+    cv::Size2d full_size;
+    cv::Point2d centroid_offset;
+    bool last_cut = false;  // the last detection was cut (its area and perimeter are partial)
   };
+
+  // Which sides of a detection are cut by a nearer detection or by the image border.
+  struct Cut {
+    bool left = false, right = false, top = false, bottom = false;
+    bool any() const { return left || right || top || bottom; }
+  };
+  void FindCuts(const std::vector<detection::Detection>& detections, const CameraModel& camera);
+  // The detection's centre as the track sees it: its centroid, or, when the blob is cut and
+  // narrower (shorter) than the track's full size, the centre of the full box on its uncut edge.
+  cv::Point2d MeasuredCentre(const Entry& entry, const detection::Detection& d, const Cut& cut) const;
+  void Correct(Entry& entry, const detection::Detection& d, const Cut& cut, const CameraModel& camera);
 
   Entry NewEntry(const detection::Detection& detection, const CameraModel& camera);
   Track Output(const Entry& entry, const CameraModel& camera) const;
@@ -153,6 +170,7 @@ class Tracker {
   std::vector<AllowedPair> allowed_;     // (track, index into usable_, pixel distance) in gates
   std::vector<int> track_to_detection_;  // index into usable_, or -1
   std::vector<char> detection_used_;
+  std::vector<Cut> cuts_;                // per usable detection
   AssignmentSolver solver_;
 };
 

@@ -5,6 +5,7 @@
 #include <map>
 #include <utility>
 
+#include "drivers/synthetic/scene_helpers.h"
 #include "drivers/synthetic/synthetic_source.h"
 
 namespace stevi::drivers {
@@ -36,7 +37,8 @@ void ValidatePath(const Path& path, const std::string& prefix, std::vector<std::
   Check(!std::isfinite(path.phase_rad), prefix + "phase_rad", "must be finite", problems);
 }
 
-// An obstacle of the scenes below.
+}  // namespace
+
 Obstacle MakeObstacle(int id, std::string name, cv::Vec3d size_m, Path path, double albedo,
                       double contrast, double cell_m) {
   Obstacle o;
@@ -50,15 +52,12 @@ Obstacle MakeObstacle(int id, std::string name, cv::Vec3d size_m, Path path, dou
   return o;
 }
 
-// A path that stays at `centre`.
 Path Fixed(cv::Vec3d centre) {
   Path p;
   p.kind = Path::Kind::kStatic;
   p.start = centre;
   return p;
 }
-
-}  // namespace
 
 cv::Vec3d Path::PositionAt(double t_s) const {
   switch (kind) {
@@ -231,13 +230,11 @@ Scene DefaultScene() {
   return scene;
 }
 
-namespace {
+// Scenario building blocks (declared in scene_helpers.h). All scenarios use the default rig:
+// f = 700 px, B = 0.6 m (f B = 420 px m), 640 x 480, principal point (320, 240), 10 fps. A point
+// (x, y, z) shows at u = 320 + 700 x / z, v = 240 + 700 y / z, with disparity 420 / z px (8 px at
+// 52.5 m).
 
-// Scenario building blocks. All scenarios use the default rig: f = 700 px, B = 0.6 m
-// (f B = 420 px m), 640 x 480, principal point (320, 240), 10 fps. A point (x, y, z) shows at
-// u = 320 + 700 x / z, v = 240 + 700 y / z, with disparity 420 / z px (8 px at 52.5 m).
-
-// Straight flight from `start` (box centre) to `end` over period_s seconds, then again.
 Path Leg(cv::Vec3d start, cv::Vec3d end, double period_s) {
   Path p;
   p.kind = Path::Kind::kLinear;
@@ -264,6 +261,8 @@ SyntheticOptions ScenarioOptions(uint64_t seed, Scene scene) {
   o.scene = std::move(scene);
   return o;
 }
+
+namespace {
 
 // A grass airfield: a 30 m wide asphalt runway along z centred on x = runway_x_m, from z = 0 to
 // 2 km, with continuous 0.9 m white edge lines, a dashed white centreline (30 m dashes, 20 m

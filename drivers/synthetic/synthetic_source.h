@@ -108,4 +108,12 @@ struct Scenario {
 // is mostly in frame. Defined in scene.cc, next to DefaultScene().
 std::vector<Scenario> EvaluationScenarios();
 
+// The scenarios for evaluating the tracker, on the same rig with the camera 100 m up (every
+// obstacle against the sky, so that detection is clean): "crossing_occlusion" (two obstacles
+// crossing at 30 and 48 m, and a drone hidden for 10 frames behind a nearer hovering one),
+// "entries_exits" (four entries and three exits at the image sides) and "head_on" (a drone closing
+// from 50 to 12.6 m, passing 2.4 m from the camera). Obstacle ids are the truth ids to score
+// against. Defined in tracking_scenarios.cc.
+std::vector<Scenario> TrackingScenarios();
+
 }  // namespace stevi::drivers

@@ -47,8 +47,27 @@ Measurement Measure(const Eigen::Vector3d& truth, std::mt19937& rng) {
   return m;
 }
 
+// A realistic 3-D measurement covariance for exercising the generic filter: the centroid's pixel
+// noise laterally, (z/f)^2 per px^2, and the range sigma along the viewing ray.
 Eigen::Matrix3d CovarianceOf(const Measurement& m) {
-  return DetectionCovariance(kCamera, m.position, kCentroidVariancePx2, m.range_sigma_m);
+  const double lateral = m.position.z() / kCamera.f_px;
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  covariance(0, 0) = covariance(1, 1) = kCentroidVariancePx2 * lateral * lateral;
+  const Eigen::Vector3d ray = m.position.normalized();
+  covariance += (m.range_sigma_m * m.range_sigma_m) * ray * ray.transpose();
+  return covariance;
+}
+
+// Variance `variance_px2` on u, v and the disparity, as a cam-frame covariance (back-projection
+// Jacobian): the free-prediction pseudo-measurement of the thesis.
+Eigen::Matrix3d PixelNoiseCovariance(const CameraModel& camera, const Eigen::Vector3d& p,
+                                     double variance_px2) {
+  const double lateral = p.z() / camera.f_px;
+  const Eigen::Vector3d along_ray = p * (p.z() / (camera.f_px * camera.baseline_m));
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  covariance(0, 0) = covariance(1, 1) = lateral * lateral;
+  covariance += along_ray * along_ray.transpose();
+  return variance_px2 * covariance;
 }
 
 // The constant-velocity truth used below: 45 m ahead, drifting left and down, closing at 5 m/s.
@@ -217,41 +236,42 @@ TEST(ConstantVelocityKalman, RejectsNaNMeasurement) {
   EXPECT_EQ(kf.state(), before);
 }
 
-TEST(PixelNoiseCovariance, IsTheBackProjectionJacobianTimesPixelNoise) {
-  // Numeric Jacobian of (u, v, d) -> p at an off-axis point.
-  const Eigen::Vector3d p(12, -4, 35);
-  const Eigen::Vector2d uv = Project(kCamera, p);
-  const double d = kCamera.f_px * kCamera.baseline_m / p.z();
-  const double h = 1e-5;
-  Eigen::Matrix3d J;
-  J.col(0) = (BackProject(uv.x() + h, uv.y(), d) - BackProject(uv.x() - h, uv.y(), d)) / (2 * h);
-  J.col(1) = (BackProject(uv.x(), uv.y() + h, d) - BackProject(uv.x(), uv.y() - h, d)) / (2 * h);
-  J.col(2) = (BackProject(uv.x(), uv.y(), d + h) - BackProject(uv.x(), uv.y(), d - h)) / (2 * h);
-  const double variance = 0.3;
-  const Eigen::Matrix3d expected = variance * J * J.transpose();
-  const Eigen::Matrix3d got = PixelNoiseCovariance(kCamera, p, variance);
-  EXPECT_LT((got - expected).norm(), 1e-6 * expected.norm()) << got << "\n\n" << expected;
+TEST(MeasureAngleDepth, ImagePositionOverFocalAndDepthWithIndependentNoises) {
+  const AngleDepth m = MeasureAngleDepth(kCamera, 420, 190, 35, 0.8, 0.1);
+  EXPECT_NEAR(m.s.x(), (420 - kCamera.cx) / kCamera.f_px, 1e-12);
+  EXPECT_NEAR(m.s.y(), (190 - kCamera.cy) / kCamera.f_px, 1e-12);
+  EXPECT_DOUBLE_EQ(m.s.z(), 35);
+  EXPECT_NEAR(m.covariance(0, 0), 0.1 / (kCamera.f_px * kCamera.f_px), 1e-18);
+  EXPECT_NEAR(m.covariance(1, 1), 0.1 / (kCamera.f_px * kCamera.f_px), 1e-18);
+  EXPECT_DOUBLE_EQ(m.covariance(2, 2), 0.64);
+  EXPECT_EQ(m.covariance(0, 2), 0.0) << "a sideways miss never moves the depth";
+  EXPECT_EQ(m.covariance(0, 1), 0.0);
+  // Without a depth sigma, the disparity gets the centroid's pixel variance: z^2 / (f B) per px.
+  const AngleDepth pixel = MeasureAngleDepth(kCamera, 420, 190, 35, 0, 0.1);
+  const double per_px = 35.0 * 35.0 / (kCamera.f_px * kCamera.baseline_m);
+  EXPECT_NEAR(pixel.covariance(2, 2), 0.1 * per_px * per_px, 1e-12);
+  // And back: the point at (a z, b z, z) projects to the pixel it came from.
+  const Eigen::Vector2d uv = Project(kCamera, PointFromAngleDepth(m.s));
+  EXPECT_NEAR(uv.x(), 420, 1e-9);
+  EXPECT_NEAR(uv.y(), 190, 1e-9);
 }
 
-TEST(DetectionCovariance, LateralFromCentroidNoiseAndRangeSigmaAlongTheRay) {
-  // On the axis: diag((z/f)^2 var, (z/f)^2 var, range_sigma^2).
-  const Eigen::Matrix3d on_axis = DetectionCovariance(kCamera, Eigen::Vector3d(0, 0, 70), 0.1, 2.0);
-  EXPECT_NEAR(on_axis(0, 0), 0.1 * 0.01, 1e-12);
-  EXPECT_NEAR(on_axis(1, 1), 0.1 * 0.01, 1e-12);
-  EXPECT_NEAR(on_axis(2, 2), 4.0, 1e-12);
-  EXPECT_NEAR(on_axis(0, 2), 0.0, 1e-12);
-  // Off the axis, the range sigma lies along the ray: the variance along the ray is
-  // range_sigma^2 plus the small lateral part, and across it (in the x-z plane) only lateral.
-  const Eigen::Vector3d p(30, 0, 40);
-  const Eigen::Vector3d ray = p.normalized();
-  const Eigen::Vector3d across(ray.z(), 0, -ray.x());
-  const Eigen::Matrix3d off_axis = DetectionCovariance(kCamera, p, 0.1, 2.0);
-  const double lateral = 0.1 * (40.0 / 700) * (40.0 / 700);
-  EXPECT_NEAR(ray.dot(off_axis * ray), 4.0 + lateral * ray.x() * ray.x(), 1e-12);
-  EXPECT_NEAR(across.dot(off_axis * across), lateral * across.x() * across.x(), 1e-12);
-  // Without a range sigma, the disparity gets the centroid's pixel noise.
-  EXPECT_EQ(DetectionCovariance(kCamera, p, 0.1, std::numeric_limits<double>::infinity()),
-            PixelNoiseCovariance(kCamera, p, 0.1));
+TEST(ConstantVelocityKalman, PerAxisProcessNoiseKeepsTheAxesIndependent) {
+  ConstantVelocityKalman kf;
+  kf.Initialize(Eigen::Vector3d(0.1, -0.05, 40), Eigen::Vector3d(1e-7, 1e-7, 1.0).asDiagonal(),
+                Eigen::Vector3d(0.5, 0.5, 20));
+  for (int k = 0; k < 20; ++k) {
+    kf.Predict(kDt, Eigen::Vector3d(1e-6, 1e-6, 1e-2));
+    ASSERT_TRUE(kf.Update(Eigen::Vector3d(0.1 + 0.01 * k, -0.05, 40),
+                          Eigen::Vector3d(1e-7, 1e-7, 1.0).asDiagonal()));
+  }
+  // Diagonal noises and a per-axis model: no covariance between the axes ever appears.
+  const ConstantVelocityKalman::Covariance& P = kf.covariance();
+  for (int i : {0, 3}) {
+    for (int j : {1, 2, 4, 5}) EXPECT_EQ(P(i, j), 0.0) << i << "," << j;
+  }
+  EXPECT_NEAR(kf.position().z(), 40, 1e-9) << "the lateral motion left the depth alone";
+  EXPECT_NEAR(kf.velocity().x(), 0.01 / kDt, 0.02 / kDt);
 }
 
 TEST(KalmanOptions, DefaultsAreTheThesisNumbersAndValid) {

@@ -695,5 +695,52 @@ TEST(TrackStateName, NamesEveryState) {
   EXPECT_EQ(TrackStateName(TrackState::kCoasting), "coasting");
 }
 
+// A far obstacle moving left slides behind a nearer one moving right: its visible blob is eaten
+// from its left, so the blob's centroid drifts right while the obstacle moves left. The tracker
+// re-centres a cut blob on its uncut edge with the obstacle's full width, so the far track keeps
+// moving left, coasts in the right place while hidden, and takes its detections again when the
+// obstacle comes out on the other side.
+TEST(Tracker, ABlobCutByANearerOneIsCentredOnItsUncutEdge) {
+  const Target near_target{.p0 = {-9, 0, 30}, .v = {12, 0, 0}, .width_m = 5, .height_m = 2};
+  const Target far_target{.p0 = {6, 0, 48}, .v = {-12, 0, 0}, .width_m = 6, .height_m = 2};
+  Tracker tracker;
+  std::optional<std::uint64_t> far_id;
+  int cut_frames = 0, wrong_direction = 0;
+  for (int k = 0; k < 60; ++k) {
+    std::vector<detection::Detection> detections{Detect(near_target, k, nullptr)};
+    detection::Detection far = Detect(far_target, k, nullptr);
+    const cv::Rect occluder = detections[0].bbox;
+    // The far blob is what the near one leaves visible.
+    const int left = std::max(far.bbox.x, occluder.x + occluder.width);
+    const int right = far.bbox.x + far.bbox.width;
+    const bool overlapping = (far.bbox & occluder).area() > 0;
+    if (overlapping && right - left >= 4 && left > far.bbox.x) {
+      far.bbox = cv::Rect(left, far.bbox.y, right - left, far.bbox.height);
+      far.centroid_px.x = left + 0.5 * (right - left);
+      far.area_px = far.bbox.area();
+      far.perimeter_px = 2 * (far.bbox.width + far.bbox.height);
+      ++cut_frames;
+      detections.push_back(far);
+    } else if (!overlapping || far.bbox.x >= occluder.x + occluder.width) {
+      detections.push_back(far);
+    }  // else: wholly hidden
+    const std::vector<Track> tracks = tracker.Update(detections, FrameTime(k), kCamera);
+    if (k == 5) {
+      const Track* t = Nearest(tracks, far_target.At(k));
+      ASSERT_NE(t, nullptr);
+      far_id = t->id;
+    }
+    if (far_id) {
+      const Track* t = Find(tracks, *far_id);
+      ASSERT_NE(t, nullptr) << "frame " << k << ": the far track was lost";
+      if (k > 8 && t->velocity_cam_mps[0] > 0) ++wrong_direction;
+    }
+  }
+  EXPECT_GT(cut_frames, 5) << "the scenario must cut the far blob";
+  EXPECT_EQ(wrong_direction, 0) << "the far track's velocity turned towards the cut";
+  // Two obstacles, two tracks, all along.
+  EXPECT_EQ(tracker.next_id(), 3u);
+}
+
 }  // namespace
 }  // namespace stevi::tracking

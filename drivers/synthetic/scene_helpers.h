@@ -1,0 +1,35 @@
+// Building blocks of the synthetic scenarios, shared by scene.cc (the detection scenarios) and
+// tracking_scenarios.cc. Internal to drivers/synthetic: not part of the drivers' interface.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "drivers/synthetic/scene.h"
+#include "drivers/synthetic/synthetic_source.h"
+
+namespace stevi::drivers {
+
+// An obstacle: id (> 0), name, size (x width, y height, z depth; metres), path, and texture
+// (mean grey 0..1, contrast 0..1, finest detail in metres).
+Obstacle MakeObstacle(int id, std::string name, cv::Vec3d size_m, Path path, double albedo,
+                      double contrast, double cell_m);
+
+// A path that stays at `centre` (metres).
+Path Fixed(cv::Vec3d centre);
+
+// Straight flight of the box centre from `start` to `end` (metres) over period_s seconds, then
+// back to `start` and again.
+Path Leg(cv::Vec3d start, cv::Vec3d end, double period_s);
+
+// A circle in the x-z plane around `centre` (metres), once every period_s seconds, starting at
+// phase_rad (0 = +x of the centre).
+Path Circle(cv::Vec3d centre, double radius_m, double period_s, double phase_rad);
+
+// The options of an evaluation scenario: the default rig (640x480, f = 700 px, B = 0.6 m,
+// 10 fps), pixel noise of 2 grey levels, `seed` and `scene`.
+SyntheticOptions ScenarioOptions(uint64_t seed, Scene scene);
+
+}  // namespace stevi::drivers
