@@ -34,6 +34,62 @@ Client::Client(ClientOptions options) : options_(std::move(options)) {
   args.SetMaxSendMessageSize(options_.max_message_bytes);
   channel_ = grpc::CreateCustomChannel(options_.address, grpc::InsecureChannelCredentials(), args);
   stub_ = v1::ObstacleService::NewStub(channel_);
+  calibration_stub_ = v1::CalibrationService::NewStub(channel_);
+}
+
+grpc::Status Client::Calibrate(const v1::CalibrationSettings& settings,
+                               const std::vector<v1::ImagePair>& pairs,
+                               v1::CalibrationReport* report,
+                               std::chrono::milliseconds calibrate_timeout) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + calibrate_timeout);
+  std::unique_ptr<grpc::ClientWriter<v1::CalibrationUpload>> writer =
+      calibration_stub_->Calibrate(&context, report);
+  v1::CalibrationUpload upload;
+  *upload.mutable_settings() = settings;
+  bool ok = writer->Write(upload);
+  for (size_t i = 0; ok && i < pairs.size(); ++i) {
+    *upload.mutable_pair() = pairs[i];
+    ok = writer->Write(upload);
+  }
+  // A failed write means the server ended the call early; Finish() tells why.
+  writer->WritesDone();
+  return writer->Finish();
+}
+
+grpc::Status Client::CaptureCalibration(
+    const v1::CaptureCalibrationRequest& request,
+    const std::function<void(const v1::CaptureProgress&)>& on_progress,
+    std::chrono::milliseconds capture_timeout) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + capture_timeout);
+  std::unique_ptr<grpc::ClientReader<v1::CaptureProgress>> reader =
+      calibration_stub_->CaptureCalibration(&context, request);
+  v1::CaptureProgress progress;
+  while (reader->Read(&progress)) on_progress(progress);
+  return reader->Finish();
+}
+
+grpc::Status Client::ListCalibrations(v1::ListCalibrationsResponse* response) {
+  grpc::ClientContext context;
+  Prepare(context);
+  return calibration_stub_->ListCalibrations(&context, v1::ListCalibrationsRequest(), response);
+}
+
+grpc::Status Client::GetCalibration(const std::string& id, v1::CalibrationRecord* record) {
+  grpc::ClientContext context;
+  Prepare(context);
+  v1::GetCalibrationRequest request;
+  request.set_calibration_id(id);
+  return calibration_stub_->GetCalibration(&context, request, record);
+}
+
+grpc::Status Client::ActivateCalibration(const std::string& id, v1::CalibrationRecord* record) {
+  grpc::ClientContext context;
+  Prepare(context);
+  v1::ActivateCalibrationRequest request;
+  request.set_calibration_id(id);
+  return calibration_stub_->ActivateCalibration(&context, request, record);
 }
 
 void Client::Prepare(grpc::ClientContext& context) const {

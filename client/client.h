@@ -8,9 +8,11 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include <grpcpp/grpcpp.h>
 
+#include "stevi/v1/calibration_service.grpc.pb.h"
 #include "stevi/v1/obstacle_service.grpc.pb.h"
 
 namespace stevi::client {
@@ -50,6 +52,19 @@ class Client {
   // or the stream fails (and reconnecting, if asked, gives up). Returns OK in the first three cases.
   grpc::Status StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,
                             const StreamOptions& options = {});
+  // Calibration (CalibrationService). Calibrate() streams `settings` then every pair; the
+  // deadline is `calibrate_timeout` (calibrating 25 pairs takes seconds).
+  grpc::Status Calibrate(const v1::CalibrationSettings& settings,
+                         const std::vector<v1::ImagePair>& pairs, v1::CalibrationReport* report,
+                         std::chrono::milliseconds calibrate_timeout = std::chrono::minutes(5));
+  // Streams the server's capture progress to on_progress (the last message holds the report).
+  grpc::Status CaptureCalibration(const v1::CaptureCalibrationRequest& request,
+                                  const std::function<void(const v1::CaptureProgress&)>& on_progress,
+                                  std::chrono::milliseconds capture_timeout = std::chrono::minutes(10));
+  grpc::Status ListCalibrations(v1::ListCalibrationsResponse* response);
+  grpc::Status GetCalibration(const std::string& id, v1::CalibrationRecord* record);
+  grpc::Status ActivateCalibration(const std::string& id, v1::CalibrationRecord* record);
+
   // Ends a running StreamTracks() from another thread.
   void Cancel();
 
@@ -61,6 +76,7 @@ class Client {
   ClientOptions options_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::ObstacleService::Stub> stub_;
+  std::unique_ptr<v1::CalibrationService::Stub> calibration_stub_;
   std::mutex stream_mu_;
   grpc::ClientContext* stream_context_ = nullptr;
   std::atomic<bool> cancelled_{false};

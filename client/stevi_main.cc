@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <pthread.h>
 
+#include <cctype>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
@@ -38,6 +39,19 @@ Commands:
   snapshot --out PREFIX        write PREFIX_disparity16.png, PREFIX_disparity_colour.png,
                                PREFIX_left.png, PREFIX_annotated.png (boxes, ids, ranges)
                                and PREFIX_meta.json
+
+  calibrate --board COLSxROWS --square-mm MM [--apply] [--json]
+            [--min-pairs N] [--max-rms PX] [--max-epipolar PX] [--alpha A]
+            (--left PATTERN --right PATTERN | --capture N [--interval S])
+                               stereo calibration from chessboard pairs: uploaded image files
+                               (printf patterns with one integer, e.g. dir/left%02d.jpg; indices
+                               0..9999, gaps skipped) or N pairs the server grabs from its own
+                               source every S seconds (default 0.5) while the board moves.
+                               Prints the quality report; --apply activates the result if every
+                               gate passes. The board counts inner corners (e.g. 9x6).
+  calibration list [--json]    stored calibrations and the active one
+  calibration get ID [--yaml]  one calibration: report, or its YAML file
+  calibration activate ID      switch the running server to it (between two frames)
 
 --server defaults to 127.0.0.1:50051; --timeout (seconds, default 5) bounds each call.
 Exit status: 0 on success, 1 when the server fails or cannot be reached, 2 on bad usage.
@@ -288,6 +302,250 @@ int Snapshot(Client& client, const std::vector<std::string>& args) {
   return 0;
 }
 
+// Reads a whole file as bytes; false when it cannot be read.
+bool ReadFile(const std::string& path, std::string& bytes) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return false;
+  std::ostringstream out;
+  out << in.rdbuf();
+  bytes = out.str();
+  return static_cast<bool>(in) || in.eof();
+}
+
+// Parses "9x6" into columns and rows (2..100 each).
+bool ParseBoard(const std::string& text, int& columns, int& rows) {
+  const size_t x = text.find('x');
+  if (x == std::string::npos) return false;
+  try {
+    size_t used_c = 0, used_r = 0;
+    columns = std::stoi(text.substr(0, x), &used_c);
+    rows = std::stoi(text.substr(x + 1), &used_r);
+    return used_c == x && used_r == text.size() - x - 1 && columns >= 2 && columns <= 100 &&
+           rows >= 2 && rows <= 100;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+bool ParseNumber(const std::string& text, double lo, double hi, double& value) {
+  try {
+    size_t used = 0;
+    value = std::stod(text, &used);
+    return used == text.size() && value >= lo && value <= hi;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+// "dir/left%02d.jpg" with index i; empty when the pattern has no single integer conversion.
+std::string FormatPattern(const std::string& pattern, int index) {
+  const size_t percent = pattern.find('%');
+  if (percent == std::string::npos || pattern.find('%', percent + 1) != std::string::npos) return "";
+  size_t end = percent + 1;
+  while (end < pattern.size() && std::isdigit(static_cast<unsigned char>(pattern[end]))) ++end;
+  if (end >= pattern.size() || pattern[end] != 'd') return "";
+  std::vector<char> buffer(pattern.size() + 32);
+  std::snprintf(buffer.data(), buffer.size(), pattern.c_str(), index);
+  return buffer.data();
+}
+
+void PrintReport(const v1::CalibrationReport& report, bool json) {
+  if (json) {
+    std::cout << Json(report) << "\n";
+    return;
+  }
+  std::cout << report.text();
+  if (!report.text().empty() && report.text().back() != '\n') std::cout << "\n";
+  std::cout << "calibration " << (report.calibration_id().empty() ? "(not stored)" : report.calibration_id())
+            << ": " << (report.passed() ? "passed" : "FAILED") << " its gates"
+            << (report.applied() ? "; now active" : "; not applied") << "\n";
+}
+
+int Calibrate(Client& client, const std::vector<std::string>& args) {
+  v1::CalibrationSettings settings;
+  std::string left_pattern, right_pattern;
+  int capture = 0;
+  double interval_s = 0.5;
+  bool json = false, have_board = false, have_square = false;
+  for (size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    const bool has_value = i + 1 < args.size();
+    double number = 0;
+    if (a == "--apply") {
+      settings.set_apply(true);
+    } else if (a == "--json") {
+      json = true;
+    } else if (a == "--board" && has_value) {
+      int columns = 0, rows = 0;
+      if (!ParseBoard(args[++i], columns, rows)) {
+        return Usage("calibrate --board: expected COLSxROWS inner corners (2..100), got '" +
+                     args[i] + "'");
+      }
+      settings.mutable_board()->set_columns(columns);
+      settings.mutable_board()->set_rows(rows);
+      have_board = true;
+    } else if (a == "--square-mm" && has_value) {
+      if (!ParseNumber(args[++i], 0.1, 10000, number)) {
+        return Usage("calibrate --square-mm: expected millimetres in [0.1, 10000], got '" +
+                     args[i] + "'");
+      }
+      settings.mutable_board()->set_square_m(number / 1000.0);
+      have_square = true;
+    } else if (a == "--left" && has_value) {
+      left_pattern = args[++i];
+    } else if (a == "--right" && has_value) {
+      right_pattern = args[++i];
+    } else if (a == "--capture" && has_value) {
+      if (!ParseNumber(args[++i], 1, 200, number) || number != static_cast<int>(number)) {
+        return Usage("calibrate --capture: expected a whole number of pairs in 1..200, got '" +
+                     args[i] + "'");
+      }
+      capture = static_cast<int>(number);
+    } else if (a == "--interval" && has_value) {
+      if (!ParseNumber(args[++i], 0, 60, interval_s)) {
+        return Usage("calibrate --interval: expected seconds in [0, 60], got '" + args[i] + "'");
+      }
+    } else if (a == "--min-pairs" && has_value) {
+      if (!ParseNumber(args[++i], 1, 1000, number) || number != static_cast<int>(number)) {
+        return Usage("calibrate --min-pairs: expected a whole number in 1..1000, got '" + args[i] +
+                     "'");
+      }
+      settings.mutable_gates()->set_min_pairs(static_cast<int>(number));
+    } else if (a == "--max-rms" && has_value) {
+      if (!ParseNumber(args[++i], 0, 100, number)) {
+        return Usage("calibrate --max-rms: expected pixels in [0, 100], got '" + args[i] + "'");
+      }
+      settings.mutable_gates()->set_max_rms_px(number);
+    } else if (a == "--max-epipolar" && has_value) {
+      if (!ParseNumber(args[++i], 0, 100, number)) {
+        return Usage("calibrate --max-epipolar: expected pixels in [0, 100], got '" + args[i] +
+                     "'");
+      }
+      settings.mutable_gates()->set_max_epipolar_px(number);
+    } else if (a == "--alpha" && has_value) {
+      if (!ParseNumber(args[++i], 0, 1, number)) {
+        return Usage("calibrate --alpha: expected a number in [0, 1], got '" + args[i] + "'");
+      }
+      settings.set_alpha(number);
+    } else {
+      return Usage("calibrate: unexpected argument '" + a + "'");
+    }
+  }
+  if (!have_board || !have_square) return Usage("calibrate: --board and --square-mm are required");
+  const bool upload = !left_pattern.empty() || !right_pattern.empty();
+  if (upload == (capture > 0)) {
+    return Usage("calibrate: give either --left and --right patterns, or --capture N");
+  }
+
+  v1::CalibrationReport report;
+  if (capture > 0) {
+    v1::CaptureCalibrationRequest request;
+    *request.mutable_settings() = settings;
+    request.set_pairs(capture);
+    request.set_interval_s(interval_s);
+    const grpc::Status status = client.CaptureCalibration(request, [&](const v1::CaptureProgress& p) {
+      if (p.has_report()) {
+        report = p.report();
+      } else if (!json) {
+        const v1::CapturedPair& c = p.pair();
+        std::cerr << "pair " << c.index() << "/" << c.of() << ": board "
+                  << (c.board_left() ? "left " : "") << (c.board_right() ? "right" : "")
+                  << (!c.board_left() && !c.board_right() ? "not found" : "") << "; coverage "
+                  << std::fixed << std::setprecision(0) << 100 * c.coverage_left() << " % / "
+                  << 100 * c.coverage_right() << " %\n";
+      }
+    });
+    if (!status.ok()) return RpcFailed(client, "calibrate", status);
+    PrintReport(report, json);
+    return report.passed() ? 0 : 1;
+  }
+
+  if (left_pattern.empty() || right_pattern.empty()) {
+    return Usage("calibrate: --left and --right go together");
+  }
+  if (FormatPattern(left_pattern, 0).empty() || FormatPattern(right_pattern, 0).empty()) {
+    return Usage("calibrate: --left and --right must be printf patterns with one integer "
+                 "conversion, e.g. dir/left%02d.jpg");
+  }
+  std::vector<v1::ImagePair> pairs;
+  for (int index = 0; index <= 9999; ++index) {
+    const std::string left = FormatPattern(left_pattern, index);
+    const std::string right = FormatPattern(right_pattern, index);
+    v1::ImagePair pair;
+    const bool have_left = ReadFile(left, *pair.mutable_left());
+    const bool have_right = ReadFile(right, *pair.mutable_right());
+    if (!have_left && !have_right) continue;
+    if (have_left != have_right) {
+      std::cerr << "stevi: calibrate: " << (have_left ? right : left) << " is missing (its pair "
+                << (have_left ? left : right) << " exists)\n";
+      return 1;
+    }
+    pair.set_name(left.substr(left.find_last_of('/') + 1));
+    pairs.push_back(std::move(pair));
+  }
+  if (pairs.empty()) {
+    std::cerr << "stevi: calibrate: no image pair matches " << left_pattern << " and "
+              << right_pattern << "\n";
+    return 1;
+  }
+  if (!json) std::cerr << "uploading " << pairs.size() << " pairs...\n";
+  const grpc::Status status = client.Calibrate(settings, pairs, &report);
+  if (!status.ok()) return RpcFailed(client, "calibrate", status);
+  PrintReport(report, json);
+  return report.passed() ? 0 : 1;
+}
+
+int Calibration(Client& client, const std::vector<std::string>& args) {
+  if (args.empty()) return Usage("calibration: expected list, get ID or activate ID");
+  if (args[0] == "list") {
+    const bool json = args.size() == 2 && args[1] == "--json";
+    if (args.size() > 1 && !json) return Usage("calibration list: unexpected argument '" + args[1] + "'");
+    v1::ListCalibrationsResponse list;
+    if (grpc::Status status = client.ListCalibrations(&list); !status.ok()) {
+      return RpcFailed(client, "calibration list", status);
+    }
+    if (json) {
+      std::cout << Json(list) << "\n";
+      return 0;
+    }
+    std::cout << "  id            size        rms px  baseline m  gates\n";
+    for (const v1::CalibrationSummary& c : list.calibrations()) {
+      std::ostringstream size;
+      size << c.width() << "x" << c.height();
+      std::cout << (c.active() ? "* " : "  ") << std::left << std::setw(14) << c.calibration_id()
+                << std::setw(12) << size.str() << std::right << std::fixed << std::setprecision(3)
+                << std::setw(6) << c.rms_px() << std::setprecision(4) << std::setw(12)
+                << c.baseline_m() << "  " << (c.passed() ? "passed" : "FAILED") << "\n";
+    }
+    if (list.calibrations_size() == 0) std::cout << "  (none stored)\n";
+    std::cout << "active: " << (list.active_id().empty() ? "(the source's own)" : list.active_id())
+              << "\n";
+    for (const std::string& problem : list.store_problems()) std::cout << "problem: " << problem << "\n";
+    return 0;
+  }
+  if ((args[0] == "get" || args[0] == "activate") && args.size() >= 2) {
+    v1::CalibrationRecord record;
+    const bool activate = args[0] == "activate";
+    if (activate && args.size() != 2) return Usage("calibration activate: expected one ID");
+    const bool yaml = !activate && args.size() == 3 && args[2] == "--yaml";
+    if (!activate && args.size() > 2 && !yaml) {
+      return Usage("calibration get: unexpected argument '" + args[2] + "'");
+    }
+    const grpc::Status status = activate ? client.ActivateCalibration(args[1], &record)
+                                         : client.GetCalibration(args[1], &record);
+    if (!status.ok()) return RpcFailed(client, "calibration " + args[0], status);
+    if (yaml) {
+      std::cout << record.yaml();
+    } else if (activate) {
+      std::cout << "active: " << record.summary().calibration_id() << "\n";
+    } else {
+      PrintReport(record.report(), false);
+    }
+    return 0;
+  }
+  return Usage("calibration: expected list, get ID or activate ID");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -314,7 +572,9 @@ int main(int argc, char** argv) {
       return Usage("unknown option '" + args[i] + "'");
     }
   }
-  if (i >= args.size()) return Usage("expected a command (watch, status, config, snapshot)");
+  if (i >= args.size()) {
+    return Usage("expected a command (watch, status, config, snapshot, calibrate, calibration)");
+  }
   const std::string command = args[i];
   const std::vector<std::string> rest(args.begin() + static_cast<long>(i) + 1, args.end());
   Client client(options);
@@ -322,5 +582,7 @@ int main(int argc, char** argv) {
   if (command == "status") return PrintStatus(client, rest);
   if (command == "config") return Config(client, rest);
   if (command == "snapshot") return Snapshot(client, rest);
+  if (command == "calibrate") return Calibrate(client, rest);
+  if (command == "calibration") return Calibration(client, rest);
   return Usage("unknown command '" + command + "'");
 }

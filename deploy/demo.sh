@@ -12,7 +12,7 @@ bash deploy/install-deps.sh
 cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=Release
 cmake --build "$build_dir" -j"$(nproc)" --target stevi-server stevi stevi-process
 
-"$build_dir/bin/stevi-server" --listen "$listen" &
+"$build_dir/bin/stevi-server" --listen "$listen" --data-dir "$build_dir/stevi-data" &
 server_pid=$!
 trap 'kill -TERM "$server_pid" 2>/dev/null; wait "$server_pid" 2>/dev/null || true' EXIT INT TERM
 

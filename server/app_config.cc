@@ -1,5 +1,7 @@
 #include "server/app_config.h"
 
+#include "drivers/synthetic/chessboard_source.h"
+
 #include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
 #include <google/protobuf/util/json_util.h>
@@ -134,6 +136,8 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
   if (const std::string* v = get("left")) source->set_left(*v);
   if (const std::string* v = get("right")) source->set_right(*v);
   if (const std::string* v = get("calibration")) source->set_calibration(*v);
+  if (const std::string* v = get("data-dir")) config.set_data_dir(*v);
+  if (const std::string* v = get("scene")) source->mutable_synthetic()->set_scene(*v);
   if (const std::string* v = get("fps")) {
     const std::optional<double> fps = ParseDouble(*v);
     if (!fps || *fps <= 0 || *fps > 1000) {
@@ -181,6 +185,11 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
         problems.push_back(
             "source: left, right and calibration are for the images source (--source images)");
       }
+      if (source.synthetic().has_scene() && source.synthetic().scene() != "airfield" &&
+          source.synthetic().scene() != "chessboard") {
+        problems.push_back("source.synthetic.scene: must be airfield or chessboard (got '" +
+                           source.synthetic().scene() + "')");
+      }
       break;
     case v1::SOURCE_KIND_IMAGES:
       if (source.left().empty()) problems.push_back("source.left: required for the images source");
@@ -202,6 +211,9 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
   }
   if (config.has_max_streams() && (config.max_streams() < 1 || config.max_streams() > 4096)) {
     problems.push_back("max_streams: must be in 1..4096");
+  }
+  if (config.has_data_dir() && config.data_dir().empty()) {
+    problems.push_back("data_dir: must not be empty");
   }
   return problems;
 }
@@ -229,8 +241,26 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig
     options.loop = config.has_loop() ? config.loop() : loop_images;
     return drivers::OpenImageSource(options);
   }
-  drivers::SyntheticOptions options;
   const v1::SyntheticConfig& s = config.synthetic();
+  if (s.scene() == "chessboard") {
+    drivers::ChessboardSourceOptions board;
+    if (s.has_width()) board.width = s.width();
+    if (s.has_height()) board.height = s.height();
+    if (s.has_f_px()) board.f_px = s.f_px();
+    if (s.has_baseline_m()) board.baseline_m = s.baseline_m();
+    if (s.has_noise_sigma()) board.noise_sigma = s.noise_sigma();
+    if (s.has_seed()) board.seed = s.seed();
+    board.fps = fps;
+    Result<std::unique_ptr<drivers::ChessboardSource>> source =
+        drivers::ChessboardSource::Open(std::move(board));
+    if (!source.ok()) {
+      Error error = source.error();
+      error.message = "source.synthetic: " + error.message;
+      return error;
+    }
+    return std::unique_ptr<drivers::StereoSource>(std::move(source).value());
+  }
+  drivers::SyntheticOptions options;
   if (s.has_width()) options.width = s.width();
   if (s.has_height()) options.height = s.height();
   if (s.has_f_px()) options.f_px = s.f_px();

@@ -21,6 +21,7 @@ inline constexpr uint32_t kDefaultQueueFrames = 8;
 inline constexpr uint32_t kDefaultMaxMessageBytes = 16u << 20;
 inline constexpr uint32_t kDefaultMaxStreams = 64;
 inline constexpr double kDefaultFps = 10.0;
+inline constexpr char kDefaultDataDir[] = "stevi-data";
 
 // Parsed "--name value" / "--name=value" flags. Flags not in `known` are an error, and so is a
 // flag given twice or without its value. `switches` take no value ("--help").

@@ -74,10 +74,37 @@ Engine::Engine(std::unique_ptr<drivers::StereoSource> source, pipeline::Pipeline
                Sink sink)
     : source_(std::move(source)),
       source_description_(source_->Describe()),
-      rig_(source_->Rig()),
+      source_image_size_(source_->Rig() ? source_->Rig()->image_size() : cv::Size()),
       config_(std::move(config)),
       sink_(std::move(sink)),
-      started_(Clock::now()) {}
+      started_(Clock::now()),
+      rig_(source_->Rig()) {}
+
+void Engine::SetRig(std::shared_ptr<const geometry::StereoRig> rig, bool swap_left_right) {
+  std::lock_guard lock(mu_);
+  rig_ = std::move(rig);
+  swap_left_right_ = swap_left_right;
+}
+
+std::shared_ptr<const geometry::StereoRig> Engine::rig() const {
+  std::lock_guard lock(mu_);
+  return rig_;
+}
+
+Result<StereoFrame> Engine::WaitForCapture(Clock::duration timeout) {
+  std::unique_lock lock(mu_);
+  const uint64_t seen = frames_captured_;
+  const bool got = capture_cv_.wait_for(lock, timeout,
+                                        [&] { return stopping_ || frames_captured_ > seen; });
+  if (stopping_) return Error{ErrorCode::kFailedPrecondition, "the server is stopping"};
+  if (!got) {
+    return Error{ErrorCode::kUnavailable,
+                 "no frame from the source within the timeout (" +
+                     std::string(SourceStateName(source_state_)) +
+                     (source_error_.empty() ? "" : ": " + source_error_) + ")"};
+  }
+  return last_capture_;
+}
 
 Engine::~Engine() { Stop(); }
 
@@ -95,6 +122,7 @@ void Engine::Stop() {
     stopping_ = true;
   }
   stop_cv_.notify_all();
+  capture_cv_.notify_all();
   mailbox_.Close();
   if (capture_thread_.joinable()) capture_thread_.join();
   if (pipeline_thread_.joinable()) pipeline_thread_.join();
@@ -140,7 +168,9 @@ void Engine::CaptureLoop() {
       source_error_.clear();
       ++frames_captured_;
       PushBounded(capture_times_, now);
+      last_capture_ = *frame;
     }
+    capture_cv_.notify_all();
     mailbox_.Put(std::move(frame).value());
     // Pace; when the source itself is slower than the period, do not try to catch up.
     next_tick = std::max(next_tick + period, now);
@@ -149,7 +179,12 @@ void Engine::CaptureLoop() {
 
 void Engine::PipelineLoop() {
   while (std::optional<StereoFrame> frame = mailbox_.Take()) {
-    pipeline::Snapshot snapshot{config_.Get(), rig_};
+    pipeline::Snapshot snapshot{config_.Get(), nullptr};
+    {
+      std::lock_guard lock(mu_);
+      snapshot.rig = rig_;
+      if (swap_left_right_) std::swap(frame->left, frame->right);
+    }
     Result<pipeline::FrameResult> result = ProcessFrame(pipeline_, *frame, snapshot);
     const auto now = Clock::now();
     if (!result.ok()) {
@@ -182,9 +217,9 @@ EngineStatus Engine::Status() const {
   s.frames_dropped_capture = mailbox_.dropped();
   const std::shared_ptr<const pipeline::PipelineConfig> config = config_.Get();
   s.algorithm = config->algorithm;
-  s.calibration_id = rig_ ? rig_->calibration_id() : "";
   s.uptime_s = std::chrono::duration<double>(Clock::now() - started_).count();
   std::lock_guard lock(mu_);
+  s.calibration_id = rig_ ? rig_->calibration_id() : "";
   s.source_state = source_state_;
   s.source_error = source_error_;
   s.fps_in = Rate(capture_times_);

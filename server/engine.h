@@ -57,6 +57,20 @@ class Engine {
   void Stop();
 
   pipeline::ConfigStore& config() { return config_; }
+
+  // The rig frames are processed with. SetRig() swaps it between two frames: the next frame taken
+  // by the pipeline uses it (build it, with its rectification maps, before calling: this only
+  // swaps a pointer). With `swap_left_right`, the source's left image is the rig's right camera
+  // (a calibration found the cameras named the wrong way round) and the engine swaps each pair.
+  void SetRig(std::shared_ptr<const geometry::StereoRig> rig, bool swap_left_right = false);
+  std::shared_ptr<const geometry::StereoRig> rig() const;
+  // The source's image size (of the rig it was created with).
+  cv::Size source_image_size() const { return source_image_size_; }
+
+  // Waits for a frame captured after the call (raw, as the source delivered it, not swapped), for
+  // at most `timeout`. kUnavailable when none came (source down or ended), kCancelled-like
+  // kFailedPrecondition when the engine is stopping.
+  Result<StereoFrame> WaitForCapture(std::chrono::steady_clock::duration timeout);
   // The latest processed frame, or nullptr before the first.
   std::shared_ptr<const pipeline::FrameResult> Latest() const;
   EngineStatus Status() const;
@@ -71,7 +85,7 @@ class Engine {
 
   std::unique_ptr<drivers::StereoSource> source_;
   const std::string source_description_;
-  std::shared_ptr<const geometry::StereoRig> rig_;
+  const cv::Size source_image_size_;
   pipeline::ConfigStore config_;
   Sink sink_;
   LatestMailbox<StereoFrame> mailbox_;
@@ -90,6 +104,10 @@ class Engine {
   std::deque<std::chrono::steady_clock::time_point> capture_times_, process_times_;
   std::deque<std::vector<pipeline::StageTiming>> recent_timings_;
   std::shared_ptr<const pipeline::FrameResult> latest_;
+  std::shared_ptr<const geometry::StereoRig> rig_;
+  bool swap_left_right_ = false;
+  std::condition_variable capture_cv_;
+  StereoFrame last_capture_;  // shares the images with the frame in the mailbox (never written)
 
   std::thread capture_thread_;
   std::thread pipeline_thread_;

@@ -33,7 +33,12 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
       });
   if (!engine.ok()) return engine.error();
   server->engine_ = std::move(engine).value();
+  Result<std::unique_ptr<CalibrationManager>> calibration = CalibrationManager::Open(
+      config.has_data_dir() ? config.data_dir() : kDefaultDataDir, *server->engine_);
+  if (!calibration.ok()) return calibration.error();
+  server->calibration_ = std::move(calibration).value();
   server->service_ = std::make_unique<ObstacleServiceImpl>(*server->engine_, *broadcaster);
+  server->calibration_service_ = std::make_unique<CalibrationServiceImpl>(*server->calibration_);
 
   const int max_message =
       static_cast<int>(config.has_max_message_bytes() ? config.max_message_bytes()
@@ -41,6 +46,7 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   grpc::ServerBuilder builder;
   builder.AddListeningPort(server->listen_, grpc::InsecureServerCredentials(), &server->port_);
   builder.RegisterService(server->service_.get());
+  builder.RegisterService(server->calibration_service_.get());
   builder.SetMaxReceiveMessageSize(max_message);
   builder.SetMaxSendMessageSize(max_message);
   server->grpc_server_ = builder.BuildAndStart();
@@ -63,6 +69,7 @@ void Server::Shutdown() {
     grpc_server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
     grpc_server_->Wait();
   }
+  if (calibration_) calibration_->Stop();
   if (engine_) engine_->Stop();
 }
 

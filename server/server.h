@@ -6,6 +6,8 @@
 #include <string>
 
 #include "core/common/error.h"
+#include "server/calibration_manager.h"
+#include "server/calibration_service.h"
 #include "server/engine.h"
 #include "server/service.h"
 #include "stevi/v1/config.pb.h"
@@ -23,6 +25,7 @@ class Server {
   int port() const { return port_; }
   const std::string& listen_address() const { return listen_; }
   Engine& engine() { return *engine_; }
+  CalibrationManager& calibration() { return *calibration_; }
 
   // Graceful shutdown: stop accepting, end every stream with a final status, stop the source and
   // the pipeline. Idempotent.
@@ -35,7 +38,9 @@ class Server {
   int port_ = 0;
   std::unique_ptr<FrameBroadcaster> broadcaster_;
   std::unique_ptr<Engine> engine_;
+  std::unique_ptr<CalibrationManager> calibration_;
   std::unique_ptr<ObstacleServiceImpl> service_;
+  std::unique_ptr<CalibrationServiceImpl> calibration_service_;
   std::unique_ptr<grpc::Server> grpc_server_;
   bool shut_down_ = false;
 };

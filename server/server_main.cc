@@ -13,7 +13,8 @@ namespace {
 
 constexpr char kUsage[] = R"(usage: stevi-server [flags]
 
-Serves obstacle tracks from a stereo rig over gRPC (service stevi.v1.ObstacleService).
+Serves obstacle tracks from a stereo rig over gRPC (services stevi.v1.ObstacleService and
+stevi.v1.CalibrationService).
 With no flags: the built-in synthetic rig, the canonical algorithm, listening on 127.0.0.1:50051.
 
   --listen HOST:PORT     address to listen on (default 127.0.0.1:50051)
@@ -23,6 +24,10 @@ With no flags: the built-in synthetic rig, the canonical algorithm, listening on
   --right PATTERN|VIDEO  images: right images, likewise
   --calibration FILE     images: calibration YAML (OpenCV FileStorage)
   --fps N                frames per second to run the source at (default 10)
+  --scene NAME           synthetic: airfield (default) or chessboard (a moving calibration board,
+                         9x6 inner corners of 100 mm squares, for `stevi calibrate --capture`)
+  --data-dir DIR         where calibrations are stored (default ./stevi-data); its active
+                         calibration is applied at start when it fits the source
   --algorithm NAME       canonical (default), stevie (stereo + edges) or stevis (stereo + saliency)
   --help                 this text
 )";
@@ -32,7 +37,7 @@ With no flags: the built-in synthetic rig, the canonical algorithm, listening on
 int main(int argc, char** argv) {
   using namespace stevi;
   const std::set<std::string> known = {"listen", "config", "source", "left", "right",
-                                       "calibration", "fps", "algorithm"};
+                                       "calibration", "fps", "algorithm", "data-dir", "scene"};
   Result<server::Flags> flags = server::ParseFlags(argc, argv, known, {"help"});
   if (!flags.ok()) {
     std::cerr << "stevi-server: " << flags.error().message << "\n";
@@ -72,6 +77,9 @@ int main(int argc, char** argv) {
   if (!server.ok()) {
     std::cerr << "stevi-server: " << server.error().message << "\n";
     return 1;
+  }
+  for (const std::string& problem : (*server)->calibration().problems()) {
+    std::cerr << "stevi-server: calibration store: " << problem << "\n";
   }
   const server::EngineStatus status = (*server)->engine().Status();
   std::cerr << "stevi-server: serving " << status.source << ", algorithm "

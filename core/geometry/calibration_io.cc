@@ -1,5 +1,7 @@
 #include "core/geometry/calibration_io.h"
 
+#include "core/common/atomic_file.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -204,7 +206,6 @@ Error WithPrefix(Error e, const std::string& prefix) {
   return e;
 }
 
-std::string ErrnoText() { return std::strerror(errno); }
 
 // A readable reason from an OpenCV exception. OpenCV's YAML parser puts "(line): message" in
 // `func` and the parser function's name in `err`. `line_offset` undoes lines we prepended.
@@ -367,42 +368,7 @@ Status SaveCalibrationYaml(const StereoCalibration& calibration, const std::stri
                  path + ": could not format the calibration (" + OpenCvReason(e) + ")"};
   }
 
-  // Atomic write: a temporary file in the same directory, fsync, rename, fsync the directory.
-  std::string tmp_path = path + ".tmp-XXXXXX";
-  const int fd = ::mkstemp(tmp_path.data());
-  if (fd < 0) {
-    return Error{ErrorCode::kInvalidArgument,
-                 path + ": cannot create a temporary file beside it (" + ErrnoText() + ")"};
-  }
-  auto fail = [&](const std::string& what) -> Status {
-    const std::string reason = ErrnoText();
-    ::unlink(tmp_path.c_str());
-    return Error{ErrorCode::kInternal, path + ": " + what + " (" + reason + ")"};
-  };
-  ::fchmod(fd, 0644);
-  std::size_t written = 0;
-  while (written < text.size()) {
-    const ssize_t n = ::write(fd, text.data() + written, text.size() - written);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      ::close(fd);
-      return fail("write failed");
-    }
-    written += static_cast<std::size_t>(n);
-  }
-  if (::fsync(fd) != 0) {
-    ::close(fd);
-    return fail("fsync failed");
-  }
-  if (::close(fd) != 0) return fail("close failed");
-  if (::rename(tmp_path.c_str(), path.c_str()) != 0) return fail("rename failed");
-  std::string dir = std::filesystem::path(path).parent_path().string();
-  if (dir.empty()) dir = ".";
-  if (const int dir_fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY); dir_fd >= 0) {
-    ::fsync(dir_fd);  // Best effort: the rename is durable once the directory is synced.
-    ::close(dir_fd);
-  }
-  return Status::Ok();
+  return AtomicWriteFile(path, text);
 }
 
 StereoCalibration IdealCalibration(cv::Size image_size, double f_px, double baseline_m, double cx,

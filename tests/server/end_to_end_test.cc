@@ -14,7 +14,9 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include "core/calibration/chessboard_render.h"
 #include "core/geometry/calibration_io.h"
+#include "stevi/v1/calibration_service.pb.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "stevi/v1/truth.pb.h"
 #include "tests/server/truth_check.h"
@@ -56,7 +58,8 @@ class ServerProcessTest : public ::testing::Test {
 
   void SetUp() override {
     server_ = std::make_unique<Subprocess>(std::vector<std::string>{
-        BinaryPath("stevi-server"), "--listen", "127.0.0.1:0", "--fps", "20"});
+        BinaryPath("stevi-server"), "--listen", "127.0.0.1:0", "--fps", "20", "--data-dir",
+        testing::MakeTempDir("stevi-e2e-data")});
     const std::optional<std::string> line = server_->WaitForStderrLine("serving", 60s);
     ASSERT_TRUE(line.has_value()) << "the server did not start: " << server_->DrainStderr();
     std::smatch m;
@@ -129,6 +132,81 @@ TEST_F(ServerProcessTest, WatchShowsObstaclesWithDepthWithinTwoPercent) {
   EXPECT_EQ(bad_score.exit_code, 2);
   EXPECT_THAT(bad_score.err, HasSubstr("--min-score"));
   EXPECT_THAT(table.out, HasSubstr("canonical"));
+}
+
+// `stevi calibrate` uploads chessboard pairs from files, prints the report and, with --apply,
+// switches the running server to the new calibration: the stream goes on with it.
+TEST_F(ServerProcessTest, CalibrateUploadsPairsAppliesAndTheStreamGoesOn) {
+  const std::string dir = testing::MakeTempDir("stevi-calibrate");
+  const cv::Size size(640, 480);
+  const geometry::StereoCalibration rig = geometry::IdealCalibration(size, 700, 0.6, 320, 240);
+  const calibration::BoardSpec board{9, 6, 0.10};
+  Result<calibration::ChessboardRenderer> renderer =
+      calibration::ChessboardRenderer::Create(rig, board, size);
+  ASSERT_TRUE(renderer.ok()) << renderer.error().message;
+  Result<std::vector<cv::Affine3d>> poses = calibration::GenerateBoardPoses(rig, board, size, 12, 3);
+  ASSERT_TRUE(poses.ok()) << poses.error().message;
+  for (size_t i = 0; i < poses->size(); ++i) {
+    const calibration::RenderedPair pair = renderer->Render((*poses)[i]);
+    char name[64];
+    std::snprintf(name, sizeof name, "/left%02zu.png", i + 1);
+    ASSERT_TRUE(cv::imwrite(dir + name, pair.left));
+    std::snprintf(name, sizeof name, "/right%02zu.png", i + 1);
+    ASSERT_TRUE(cv::imwrite(dir + name, pair.right));
+  }
+  const testing::RunResult calibrated =
+      Stevi({"calibrate", "--board", "9x6", "--square-mm", "100", "--left", dir + "/left%02d.png",
+             "--right", dir + "/right%02d.png", "--apply"});
+  ASSERT_EQ(calibrated.exit_code, 0) << calibrated.out << calibrated.err;
+  EXPECT_THAT(calibrated.out, HasSubstr("PASSED"));
+  EXPECT_THAT(calibrated.out, HasSubstr("cal-000001: passed its gates; now active"));
+  const testing::RunResult list = Stevi({"calibration", "list"});
+  EXPECT_THAT(list.out, HasSubstr("* cal-000001"));
+  const testing::RunResult watch = Stevi({"watch", "--count", "3", "--json"});
+  ASSERT_EQ(watch.exit_code, 0) << watch.err;
+  for (const v1::TrackFrame& f : ParseJsonLines<v1::TrackFrame>(watch.out)) {
+    EXPECT_EQ(f.calibration_id(), "cal-000001") << "the stream goes on with the new calibration";
+  }
+  const testing::RunResult yaml = Stevi({"calibration", "get", "cal-000001", "--yaml"});
+  Result<geometry::StereoCalibration> parsed = geometry::ParseCalibrationYaml(yaml.out);
+  ASSERT_TRUE(parsed.ok()) << parsed.error().message;
+  EXPECT_NEAR(cv::norm(parsed->T), 0.6, 0.003);
+
+  const testing::RunResult no_board = Stevi({"calibrate", "--board", "9x6", "--square-mm", "100",
+                                             "--left", dir + "/nothing%02d.png", "--right",
+                                             dir + "/none%02d.png"});
+  EXPECT_EQ(no_board.exit_code, 1);
+  EXPECT_THAT(no_board.err, HasSubstr("no image pair matches"));
+  const testing::RunResult bad_board = Stevi({"calibrate", "--board", "9", "--square-mm", "100",
+                                              "--capture", "3"});
+  EXPECT_EQ(bad_board.exit_code, 2);
+  EXPECT_THAT(bad_board.err, HasSubstr("--board"));
+}
+
+// The real XIMEA captures through `stevi calibrate`: the report's figures. The server's source is
+// 640x480 and these are 640x512, so the calibration is stored but (rightly) not applied.
+TEST_F(ServerProcessTest, CalibrateTheRealXimeaCaptures) {
+  const std::optional<std::string> data = testing::DataDir();
+  if (!data) GTEST_SKIP() << "reference data not found at " << testing::DataDirWanted();
+  const std::string dir = *data + "/calib_ximea_stereo";
+  const testing::RunResult r =
+      Stevi({"calibrate", "--board", "6x9", "--square-mm", "24", "--left", dir + "/left%02d.jpg",
+             "--right", dir + "/right%02d.jpg", "--apply", "--json"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  const std::vector<v1::CalibrationReport> reports = ParseJsonLines<v1::CalibrationReport>(r.out);
+  ASSERT_EQ(reports.size(), 1u) << r.out;
+  const v1::CalibrationReport& report = reports[0];
+  std::cout << report.text() << "\n";
+  EXPECT_TRUE(report.passed());
+  EXPECT_EQ(report.pairs_total(), 25);
+  EXPECT_EQ(report.pairs_used(), 24);
+  EXPECT_LE(report.rms_px(), 0.25);
+  EXPECT_NEAR(report.baseline_m(), 0.0925, 0.002);
+  EXPECT_TRUE(report.swapped_left_right()) << "the camera named left sits on the right";
+  EXPECT_FALSE(report.applied()) << "640x512 does not fit the 640x480 source";
+  bool size_warning = false;
+  for (const std::string& w : report.warnings()) size_warning |= w.find("640x512") != std::string::npos;
+  EXPECT_TRUE(size_warning) << "the report says why it was not applied";
 }
 
 TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {

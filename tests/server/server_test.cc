@@ -13,6 +13,7 @@
 #include "client/client.h"
 #include "server/service.h"
 #include "tests/server/truth_check.h"
+#include "tests/testing/data.h"
 
 namespace stevi::server {
 namespace {
@@ -26,6 +27,7 @@ v1::ServerConfig TestConfig() {
   v1::ServerConfig config;
   config.set_listen("127.0.0.1:0");
   config.mutable_source()->set_fps(kFps);
+  config.set_data_dir(testing::MakeTempDir("stevi-server-test"));
   return config;
 }
 

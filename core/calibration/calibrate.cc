@@ -1,0 +1,706 @@
+#include "core/calibration/calibrate.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <sstream>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/calibration/image_header.h"
+
+namespace stevi::calibration {
+namespace {
+
+// Fewer pairs than this cannot be solved for two cameras' intrinsics and their relative pose.
+constexpr int kMinSolvablePairs = 3;
+// The thesis' rules of thumb (warnings, not gates).
+constexpr int kAdvisedPairs = 20;
+constexpr double kAdvisedViewCoverage = 0.4;
+constexpr double kAdvisedUnionCoverage = 0.7;
+// A pair whose RMS exceeds this multiple of the median (and kOutlierMinPx) gets a warning.
+constexpr double kOutlierFactor = 3.0;
+constexpr double kOutlierMinPx = 0.5;
+// A pair is only dropped as an outlier when its RMS error also exceeds this (pixels).
+constexpr double kOutlierMinDropPx = 1.0;
+// Rejected pairs quoted in an error message before "and N more".
+constexpr std::size_t kQuotedRejections = 4;
+
+std::string SizeText(cv::Size s) { return std::to_string(s.width) + "x" + std::to_string(s.height); }
+
+std::string PairLabel(int index, const std::string& name) {
+  std::string label = "#" + std::to_string(index);
+  if (!name.empty()) label += " (" + name + ")";
+  return label;
+}
+
+std::string Fixed(double value, int digits) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, value);
+  return buf;
+}
+
+// ---- Images -----------------------------------------------------------------------------------
+
+struct Probe {
+  std::optional<cv::Size> size;
+  std::optional<RejectReason> reason;  // set when the image cannot be used
+  std::string problem;
+};
+
+std::span<const std::uint8_t> BytesOf(const ImageData& data) {
+  if (const auto* s = std::get_if<std::string>(&data)) {
+    return {reinterpret_cast<const std::uint8_t*>(s->data()), s->size()};
+  }
+  if (const auto* v = std::get_if<std::vector<std::uint8_t>>(&data)) return {v->data(), v->size()};
+  return {};
+}
+
+// The image's size without decoding it (header for bytes), or why it cannot be used.
+Probe ProbeImage(const ImageData& data, cv::Size max_size) {
+  Probe p;
+  if (const auto* mat = std::get_if<cv::Mat>(&data)) {
+    if (mat->empty()) {
+      p.reason = RejectReason::kUndecodable;
+      p.problem = "empty image";
+    } else if (mat->depth() != CV_8U || (mat->channels() != 1 && mat->channels() != 3 && mat->channels() != 4) ||
+               mat->dims != 2) {
+      p.reason = RejectReason::kUndecodable;
+      p.problem = "unsupported image type " + cv::typeToString(mat->type()) +
+                  " (expected 8-bit grey, BGR or BGRA)";
+    } else {
+      p.size = mat->size();
+    }
+  } else {
+    Result<cv::Size> header = ImageHeaderSize(BytesOf(data));
+    if (!header.ok()) {
+      p.reason = RejectReason::kUndecodable;
+      p.problem = header.error().message;
+      return p;
+    }
+    p.size = *header;
+  }
+  if (p.size && (p.size->width > max_size.width || p.size->height > max_size.height)) {
+    p.reason = RejectReason::kTooLarge;
+    p.problem = "image of " + SizeText(*p.size) + " pixels exceeds the maximum of " +
+                SizeText(max_size) + "; not decoded";
+    p.size.reset();
+  }
+  return p;
+}
+
+// An 8-bit grey image of the input (decoding bytes, converting colour cv::Mat).
+Result<cv::Mat> GreyImage(const ImageData& data, cv::Size max_size) {
+  if (const auto* mat = std::get_if<cv::Mat>(&data)) {
+    if (mat->channels() == 1) return *mat;
+    cv::Mat grey;
+    cv::cvtColor(*mat, grey, mat->channels() == 3 ? cv::COLOR_BGR2GRAY : cv::COLOR_BGRA2GRAY);
+    return grey;
+  }
+  return DecodeGreyImage(BytesOf(data), max_size);
+}
+
+// ---- Geometry helpers -------------------------------------------------------------------------
+
+cv::Mat RowVector(const cv::Mat& d, int n) {
+  cv::Mat row = cv::Mat::zeros(1, n, CV_64F);
+  cv::Mat flat = d.reshape(1, 1);
+  cv::Mat flat64;
+  flat.convertTo(flat64, CV_64F);
+  flat64.colRange(0, std::min(n, flat64.cols)).copyTo(row.colRange(0, std::min(n, flat64.cols)));
+  return row;
+}
+
+bool Finite(const cv::Mat& m) { return m.empty() || cv::checkRange(m, true); }
+
+// Undistorts and rectifies points accurately (the default 5 iterations of cv::undistortPoints
+// leave tenths of a pixel near the corners of a strongly distorted image).
+std::vector<cv::Point2f> RectifyPoints(const std::vector<cv::Point2f>& points, const cv::Matx33d& K,
+                                       const cv::Mat& D, const cv::Matx33d& R, const cv::Matx34d& P) {
+  std::vector<cv::Point2f> out;
+  cv::undistortPoints(points, out, K, D, R, P,
+                      cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-9));
+  return out;
+}
+
+double HullCoverage(const std::vector<cv::Point2f>& corners, cv::Size image, std::vector<cv::Point2f>& hull) {
+  cv::convexHull(corners, hull);
+  return cv::contourArea(hull) / image.area();
+}
+
+// Fraction of the grid's cells whose centre lies inside some hull.
+double UnionCoverage(const std::vector<std::vector<cv::Point2f>>& hulls, cv::Size image, cv::Size grid) {
+  int covered = 0;
+  for (int gy = 0; gy < grid.height; ++gy) {
+    for (int gx = 0; gx < grid.width; ++gx) {
+      const cv::Point2f centre(static_cast<float>((gx + 0.5) * image.width / grid.width),
+                               static_cast<float>((gy + 0.5) * image.height / grid.height));
+      for (const auto& hull : hulls) {
+        if (cv::pointPolygonTest(hull, centre, false) >= 0) {
+          ++covered;
+          break;
+        }
+      }
+    }
+  }
+  return static_cast<double>(covered) / grid.area();
+}
+
+// "#3 (a.png): no_board_left: ...; #5: ... and 4 more".
+std::string RejectionSummary(const std::vector<RejectedPair>& rejected) {
+  std::string out;
+  for (std::size_t i = 0; i < rejected.size() && i < kQuotedRejections; ++i) {
+    if (!out.empty()) out += "; ";
+    out += PairLabel(rejected[i].index, rejected[i].name);
+    out += ": ";
+    out += rejected[i].detail;
+  }
+  if (rejected.size() > kQuotedRejections) {
+    out += "; and " + std::to_string(rejected.size() - kQuotedRejections) + " more";
+  }
+  return out;
+}
+
+int MonoFlags(const CalibrationModel& m) {
+  int flags = 0;
+  if (m.fix_aspect_ratio) flags |= cv::CALIB_FIX_ASPECT_RATIO;
+  if (m.fix_principal_point) flags |= cv::CALIB_FIX_PRINCIPAL_POINT;
+  if (m.zero_tangent_distortion) flags |= cv::CALIB_ZERO_TANGENT_DIST;
+  if (m.fix_k3) flags |= cv::CALIB_FIX_K3;
+  if (m.rational_model) flags |= cv::CALIB_RATIONAL_MODEL;
+  return flags;
+}
+
+int StereoFlags(const CalibrationModel& m) {
+  int flags = MonoFlags(m);
+  if (m.calibrate_cameras_first) {
+    flags |= m.fix_intrinsics ? cv::CALIB_FIX_INTRINSIC : cv::CALIB_USE_INTRINSIC_GUESS;
+  }
+  if (m.same_focal_length) flags |= cv::CALIB_SAME_FOCAL_LENGTH;
+  return flags;
+}
+
+Error Invalid(const std::string& message) { return Error{ErrorCode::kInvalidArgument, message}; }
+
+struct Solution {
+  cv::Mat K1, D1, K2, D2, R, T, E, F;
+  cv::Mat1d errors;  // n x 2: RMS reprojection error of each pair in camera 1 and camera 2 (pixels)
+  double rms = 0;
+};
+
+// cv::calibrateCamera per camera (optional), then cv::stereoCalibrate.
+Result<Solution> Solve(const std::vector<PairCorners>& pairs, const std::vector<cv::Point3f>& object,
+                       cv::Size image_size, const CalibrationModel& model) {
+  const std::vector<std::vector<cv::Point3f>> object_points(pairs.size(), object);
+  std::vector<std::vector<cv::Point2f>> left_points, right_points;
+  for (const PairCorners& p : pairs) {
+    left_points.push_back(p.left);
+    right_points.push_back(p.right);
+  }
+  const int n_dist = model.rational_model ? 8 : 5;
+  const cv::TermCriteria criteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, model.max_iterations,
+                                  model.epsilon);
+  Solution s;
+  s.K1 = cv::Mat::eye(3, 3, CV_64F);
+  s.K2 = cv::Mat::eye(3, 3, CV_64F);
+  s.D1 = cv::Mat::zeros(1, n_dist, CV_64F);
+  s.D2 = cv::Mat::zeros(1, n_dist, CV_64F);
+  if (model.calibrate_cameras_first) {
+    std::vector<cv::Mat> rvecs, tvecs;
+    cv::calibrateCamera(object_points, left_points, image_size, s.K1, s.D1, rvecs, tvecs, MonoFlags(model), criteria);
+    cv::calibrateCamera(object_points, right_points, image_size, s.K2, s.D2, rvecs, tvecs, MonoFlags(model), criteria);
+    s.D1 = RowVector(s.D1, n_dist);
+    s.D2 = RowVector(s.D2, n_dist);
+  }
+  cv::Mat per_view;
+  s.rms = cv::stereoCalibrate(object_points, left_points, right_points, s.K1, s.D1, s.K2, s.D2, image_size, s.R,
+                              s.T, s.E, s.F, per_view, StereoFlags(model), criteria);
+  s.D1 = RowVector(s.D1, n_dist);
+  s.D2 = RowVector(s.D2, n_dist);
+  per_view.convertTo(s.errors, CV_64F);
+  if (!std::isfinite(s.rms) || !Finite(s.K1) || !Finite(s.K2) || !Finite(s.D1) || !Finite(s.D2) || !Finite(s.R) ||
+      !Finite(s.T) || s.errors.rows != static_cast<int>(pairs.size()) || s.errors.cols != 2) {
+    return Error{ErrorCode::kInternal, "the stereo calibration diverged (non-finite result)"};
+  }
+  return s;
+}
+
+// "#3 (view3) 67.71 px, #0 (view0) 2.10 px, #5 1.90 px": the three pairs with the largest error.
+std::string WorstPairs(const std::vector<PairCorners>& pairs, const cv::Mat1d& errors) {
+  std::vector<std::pair<double, int>> order;
+  for (int i = 0; i < errors.rows; ++i) order.emplace_back(std::max(errors(i, 0), errors(i, 1)), i);
+  std::sort(order.rbegin(), order.rend());
+  std::string out;
+  for (std::size_t k = 0; k < order.size() && k < 3; ++k) {
+    if (!out.empty()) out += ", ";
+    out += PairLabel(pairs[order[k].second].index, pairs[order[k].second].name) + " " + Fixed(order[k].first, 2) + " px";
+  }
+  return out;
+}
+
+Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const CalibrationOptions& options) {
+  const BoardSpec& board = options.board;
+  const CalibrationModel& model = options.model;
+  const int n_pairs = static_cast<int>(detected.pairs.size());
+
+  if (n_pairs == 0) {
+    bool any_board = false, any_decoded = false;
+    for (const RejectedPair& r : detected.rejected) {
+      any_board |= r.reason == RejectReason::kNoBoardLeft || r.reason == RejectReason::kNoBoardRight;
+      any_decoded |= r.reason == RejectReason::kNoBoardLeft || r.reason == RejectReason::kNoBoardRight ||
+                     r.reason == RejectReason::kNoBoard;
+    }
+    if (!any_decoded) {
+      return Invalid("no usable pair: every one of the " + std::to_string(detected.pairs_given) +
+                     " pairs was rejected before detection: " + RejectionSummary(detected.rejected));
+    }
+    if (!any_board) {
+      return Invalid("no board of " + board.Name() +
+                     " inner corners found in any pair; check the board size (inner corners, "
+                     "columns x rows) and that the whole board is in view");
+    }
+    return Invalid("no pair has the board of " + board.Name() +
+                   " inner corners in both images: " + RejectionSummary(detected.rejected));
+  }
+  if (n_pairs < kMinSolvablePairs) {
+    return Invalid("too few pairs: " + std::to_string(n_pairs) + " of " +
+                   std::to_string(detected.pairs_given) +
+                   " have the board in both images, at least 3 are needed to calibrate (the "
+                   "min_pairs gate asks for " + std::to_string(options.gates.min_pairs) + ")" +
+                   (detected.rejected.empty() ? std::string() : "; rejected: " + RejectionSummary(detected.rejected)));
+  }
+  const cv::Size image_size = detected.image_size;
+  if (image_size.width <= 0 || image_size.height <= 0) {
+    return Invalid("image_size: must be > 0 (got " + SizeText(image_size) + ")");
+  }
+  const std::vector<cv::Point3f> object = board.ObjectPoints();
+  for (const PairCorners& p : detected.pairs) {
+    if (p.left.size() != object.size() || p.right.size() != object.size()) {
+      return Invalid("pair " + PairLabel(p.index, p.name) + ": " + std::to_string(p.left.size()) + " and " +
+                     std::to_string(p.right.size()) + " corners, the board of " + board.Name() + " has " +
+                     std::to_string(object.size()));
+    }
+  }
+
+  // Solve; drop pairs far worse than the rest (a mis-numbered or mis-detected board) and solve again.
+  std::vector<PairCorners> used = detected.pairs;
+  std::vector<RejectedPair> rejected = detected.rejected;
+  const int max_outliers = static_cast<int>(options.max_outlier_fraction * n_pairs);
+  int dropped = 0;
+  Solution solution;
+  for (int round = 0;; ++round) {
+    Result<Solution> solved = Solve(used, object, image_size, model);
+    if (!solved.ok()) return solved.error();
+    solution = std::move(*solved);
+    if (options.outlier_factor <= 0 || round >= 3) break;
+    std::vector<double> worst;
+    for (int i = 0; i < solution.errors.rows; ++i) worst.push_back(std::max(solution.errors(i, 0), solution.errors(i, 1)));
+    std::vector<double> sorted = worst;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double median = sorted[sorted.size() / 2];
+    std::vector<int> outliers;
+    for (int i = 0; i < static_cast<int>(worst.size()); ++i) {
+      if (worst[i] > options.outlier_factor * median && worst[i] > kOutlierMinDropPx) outliers.push_back(i);
+    }
+    if (outliers.empty() || dropped + static_cast<int>(outliers.size()) > max_outliers ||
+        static_cast<int>(used.size() - outliers.size()) < kMinSolvablePairs) {
+      break;
+    }
+    for (auto it = outliers.rbegin(); it != outliers.rend(); ++it) {
+      const PairCorners& p = used[*it];
+      const bool left_worse = solution.errors(*it, 0) >= solution.errors(*it, 1);
+      rejected.push_back({p.index, p.name, RejectReason::kOutlier,
+                          "RMS error " + Fixed(worst[*it], 2) + " px in the " + (left_worse ? "left" : "right") +
+                              " image, " + Fixed(worst[*it] / median, 1) + " times the median pair's (" +
+                              Fixed(median, 3) + " px): left out and solved again"});
+      used.erase(used.begin() + *it);
+    }
+    dropped += static_cast<int>(outliers.size());
+  }
+  std::stable_sort(rejected.begin(), rejected.end(),
+                   [](const RejectedPair& a, const RejectedPair& b) { return a.index < b.index; });
+  const int n_used = static_cast<int>(used.size());
+  std::vector<std::vector<cv::Point2f>> left_points, right_points;
+  for (const PairCorners& p : used) {
+    left_points.push_back(p.left);
+    right_points.push_back(p.right);
+  }
+  const double rms = solution.rms;
+  cv::Mat1d errors = solution.errors;  // n x 2: RMS of each view in camera 1 and camera 2
+
+  geometry::StereoCalibration c;
+  c.image_size = image_size;
+  c.M1 = cv::Matx33d(solution.K1);
+  c.M2 = cv::Matx33d(solution.K2);
+  c.D1 = solution.D1;
+  c.D2 = solution.D2;
+  c.R = cv::Matx33d(solution.R);
+  c.T = cv::Vec3d(solution.T.reshape(1, 3));
+  cv::Matx33d e(solution.E), f(solution.F);
+
+  // The left/right swap: x_right = R x_left + T puts the right camera's centre at -R^T T in the
+  // left frame; T_x > 0 means the camera named left is on the right. Swap the roles exactly:
+  // R' = R^T, T' = -R^T T, E' = E^T, F' = F^T.
+  const bool swap = c.T[0] > 0;
+  if (swap) {
+    std::swap(c.M1, c.M2);
+    std::swap(c.D1, c.D2);
+    const cv::Matx33d r_old = c.R;
+    c.R = r_old.t();
+    c.T = -(r_old.t() * c.T);
+    e = e.t();
+    f = f.t();
+    for (int i = 0; i < errors.rows; ++i) std::swap(errors(i, 0), errors(i, 1));
+    std::swap(left_points, right_points);
+  }
+  c.E = e;
+  c.F = f;
+
+  cv::Mat R1, R2, P1, P2, Q;
+  cv::stereoRectify(cv::Mat(c.M1), c.D1, cv::Mat(c.M2), c.D2, image_size, cv::Mat(c.R), cv::Mat(c.T), R1,
+                    R2, P1, P2, Q, cv::CALIB_ZERO_DISPARITY, options.rectify_alpha);
+  c.R1 = cv::Matx33d(R1);
+  c.R2 = cv::Matx33d(R2);
+  c.P1 = cv::Matx34d(P1);
+  c.P2 = cv::Matx34d(P2);
+  c.Q = cv::Matx44d(Q);
+  if (std::vector<std::string> problems = c.Validate(); !problems.empty()) {
+    Error err = Error::Invalid(problems);
+    err.code = ErrorCode::kInternal;
+    err.message = "the stereo calibration gave an invalid result (" + err.message + "); RMS " + Fixed(rms, 2) +
+                  " px, worst pairs: " + WorstPairs(used, errors);
+    return err;
+  }
+
+  CalibrationResult result;
+  result.calibration = c;
+  CalibrationReport& report = result.report;
+  report.created_unix_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                               std::chrono::system_clock::now().time_since_epoch()).count();
+  report.image_size = image_size;
+  report.board = board;
+  report.detector = std::string(CornerDetectorName(options.detection.detector)) + " + " +
+                    std::string(CornerRefinementName(options.detection.refinement));
+  report.pairs_given = detected.pairs_given;
+  report.pairs_used = n_used;
+  report.rejected = rejected;
+  report.rms_px = rms;
+  report.swap_left_right = swap;
+  report.coverage_grid = options.coverage_grid;
+
+  double sum_left = 0, sum_right = 0, epi_sum = 0, epi_max = 0;
+  std::size_t epi_n = 0;
+  std::vector<std::vector<cv::Point2f>> hulls_left, hulls_right;
+  double coverage_sum = 0, coverage_min = 1;
+  for (int i = 0; i < n_used; ++i) {
+    PairReport p;
+    p.index = used[i].index;
+    p.name = used[i].name;
+    p.rms_left_px = errors(i, 0);
+    p.rms_right_px = errors(i, 1);
+    sum_left += p.rms_left_px * p.rms_left_px;
+    sum_right += p.rms_right_px * p.rms_right_px;
+    const std::vector<cv::Point2f> rect_left = RectifyPoints(left_points[i], c.M1, c.D1, *c.R1, *c.P1);
+    const std::vector<cv::Point2f> rect_right = RectifyPoints(right_points[i], c.M2, c.D2, *c.R2, *c.P2);
+    double pair_sum = 0;
+    for (std::size_t k = 0; k < rect_left.size(); ++k) {
+      const double dy = std::abs(static_cast<double>(rect_left[k].y) - rect_right[k].y);
+      pair_sum += dy;
+      epi_max = std::max(epi_max, dy);
+    }
+    p.epipolar_mean_px = pair_sum / static_cast<double>(rect_left.size());
+    epi_sum += pair_sum;
+    epi_n += rect_left.size();
+    hulls_left.emplace_back();
+    hulls_right.emplace_back();
+    p.coverage_left = HullCoverage(left_points[i], image_size, hulls_left.back());
+    p.coverage_right = HullCoverage(right_points[i], image_size, hulls_right.back());
+    coverage_sum += p.coverage_left + p.coverage_right;
+    coverage_min = std::min({coverage_min, p.coverage_left, p.coverage_right});
+    report.pairs.push_back(p);
+  }
+  report.rms_left_px = std::sqrt(sum_left / n_used);
+  report.rms_right_px = std::sqrt(sum_right / n_used);
+  report.epipolar_mean_px = epi_sum / static_cast<double>(epi_n);
+  report.epipolar_max_px = epi_max;
+  report.coverage_mean_view = coverage_sum / (2.0 * n_used);
+  report.coverage_min_view = coverage_min;
+  report.coverage_union_left = UnionCoverage(hulls_left, image_size, options.coverage_grid);
+  report.coverage_union_right = UnionCoverage(hulls_right, image_size, options.coverage_grid);
+  report.fx_left_px = c.M1(0, 0);
+  report.fy_left_px = c.M1(1, 1);
+  report.fx_right_px = c.M2(0, 0);
+  report.fy_right_px = c.M2(1, 1);
+  report.baseline_m = cv::norm(c.T);
+  report.rectified_f_px = (*c.P1)(0, 0);
+
+  // Gates.
+  const QualityGates& gates = options.gates;
+  if (n_used < gates.min_pairs) {
+    report.failures.push_back({"min_pairs", static_cast<double>(n_used), static_cast<double>(gates.min_pairs),
+                               std::to_string(n_used) + " pairs used < " + std::to_string(gates.min_pairs) +
+                                   " (min_pairs)"});
+  }
+  if (!(rms <= gates.max_rms_px)) {
+    report.failures.push_back({"max_rms_px", rms, gates.max_rms_px,
+                               "stereo RMS reprojection error " + Fixed(rms, 3) + " px > " +
+                                   Fixed(gates.max_rms_px, 3) + " px (max_rms_px)"});
+  }
+  if (!(report.epipolar_mean_px <= gates.max_epipolar_px)) {
+    report.failures.push_back({"max_epipolar_px", report.epipolar_mean_px, gates.max_epipolar_px,
+                               "mean epipolar error after rectification " + Fixed(report.epipolar_mean_px, 3) +
+                                   " px > " + Fixed(gates.max_epipolar_px, 3) + " px (max_epipolar_px)"});
+  }
+  report.passed = report.failures.empty();
+
+  // Advice.
+  if (swap) {
+    report.warnings.push_back(
+        "left and right swapped: the camera named left sits to the right of the other (solved T_x = +" +
+        Fixed(-c.T[0] * 1000, 1) + " mm); this calibration's camera 1 is the input's right camera, so "
+        "the source's left and right images must be swapped when it is applied (swap_left_right)");
+  }
+  if (n_used < kAdvisedPairs) {
+    report.warnings.push_back(std::to_string(n_used) + " pairs used; the thesis advises at least " +
+                              std::to_string(kAdvisedPairs));
+  }
+  if (report.coverage_mean_view < kAdvisedViewCoverage) {
+    report.warnings.push_back("the board covers " + Fixed(100 * report.coverage_mean_view, 0) +
+                              " % of the image per view on average; the thesis asks for at least 40 % "
+                              "(hold the board closer)");
+  }
+  const double union_min = std::min(report.coverage_union_left, report.coverage_union_right);
+  if (union_min < kAdvisedUnionCoverage) {
+    report.warnings.push_back("the boards reached only " + Fixed(100 * union_min, 0) + " % of the " +
+                              SizeText(options.coverage_grid) +
+                              " grid cells; the distortion is extrapolated elsewhere (move the board "
+                              "into the corners and edges)");
+  }
+  std::vector<double> pair_rms;
+  for (const PairReport& p : report.pairs) pair_rms.push_back(std::max(p.rms_left_px, p.rms_right_px));
+  std::nth_element(pair_rms.begin(), pair_rms.begin() + pair_rms.size() / 2, pair_rms.end());
+  const double median = pair_rms[pair_rms.size() / 2];
+  for (const PairReport& p : report.pairs) {
+    const double worst = std::max(p.rms_left_px, p.rms_right_px);
+    if (worst > kOutlierFactor * median && worst > kOutlierMinPx) {
+      report.warnings.push_back("pair " + PairLabel(p.index, p.name) + " has an RMS error of " + Fixed(worst, 2) +
+                                " px, " + Fixed(worst / median, 1) +
+                                " times the median: check its corners (motion blur, a mis-detection)");
+    }
+  }
+  return result;
+}
+
+}  // namespace
+
+std::vector<std::string> CalibrationModel::Validate() const {
+  std::vector<std::string> problems;
+  if (fix_intrinsics && !calibrate_cameras_first) {
+    problems.push_back("fix_intrinsics: needs calibrate_cameras_first (nothing to keep fixed otherwise)");
+  }
+  if (max_iterations < 1 || max_iterations > 10000) {
+    problems.push_back("max_iterations: must be in [1, 10000]" + Got(max_iterations));
+  }
+  if (!(epsilon > 0) || !(epsilon < 1)) problems.push_back("epsilon: must be in (0, 1)" + Got(epsilon));
+  return problems;
+}
+
+std::vector<std::string> QualityGates::Validate() const {
+  std::vector<std::string> problems;
+  if (min_pairs < kMinSolvablePairs || min_pairs > 10000) {
+    problems.push_back("min_pairs: must be in [3, 10000]" + Got(min_pairs));
+  }
+  if (!(max_rms_px > 0) || !std::isfinite(max_rms_px)) {
+    problems.push_back("max_rms_px: must be > 0 pixels" + Got(max_rms_px));
+  }
+  if (!(max_epipolar_px > 0) || !std::isfinite(max_epipolar_px)) {
+    problems.push_back("max_epipolar_px: must be > 0 pixels" + Got(max_epipolar_px));
+  }
+  return problems;
+}
+
+std::vector<std::string> CalibrationOptions::Validate() const {
+  std::vector<std::string> problems;
+  AppendPrefixed(problems, "board.", board.Validate());
+  AppendPrefixed(problems, "detection.", detection.Validate());
+  AppendPrefixed(problems, "model.", model.Validate());
+  AppendPrefixed(problems, "gates.", gates.Validate());
+  if (!(rectify_alpha == -1 || (rectify_alpha >= 0 && rectify_alpha <= 1))) {
+    problems.push_back("rectify_alpha: must be in [0, 1], or -1 for OpenCV's choice" + Got(rectify_alpha));
+  }
+  if (max_image_size.width < 16 || max_image_size.height < 16 || max_image_size.width > 65535 ||
+      max_image_size.height > 65535) {
+    problems.push_back("max_image_size: each side must be in [16, 65535] pixels (got " + SizeText(max_image_size) + ")");
+  }
+  if (!(outlier_factor == 0 || (outlier_factor >= 2 && outlier_factor <= 1000))) {
+    problems.push_back("outlier_factor: must be 0 (off) or in [2, 1000]" + Got(outlier_factor));
+  }
+  if (!(max_outlier_fraction >= 0 && max_outlier_fraction <= 0.5)) {
+    problems.push_back("max_outlier_fraction: must be in [0, 0.5]" + Got(max_outlier_fraction));
+  }
+  if (coverage_grid.width < 1 || coverage_grid.height < 1 || coverage_grid.width > 1000 ||
+      coverage_grid.height > 1000) {
+    problems.push_back("coverage_grid: each side must be in [1, 1000] cells (got " + SizeText(coverage_grid) + ")");
+  }
+  return problems;
+}
+
+namespace {
+
+Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs, const CalibrationOptions& options) {
+  const int n = static_cast<int>(pairs.size());
+  DetectedPairs out;
+  out.pairs_given = n;
+
+  // 1. Sizes from the headers; per-pair problems reject the pair.
+  std::vector<std::optional<RejectedPair>> rejection(n);
+  std::vector<cv::Size> sizes(n);
+  auto reject = [&](int i, RejectReason reason, std::string detail) {
+    rejection[i] = RejectedPair{i, pairs[i].name, reason, std::move(detail)};
+  };
+  std::map<std::pair<int, int>, int> size_counts;
+  std::vector<std::pair<int, int>> size_order;  // first appearance, for ties
+  for (int i = 0; i < n; ++i) {
+    const Probe left = ProbeImage(pairs[i].left, options.max_image_size);
+    const Probe right = ProbeImage(pairs[i].right, options.max_image_size);
+    if (left.reason || right.reason) {
+      std::string detail;
+      if (left.reason) detail = "left image: " + left.problem;
+      if (right.reason) detail += (detail.empty() ? "" : "; ") + std::string("right image: ") + right.problem;
+      reject(i, left.reason ? *left.reason : *right.reason, detail);
+      continue;
+    }
+    if (*left.size != *right.size) {
+      reject(i, RejectReason::kSizeMismatch,
+             "left image is " + SizeText(*left.size) + ", right image is " + SizeText(*right.size));
+      continue;
+    }
+    sizes[i] = *left.size;
+    const std::pair<int, int> key(sizes[i].width, sizes[i].height);
+    if (size_counts[key]++ == 0) size_order.push_back(key);
+  }
+  // 2. The calibration's image size: the one most pairs share (the earliest on a tie).
+  std::pair<int, int> common(0, 0);
+  int best = 0;
+  for (const auto& key : size_order) {
+    if (size_counts[key] > best) {
+      best = size_counts[key];
+      common = key;
+    }
+  }
+  out.image_size = cv::Size(common.first, common.second);
+  for (int i = 0; i < n; ++i) {
+    if (!rejection[i] && sizes[i] != out.image_size) {
+      reject(i, RejectReason::kSizeDiffers,
+             "images of " + SizeText(sizes[i]) + ", while " + std::to_string(best) + " pairs are " +
+                 SizeText(out.image_size));
+    }
+  }
+
+  // 3. Decode and detect, one task per image.
+  struct ImageOutcome {
+    std::optional<Error> decode_error;
+    Result<std::vector<cv::Point2f>> corners = Error{ErrorCode::kInternal, "not run"};
+  };
+  std::vector<ImageOutcome> outcomes(2 * static_cast<std::size_t>(n));
+  std::vector<int> tasks;
+  for (int i = 0; i < n; ++i) {
+    if (!rejection[i]) {
+      tasks.push_back(2 * i);
+      tasks.push_back(2 * i + 1);
+    }
+  }
+  cv::parallel_for_(cv::Range(0, static_cast<int>(tasks.size())), [&](const cv::Range& range) {
+    for (int t = range.start; t < range.end; ++t) {
+      const int slot = tasks[t];
+      const ImagePair& pair = pairs[slot / 2];
+      ImageOutcome& outcome = outcomes[slot];
+      try {
+        Result<cv::Mat> grey = GreyImage(slot % 2 == 0 ? pair.left : pair.right, options.max_image_size);
+        if (!grey.ok()) {
+          outcome.decode_error = grey.error();
+          continue;
+        }
+        outcome.corners = DetectChessboard(*grey, options.board, options.detection);
+      } catch (const std::exception& e) {
+        outcome.decode_error = Error{ErrorCode::kInternal, e.what()};
+      }
+    }
+  });
+
+  for (int i = 0; i < n; ++i) {
+    if (rejection[i]) continue;
+    const ImageOutcome& left = outcomes[2 * i];
+    const ImageOutcome& right = outcomes[2 * i + 1];
+    if (left.decode_error || right.decode_error) {
+      std::string detail;
+      RejectReason reason = RejectReason::kUndecodable;
+      for (const auto* side : {&left, &right}) {
+        if (!side->decode_error) continue;
+        if (side->decode_error->code == ErrorCode::kResourceExhausted) reason = RejectReason::kTooLarge;
+        if (!detail.empty()) detail += "; ";
+        detail += (side == &left ? "left image: " : "right image: ") + side->decode_error->message;
+      }
+      reject(i, reason, detail);
+      continue;
+    }
+    const bool found_left = left.corners.ok(), found_right = right.corners.ok();
+    if (found_left && found_right) {
+      out.pairs.push_back(PairCorners{i, pairs[i].name, *left.corners, *right.corners});
+      continue;
+    }
+    const std::string missing = "no board of " + options.board.Name() + " inner corners found in ";
+    auto why = [](const ImageOutcome& o) {
+      return o.corners.error().code == ErrorCode::kNotFound ? std::string() : " (" + o.corners.error().message + ")";
+    };
+    if (!found_left && !found_right) {
+      reject(i, RejectReason::kNoBoard, missing + "either image" + why(left));
+    } else if (!found_left) {
+      reject(i, RejectReason::kNoBoardLeft, missing + "the left image" + why(left));
+    } else {
+      reject(i, RejectReason::kNoBoardRight, missing + "the right image" + why(right));
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    if (rejection[i]) out.rejected.push_back(*rejection[i]);
+  }
+  return out;
+}
+
+}  // namespace
+
+Result<DetectedPairs> DetectPairs(const std::vector<ImagePair>& pairs, const CalibrationOptions& options) {
+  if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
+    return Error::Invalid(problems);
+  }
+  if (pairs.empty()) return Invalid("no image pairs given");
+  try {
+    return DetectPairsChecked(pairs, options);
+  } catch (const std::exception& e) {
+    return Error{ErrorCode::kInternal, std::string("chessboard detection failed (") + e.what() + ")"};
+  }
+}
+
+Result<CalibrationResult> CalibrateFromCorners(const DetectedPairs& detected, const CalibrationOptions& options) {
+  if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
+    return Error::Invalid(problems);
+  }
+  try {
+    return CalibrateChecked(detected, options);
+  } catch (const cv::Exception& e) {
+    return Error{ErrorCode::kInternal, "the stereo calibration failed in OpenCV (" + e.err + ")"};
+  } catch (const std::exception& e) {
+    return Error{ErrorCode::kInternal, std::string("the stereo calibration failed (") + e.what() + ")"};
+  }
+}
+
+Result<CalibrationResult> CalibrateStereo(const std::vector<ImagePair>& pairs, const CalibrationOptions& options) {
+  Result<DetectedPairs> detected = DetectPairs(pairs, options);
+  if (!detected.ok()) return detected.error();
+  return CalibrateFromCorners(*detected, options);
+}
+
+}  // namespace stevi::calibration

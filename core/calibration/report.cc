@@ -1,0 +1,354 @@
+#include "core/calibration/report.h"
+
+#include <cstdio>
+#include <cstdlib>
+#include <iomanip>
+#include <sstream>
+
+namespace stevi::calibration {
+namespace {
+
+constexpr RejectReason kAllReasons[] = {
+    RejectReason::kUndecodable,  RejectReason::kTooLarge,     RejectReason::kSizeMismatch,
+    RejectReason::kSizeDiffers,  RejectReason::kNoBoardLeft,  RejectReason::kNoBoardRight,
+    RejectReason::kNoBoard,      RejectReason::kOutlier,
+};
+
+std::string Percent(double fraction) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.0f %%", 100.0 * fraction);
+  return buf;
+}
+
+std::string Fixed(double value, int digits) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, value);
+  return buf;
+}
+
+// Readers that append "key: problem" and return a default on failure. OpenCV may throw on
+// malformed nodes, so every access is guarded.
+class Reader {
+ public:
+  explicit Reader(std::vector<std::string>& problems) : problems_(problems) {}
+
+  cv::FileNode Node(const cv::FileNode& parent, const std::string& key, const std::string& where) {
+    try {
+      cv::FileNode node = parent[key];
+      if (node.empty() || node.isNone()) problems_.push_back(where + key + ": missing");
+      return node;
+    } catch (const cv::Exception&) {
+      problems_.push_back(where + key + ": unreadable");
+      return cv::FileNode();
+    }
+  }
+
+  double Double(const cv::FileNode& parent, const std::string& key, const std::string& where = "") {
+    const cv::FileNode node = Node(parent, key, where);
+    if (node.empty() || node.isNone()) return 0;
+    if (!node.isReal() && !node.isInt()) {
+      problems_.push_back(where + key + ": expected a number");
+      return 0;
+    }
+    return static_cast<double>(node);
+  }
+
+  int Int(const cv::FileNode& parent, const std::string& key, const std::string& where = "") {
+    const cv::FileNode node = Node(parent, key, where);
+    if (node.empty() || node.isNone()) return 0;
+    if (!node.isInt()) {
+      problems_.push_back(where + key + ": expected an integer");
+      return 0;
+    }
+    return static_cast<int>(node);
+  }
+
+  std::string String(const cv::FileNode& parent, const std::string& key, const std::string& where = "") {
+    const cv::FileNode node = Node(parent, key, where);
+    if (node.empty() || node.isNone()) return {};
+    if (!node.isString()) {
+      problems_.push_back(where + key + ": expected a string");
+      return {};
+    }
+    return static_cast<std::string>(node);
+  }
+
+  // A sequence (possibly empty); problems when it is something else.
+  std::vector<cv::FileNode> Seq(const cv::FileNode& parent, const std::string& key) {
+    std::vector<cv::FileNode> out;
+    const cv::FileNode node = Node(parent, key, "");
+    if (node.empty() || node.isNone()) return out;
+    if (!node.isSeq()) {
+      problems_.push_back(key + ": expected a list");
+      return out;
+    }
+    for (const cv::FileNode& element : node) out.push_back(element);
+    return out;
+  }
+
+ private:
+  std::vector<std::string>& problems_;
+};
+
+std::string Where(const std::string& list, std::size_t i) {
+  return list + "[" + std::to_string(i) + "].";
+}
+
+}  // namespace
+
+std::string_view RejectReasonName(RejectReason reason) {
+  switch (reason) {
+    case RejectReason::kUndecodable: return "undecodable";
+    case RejectReason::kTooLarge: return "too_large";
+    case RejectReason::kSizeMismatch: return "size_mismatch";
+    case RejectReason::kSizeDiffers: return "size_differs";
+    case RejectReason::kNoBoardLeft: return "no_board_left";
+    case RejectReason::kNoBoardRight: return "no_board_right";
+    case RejectReason::kNoBoard: return "no_board";
+    case RejectReason::kOutlier: return "outlier";
+  }
+  return "unknown";
+}
+
+std::string FormatReportText(const CalibrationReport& r) {
+  std::ostringstream s;
+  s << "Stereo calibration: " << (r.passed ? "PASSED" : "FAILED");
+  if (!r.passed) {
+    s << " (";
+    for (std::size_t i = 0; i < r.failures.size(); ++i) s << (i ? ", " : "") << r.failures[i].gate;
+    s << ")";
+  }
+  s << "\n";
+  s << "  image " << r.image_size.width << "x" << r.image_size.height << ", board of "
+    << r.board.Name() << " inner corners, squares of " << Fixed(r.board.square_size_m * 1000, 1)
+    << " mm, detector " << r.detector << "\n";
+  s << "  pairs: " << r.pairs_used << " used of " << r.pairs_given << " given, "
+    << r.rejected.size() << " rejected\n";
+  s << "  RMS reprojection error: " << Fixed(r.rms_px, 3) << " px (left " << Fixed(r.rms_left_px, 3)
+    << " px, right " << Fixed(r.rms_right_px, 3) << " px)\n";
+  s << "  epipolar error after rectification: mean " << Fixed(r.epipolar_mean_px, 3)
+    << " px, max " << Fixed(r.epipolar_max_px, 3) << " px\n";
+  s << "  board coverage: per view mean " << Percent(r.coverage_mean_view) << ", min "
+    << Percent(r.coverage_min_view) << "; union of the views on a " << r.coverage_grid.width << "x"
+    << r.coverage_grid.height << " grid: left " << Percent(r.coverage_union_left) << ", right "
+    << Percent(r.coverage_union_right) << "\n";
+  s << "  focal length: left " << Fixed(r.fx_left_px, 2) << " x " << Fixed(r.fy_left_px, 2)
+    << " px, right " << Fixed(r.fx_right_px, 2) << " x " << Fixed(r.fy_right_px, 2)
+    << " px; rectified " << Fixed(r.rectified_f_px, 2) << " px\n";
+  s << "  baseline: " << Fixed(r.baseline_m * 1000, 2) << " mm\n";
+  if (r.swap_left_right) {
+    s << "  LEFT AND RIGHT SWAPPED: the camera named left is on the right; camera 1 of this "
+         "calibration is the input's right camera, so the source's images must be swapped\n";
+  }
+  if (!r.failures.empty()) {
+    s << "Failed gates:\n";
+    for (const GateFailure& f : r.failures) s << "  - " << f.message << "\n";
+  }
+  if (!r.warnings.empty()) {
+    s << "Warnings:\n";
+    for (const std::string& w : r.warnings) s << "  - " << w << "\n";
+  }
+  if (!r.rejected.empty()) {
+    s << "Rejected pairs:\n";
+    for (const RejectedPair& p : r.rejected) {
+      s << "  - #" << p.index << (p.name.empty() ? "" : " " + p.name) << ": "
+        << RejectReasonName(p.reason) << ": " << p.detail << "\n";
+    }
+  }
+  if (!r.pairs.empty()) {
+    s << "Pairs used (rms and coverage of camera 1 / camera 2, epipolar error):\n";
+    for (const PairReport& p : r.pairs) {
+      s << "  #" << std::setw(3) << std::left << p.index << std::right << " "
+        << std::setw(16) << std::left << p.name << std::right << " rms " << Fixed(p.rms_left_px, 3)
+        << " / " << Fixed(p.rms_right_px, 3) << " px, epipolar " << Fixed(p.epipolar_mean_px, 3)
+        << " px, coverage " << Percent(p.coverage_left) << " / " << Percent(p.coverage_right) << "\n";
+    }
+  }
+  return s.str();
+}
+
+Result<std::string> ReportToYaml(const CalibrationReport& r) {
+  try {
+    cv::FileStorage fs(".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY |
+                                    cv::FileStorage::FORMAT_YAML);
+    // FileStorage has no 64-bit integers: the time is written as a decimal string.
+    fs << "created_unix_ms" << std::to_string(r.created_unix_ms);
+    fs << "passed" << static_cast<int>(r.passed);
+    fs << "swap_left_right" << static_cast<int>(r.swap_left_right);
+    fs << "image_width" << r.image_size.width;
+    fs << "image_height" << r.image_size.height;
+    fs << "board" << "{" << "inner_cols" << r.board.inner_cols << "inner_rows" << r.board.inner_rows
+       << "square_size_m" << r.board.square_size_m << "}";
+    fs << "detector" << r.detector;
+    fs << "pairs_given" << r.pairs_given;
+    fs << "pairs_used" << r.pairs_used;
+    fs << "rms_px" << r.rms_px;
+    fs << "rms_left_px" << r.rms_left_px;
+    fs << "rms_right_px" << r.rms_right_px;
+    fs << "epipolar_mean_px" << r.epipolar_mean_px;
+    fs << "epipolar_max_px" << r.epipolar_max_px;
+    fs << "coverage_grid_cols" << r.coverage_grid.width;
+    fs << "coverage_grid_rows" << r.coverage_grid.height;
+    fs << "coverage_mean_view" << r.coverage_mean_view;
+    fs << "coverage_min_view" << r.coverage_min_view;
+    fs << "coverage_union_left" << r.coverage_union_left;
+    fs << "coverage_union_right" << r.coverage_union_right;
+    fs << "fx_left_px" << r.fx_left_px;
+    fs << "fy_left_px" << r.fy_left_px;
+    fs << "fx_right_px" << r.fx_right_px;
+    fs << "fy_right_px" << r.fy_right_px;
+    fs << "baseline_m" << r.baseline_m;
+    fs << "rectified_f_px" << r.rectified_f_px;
+    fs << "failures" << "[";
+    for (const GateFailure& f : r.failures) {
+      fs << "{" << "gate" << f.gate << "measured" << f.measured << "limit" << f.limit << "message"
+         << f.message << "}";
+    }
+    fs << "]";
+    fs << "warnings" << "[";
+    for (const std::string& w : r.warnings) fs << w;
+    fs << "]";
+    fs << "rejected" << "[";
+    for (const RejectedPair& p : r.rejected) {
+      fs << "{" << "index" << p.index << "name" << p.name << "reason"
+         << std::string(RejectReasonName(p.reason)) << "detail" << p.detail << "}";
+    }
+    fs << "]";
+    fs << "pairs" << "[";
+    for (const PairReport& p : r.pairs) {
+      fs << "{" << "index" << p.index << "name" << p.name << "rms_left_px" << p.rms_left_px
+         << "rms_right_px" << p.rms_right_px << "epipolar_mean_px" << p.epipolar_mean_px
+         << "coverage_left" << p.coverage_left << "coverage_right" << p.coverage_right << "}";
+    }
+    fs << "]";
+    return fs.releaseAndGetString();
+  } catch (const cv::Exception& e) {
+    return Error{ErrorCode::kInternal, "cannot format the calibration report (" + e.err + ")"};
+  }
+}
+
+Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
+  cv::FileStorage fs;
+  try {
+    std::string text = yaml_text;
+    if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
+    if (!fs.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML)) {
+      return Error{ErrorCode::kInvalidArgument, "calibration report: cannot parse the text"};
+    }
+  } catch (const cv::Exception& e) {
+    return Error{ErrorCode::kInvalidArgument, "calibration report: not valid YAML (" + e.err + ")"};
+  }
+  std::vector<std::string> problems;
+  CalibrationReport r;
+  try {
+    const cv::FileNode root = fs.root();
+    if (!root.isMap()) {
+      return Error{ErrorCode::kInvalidArgument, "calibration report: expected a map at the top level"};
+    }
+    Reader read(problems);
+    const std::string created = read.String(root, "created_unix_ms");
+    if (!created.empty()) {
+      char* end = nullptr;
+      r.created_unix_ms = std::strtoll(created.c_str(), &end, 10);
+      if (*end != '\0') problems.push_back("created_unix_ms: expected a decimal integer");
+    }
+    r.passed = read.Int(root, "passed") != 0;
+    r.swap_left_right = read.Int(root, "swap_left_right") != 0;
+    r.image_size = cv::Size(read.Int(root, "image_width"), read.Int(root, "image_height"));
+    const cv::FileNode board = read.Node(root, "board", "");
+    if (board.isMap()) {
+      r.board.inner_cols = read.Int(board, "inner_cols", "board.");
+      r.board.inner_rows = read.Int(board, "inner_rows", "board.");
+      r.board.square_size_m = read.Double(board, "square_size_m", "board.");
+    } else if (!board.empty() && !board.isNone()) {
+      problems.push_back("board: expected a map");
+    }
+    r.detector = read.String(root, "detector");
+    r.pairs_given = read.Int(root, "pairs_given");
+    r.pairs_used = read.Int(root, "pairs_used");
+    r.rms_px = read.Double(root, "rms_px");
+    r.rms_left_px = read.Double(root, "rms_left_px");
+    r.rms_right_px = read.Double(root, "rms_right_px");
+    r.epipolar_mean_px = read.Double(root, "epipolar_mean_px");
+    r.epipolar_max_px = read.Double(root, "epipolar_max_px");
+    r.coverage_grid = cv::Size(read.Int(root, "coverage_grid_cols"), read.Int(root, "coverage_grid_rows"));
+    r.coverage_mean_view = read.Double(root, "coverage_mean_view");
+    r.coverage_min_view = read.Double(root, "coverage_min_view");
+    r.coverage_union_left = read.Double(root, "coverage_union_left");
+    r.coverage_union_right = read.Double(root, "coverage_union_right");
+    r.fx_left_px = read.Double(root, "fx_left_px");
+    r.fy_left_px = read.Double(root, "fy_left_px");
+    r.fx_right_px = read.Double(root, "fx_right_px");
+    r.fy_right_px = read.Double(root, "fy_right_px");
+    r.baseline_m = read.Double(root, "baseline_m");
+    r.rectified_f_px = read.Double(root, "rectified_f_px");
+
+    const std::vector<cv::FileNode> failures = read.Seq(root, "failures");
+    for (std::size_t i = 0; i < failures.size(); ++i) {
+      const std::string where = Where("failures", i);
+      GateFailure f;
+      f.gate = read.String(failures[i], "gate", where);
+      f.measured = read.Double(failures[i], "measured", where);
+      f.limit = read.Double(failures[i], "limit", where);
+      f.message = read.String(failures[i], "message", where);
+      r.failures.push_back(f);
+    }
+    const cv::FileNode warnings = read.Node(root, "warnings", "");
+    if (warnings.isSeq()) {
+      for (const cv::FileNode& w : warnings) {
+        if (w.isString()) {
+          r.warnings.push_back(static_cast<std::string>(w));
+        } else {
+          problems.push_back("warnings: expected strings");
+        }
+      }
+    } else if (!warnings.empty() && !warnings.isNone()) {
+      problems.push_back("warnings: expected a list");
+    }
+    const std::vector<cv::FileNode> rejected = read.Seq(root, "rejected");
+    for (std::size_t i = 0; i < rejected.size(); ++i) {
+      const std::string where = Where("rejected", i);
+      RejectedPair p;
+      p.index = read.Int(rejected[i], "index", where);
+      p.name = read.String(rejected[i], "name", where);
+      const std::string reason = read.String(rejected[i], "reason", where);
+      bool known = false;
+      for (RejectReason candidate : kAllReasons) {
+        if (RejectReasonName(candidate) == reason) {
+          p.reason = candidate;
+          known = true;
+        }
+      }
+      if (!known) problems.push_back(where + "reason: unknown value \"" + reason + "\"");
+      p.detail = read.String(rejected[i], "detail", where);
+      r.rejected.push_back(p);
+    }
+    const std::vector<cv::FileNode> pairs = read.Seq(root, "pairs");
+    for (std::size_t i = 0; i < pairs.size(); ++i) {
+      const std::string where = Where("pairs", i);
+      PairReport p;
+      p.index = read.Int(pairs[i], "index", where);
+      p.name = read.String(pairs[i], "name", where);
+      p.rms_left_px = read.Double(pairs[i], "rms_left_px", where);
+      p.rms_right_px = read.Double(pairs[i], "rms_right_px", where);
+      p.epipolar_mean_px = read.Double(pairs[i], "epipolar_mean_px", where);
+      p.coverage_left = read.Double(pairs[i], "coverage_left", where);
+      p.coverage_right = read.Double(pairs[i], "coverage_right", where);
+      r.pairs.push_back(p);
+    }
+    if (static_cast<int>(r.pairs.size()) != r.pairs_used && problems.empty()) {
+      problems.push_back("pairs_used: " + std::to_string(r.pairs_used) + " but " +
+                         std::to_string(r.pairs.size()) + " pairs are listed");
+    }
+  } catch (const cv::Exception& e) {
+    problems.push_back("unreadable (" + e.err + ")");
+  }
+  if (!problems.empty()) {
+    Error e = Error::Invalid(problems);
+    e.message = "calibration report: " + e.message;
+    return e;
+  }
+  return r;
+}
+
+}  // namespace stevi::calibration
