@@ -360,8 +360,14 @@ Track Tracker::Output(const Entry& e, const CameraModel& camera) const {
   // The range rate of the filtered 3-D state: as smooth as the time to collision computed from the
   // same state, so the two never disagree in sign (the fading filter's own rate is noisier).
   track.range_rate_mps = p.norm() > 0 ? p.dot(v) / p.norm() : 0.0;
+  // Closing only when the range rate is significantly negative (beyond 2 sigma of its own
+  // uncertainty): a hovering or standing obstacle's velocity noise must not read as an approach.
+  const Eigen::Vector3d line_of_sight = p.norm() > 0 ? Eigen::Vector3d(p / p.norm()) : Eigen::Vector3d::Zero();
+  const Eigen::Vector3d velocity_sigma = variance.tail<3>().cwiseMax(0.0).cwiseSqrt();
+  const double range_rate_sigma = line_of_sight.cwiseProduct(velocity_sigma).norm();
+  const bool closing = track.range_rate_mps < -2.0 * range_rate_sigma;
   const double speed2 = v.squaredNorm();
-  if (speed2 > 1e-12) {
+  if (closing && speed2 > 1e-12) {
     const double t_closest = -p.dot(v) / speed2;
     if (t_closest > 0) {
       track.time_to_collision_s = t_closest;

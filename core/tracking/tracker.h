@@ -95,8 +95,9 @@ struct Track {
   double range_rate_mps = 0;    // d|p|/dt of the Kalman state; negative = closing
   // Straight-line extrapolation of the filtered relative position p and velocity v: the time of
   // the closest approach t* = -p.v / |v|^2 (seconds from this frame) and the miss distance
-  // |p + v t*| (metres). Set only for a closing obstacle (t* > 0); whether it is a collision is
-  // for the caller to judge from closest_approach_m and the vehicle's size.
+  // |p + v t*| (metres). Set only for a closing obstacle: t* > 0 and a range rate below minus
+  // twice its own 1-sigma (a hovering obstacle's velocity noise is not an approach). Whether it is
+  // a collision is for the caller to judge from closest_approach_m and the vehicle's size.
   std::optional<double> time_to_collision_s;
   std::optional<double> closest_approach_m;
 };

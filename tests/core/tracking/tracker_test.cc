@@ -472,13 +472,14 @@ CollisionErrors MeasureCollision(const Target& target, int frames, int first_fra
 
 TEST(Tracker, HeadOnApproachGivesTimeToCollisionAndMissDistance) {
   // From 80 m, closing at 15 m/s, passing 2.24 m off the camera (2 m right, 1 m up): t* = z / 15,
-  // miss distance |(2, -1)| = 2.236 m. 30 runs of 3 s (80 m -> 35 m), checked from 0.5 s on.
+  // miss distance |(2, -1)| = 2.236 m. 30 runs of 3 s (80 m -> 35 m), checked from 1 s on (the
+  // time to collision is given once the closing speed is 2 sigma clear of zero).
   // The state tolerance (CollisionTolerance, from the track's own sigmas, which kalman_test shows
   // to be consistent) is about one sigma: every error is within 4 of it, their RMS within 1.2
   // (measured: worst 2.8 and 1.6, RMS 0.91 and 0.50). At the end (t* = 2.3 s, 35 m) the
   // tolerances are 0.06 s on t* and 0.18 m on the miss distance.
   const Target target{.p0 = {2, -1, 80}, .v = {0, 0, -15}};
-  const CollisionErrors e = MeasureCollision(target, 90, 15, 30);
+  const CollisionErrors e = MeasureCollision(target, 90, 30, 30);
   EXPECT_TRUE(e.always_closing);
   EXPECT_LT(e.worst_normalised[0], 4.0);
   EXPECT_LT(e.worst_normalised[1], 4.0);
@@ -497,12 +498,13 @@ TEST(Tracker, HeadOnApproachGivesTimeToCollisionAndMissDistance) {
 
 TEST(Tracker, PassingObstacleGivesItsClosestApproach) {
   // From (-10, 0, 60) at (5, 0, -10) m/s: t* = 650 / 125 = 5.2 s from the start, passing
-  // |(16, 0, 8)| = 17.9 m away. 30 runs of 3.6 s (depth 60 m -> 24 m), checked from 0.5 s on.
+  // |(16, 0, 8)| = 17.9 m away. 30 runs of 3.6 s (depth 60 m -> 24 m), checked from 1 s
+  // on (before, the closing speed is not yet 2 sigma clear of zero: no time to collision).
   // Here the miss distance depends on the closing speed too (an error dv moves the closest point
   // by about t* dv). Measured: worst 2.3 and 1.9 tolerances, RMS 0.63 and 0.60; at the end
   // (t* = 1.6 s) t* to 0.03 s and the miss distance to 0.24 m.
   const Target target{.p0 = {-10, 0, 60}, .v = {5, 0, -10}};
-  const CollisionErrors e = MeasureCollision(target, 110, 15, 30);
+  const CollisionErrors e = MeasureCollision(target, 110, 30, 30);
   EXPECT_TRUE(e.always_closing);
   EXPECT_LT(e.worst_normalised[0], 4.0);
   EXPECT_LT(e.worst_normalised[1], 4.0);
