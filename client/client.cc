@@ -70,6 +70,19 @@ grpc::Status Client::CaptureCalibration(
   return reader->Finish();
 }
 
+grpc::Status Client::PublishVehicleStates(const std::vector<v1::VehicleState>& states,
+                                          v1::PublishVehicleStateResponse* response) {
+  grpc::ClientContext context;
+  Prepare(context);
+  std::unique_ptr<grpc::ClientWriter<v1::VehicleState>> writer =
+      stub_->PublishVehicleState(&context, response);
+  for (const v1::VehicleState& state : states) {
+    if (!writer->Write(state)) break;
+  }
+  writer->WritesDone();
+  return writer->Finish();
+}
+
 grpc::Status Client::ListCalibrations(v1::ListCalibrationsResponse* response) {
   grpc::ClientContext context;
   Prepare(context);

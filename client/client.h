@@ -62,6 +62,9 @@ class Client {
                                   const std::function<void(const v1::CaptureProgress&)>& on_progress,
                                   std::chrono::milliseconds capture_timeout = std::chrono::minutes(10));
   grpc::Status ListCalibrations(v1::ListCalibrationsResponse* response);
+  // Streams vehicle states to the server (an autopilot's feed) and returns its counts.
+  grpc::Status PublishVehicleStates(const std::vector<v1::VehicleState>& states,
+                                    v1::PublishVehicleStateResponse* response);
   grpc::Status GetCalibration(const std::string& id, v1::CalibrationRecord* record);
   grpc::Status ActivateCalibration(const std::string& id, v1::CalibrationRecord* record);
 

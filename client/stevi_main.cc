@@ -99,10 +99,13 @@ void PrintFrameTable(const v1::TrackFrame& f) {
       << ShortEnum(v1::Algorithm_Name(f.algorithm()), "ALGORITHM_") << "  " << f.tracks_size()
       << (f.tracks_size() == 1 ? " obstacle" : " obstacles");
   if (f.dropped_frames() > 0) out << "  (dropped " << f.dropped_frames() << ")";
+  const bool geo = f.geo_status() == v1::GEO_STATUS_OK;
+  if (f.geo_status() != v1::GEO_STATUS_UNSPECIFIED && !geo) out << "  no geodetic: " << f.geo_message();
   out << "\n";
   if (f.tracks_size() > 0) {
     out << "    id  state       age        box (x,y wxh)   depth m   range m  sigma m   disp px"
-           "  rate m/s     ttc s   miss m\n";
+           "  rate m/s     ttc s   miss m"
+        << (geo ? "       lat deg      lon deg    alt m  sigma h/v m" : "") << "\n";
   }
   out << std::setprecision(2);
   for (const v1::Track& t : f.tracks()) {
@@ -124,7 +127,14 @@ void PrintFrameTable(const v1::TrackFrame& f) {
         << t.depth_m() << std::setw(10) << t.range_m() << std::setw(9) << t.range_sigma_m()
         << std::setw(10) << t.disparity_px() << std::setw(10) << t.range_rate_mps()
         << std::setw(10) << optional(t.has_time_to_collision_s(), t.time_to_collision_s())
-        << std::setw(9) << optional(t.has_closest_approach_m(), t.closest_approach_m()) << "\n";
+        << std::setw(9) << optional(t.has_closest_approach_m(), t.closest_approach_m());
+    if (geo && t.has_geodetic()) {
+      out << std::setprecision(7) << std::setw(14) << t.geodetic().lat_deg() << std::setw(13)
+          << t.geodetic().lon_deg() << std::setprecision(1) << std::setw(9) << t.geodetic().alt_m()
+          << std::setw(7) << t.position_sigma_m().horizontal_m() << "/"
+          << t.position_sigma_m().vertical_m() << std::setprecision(2);
+    }
+    out << "\n";
   }
   std::cout << out.str() << std::flush;
 }

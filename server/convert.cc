@@ -268,6 +268,24 @@ void MergeTracking(const v1::TrackingConfig& p, tracking::TrackerOptions& o) {
   STEVI_MERGE(p, max_dt_s, o.max_dt_s);
 }
 
+void ToProto(const geo::MountOptions& o, v1::MountConfig* p) {
+  p->set_roll_deg(o.roll_deg);
+  p->set_pitch_deg(o.pitch_deg);
+  p->set_yaw_deg(o.yaw_deg);
+  p->set_lever_arm_x_m(o.lever_arm_m.x());
+  p->set_lever_arm_y_m(o.lever_arm_m.y());
+  p->set_lever_arm_z_m(o.lever_arm_m.z());
+}
+
+void MergeMount(const v1::MountConfig& p, geo::MountOptions& o) {
+  STEVI_MERGE(p, roll_deg, o.roll_deg);
+  STEVI_MERGE(p, pitch_deg, o.pitch_deg);
+  STEVI_MERGE(p, yaw_deg, o.yaw_deg);
+  STEVI_MERGE(p, lever_arm_x_m, o.lever_arm_m.x());
+  STEVI_MERGE(p, lever_arm_y_m, o.lever_arm_m.y());
+  STEVI_MERGE(p, lever_arm_z_m, o.lever_arm_m.z());
+}
+
 v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
   v1::PipelineConfig p;
   p.set_algorithm(ToProto(c.algorithm));
@@ -321,6 +339,7 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
   ToProto(c.stevie, p.mutable_stevie());
   ToProto(c.stevis, p.mutable_stevis());
   ToProto(c.tracking, p.mutable_tracking());
+  ToProto(c.mount, p.mutable_mount());
   return p;
 }
 
@@ -403,6 +422,7 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
   MergeSteViE(u.stevie(), c.stevie, problems);
   MergeSteViS(u.stevis(), c.stevis, problems);
   MergeTracking(u.tracking(), c.tracking);
+  MergeMount(u.mount(), c.mount);
   return problems;
 }
 
@@ -467,6 +487,53 @@ v1::TrackState ToProto(tracking::TrackState state) {
   return v1::TRACK_STATE_UNSPECIFIED;
 }
 
+geo::VehicleState FromProto(const v1::VehicleState& p) {
+  geo::VehicleState s;
+  s.t_ns = p.unix_time_ns();
+  s.lat_deg = p.position().lat_deg();
+  s.lon_deg = p.position().lon_deg();
+  s.alt_m = p.position().alt_m();
+  s.roll_deg = p.roll_deg();
+  s.pitch_deg = p.pitch_deg();
+  s.yaw_deg = p.yaw_deg();
+  s.velocity_ned_mps = Eigen::Vector3d(p.velocity().n_mps(), p.velocity().e_mps(), p.velocity().d_mps());
+  s.sigma.horizontal_m = p.position_sigma_horizontal_m();
+  s.sigma.vertical_m = p.position_sigma_vertical_m();
+  s.sigma.tilt_deg = p.tilt_sigma_deg();
+  s.sigma.yaw_deg = p.yaw_sigma_deg();
+  return s;
+}
+
+v1::VehicleState ToProto(const geo::VehicleState& s) {
+  v1::VehicleState p;
+  p.set_unix_time_ns(s.t_ns);
+  p.mutable_position()->set_lat_deg(s.lat_deg);
+  p.mutable_position()->set_lon_deg(s.lon_deg);
+  p.mutable_position()->set_alt_m(s.alt_m);
+  p.set_roll_deg(s.roll_deg);
+  p.set_pitch_deg(s.pitch_deg);
+  p.set_yaw_deg(s.yaw_deg);
+  p.mutable_velocity()->set_n_mps(s.velocity_ned_mps.x());
+  p.mutable_velocity()->set_e_mps(s.velocity_ned_mps.y());
+  p.mutable_velocity()->set_d_mps(s.velocity_ned_mps.z());
+  p.set_position_sigma_horizontal_m(s.sigma.horizontal_m);
+  p.set_position_sigma_vertical_m(s.sigma.vertical_m);
+  p.set_tilt_sigma_deg(s.sigma.tilt_deg);
+  p.set_yaw_sigma_deg(s.sigma.yaw_deg);
+  return p;
+}
+
+v1::GeoStatus ToProto(geo::GeoStatus status) {
+  switch (status) {
+    case geo::GeoStatus::kOk: return v1::GEO_STATUS_OK;
+    case geo::GeoStatus::kNoPose: return v1::GEO_STATUS_NO_POSE;
+    case geo::GeoStatus::kPoseTooOld: return v1::GEO_STATUS_POSE_TOO_OLD;
+    case geo::GeoStatus::kFrameTooOld: return v1::GEO_STATUS_FRAME_TOO_OLD;
+    case geo::GeoStatus::kPoseGap: return v1::GEO_STATUS_POSE_GAP;
+  }
+  return v1::GEO_STATUS_UNSPECIFIED;
+}
+
 v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
   v1::TrackFrame f;
   f.set_frame_id(result.frame_id);
@@ -476,7 +543,8 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
   f.set_algorithm(ToProto(result.algorithm));
   if (result.rig) f.set_calibration_id(result.rig->calibration_id());
   ToProto(result.timings, f.mutable_timings());
-  for (const tracking::Track& track : result.tracks) {
+  for (size_t i = 0; i < result.tracks.size(); ++i) {
+    const tracking::Track& track = result.tracks[i];
     const detection::Detection& d = track.detection;
     v1::Track* t = f.add_tracks();
     t->set_track_id(track.id);
@@ -508,6 +576,22 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
     if (track.closest_approach_m) t->set_closest_approach_m(*track.closest_approach_m);
     t->set_smoothed_range_m(track.smoothed_range_m);
     SetPoint(track.position_sigma_m, t->mutable_position_sigma_cam());
+    if (i < result.track_geo.size() && result.track_geo[i]) {
+      const geo::GeoPoint& g = *result.track_geo[i];
+      t->mutable_geodetic()->set_lat_deg(g.lat_deg);
+      t->mutable_geodetic()->set_lon_deg(g.lon_deg);
+      t->mutable_geodetic()->set_alt_m(g.alt_m);
+      t->mutable_velocity_ned()->set_n_mps(g.velocity_ned_mps.x());
+      t->mutable_velocity_ned()->set_e_mps(g.velocity_ned_mps.y());
+      t->mutable_velocity_ned()->set_d_mps(g.velocity_ned_mps.z());
+      t->mutable_position_sigma_m()->set_horizontal_m(g.sigma.horizontal_m);
+      t->mutable_position_sigma_m()->set_vertical_m(g.sigma.vertical_m);
+    }
+  }
+  if (result.pose) {
+    f.set_geo_status(ToProto(result.pose->status));
+    f.set_geo_message(result.pose->message);
+    if (result.pose->pose) *f.mutable_vehicle() = ToProto(result.pose->pose->state);
   }
   return f;
 }

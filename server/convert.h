@@ -27,6 +27,11 @@ v1::Algorithm ToProto(pipeline::Algorithm algorithm);
 // The frame as it goes out to subscribers (detections as per-frame tracks until tracking lands).
 v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result);
 
+// Vehicle states between the wire (degrees, Unix time) and core/geo. FromProto does not validate:
+// geo::VehicleState::Validate() (PoseBuffer::Add) names the bad fields.
+geo::VehicleState FromProto(const v1::VehicleState& state);
+v1::VehicleState ToProto(const geo::VehicleState& state);
+
 // PNG images and the rig's geometry. Fails (kInternal) only when PNG encoding fails.
 // With `annotated`, also the left image with the detections drawn on it.
 Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result, bool annotated);

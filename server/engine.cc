@@ -86,6 +86,11 @@ void Engine::SetRig(std::shared_ptr<const geometry::StereoRig> rig, bool swap_le
   swap_left_right_ = swap_left_right;
 }
 
+void Engine::SetPoseSource(std::function<geo::PoseLookup(int64_t)> pose_at) {
+  std::lock_guard lock(mu_);
+  pose_at_ = std::move(pose_at);
+}
+
 std::shared_ptr<const geometry::StereoRig> Engine::rig() const {
   std::lock_guard lock(mu_);
   return rig_;
@@ -183,6 +188,7 @@ void Engine::PipelineLoop() {
     {
       std::lock_guard lock(mu_);
       snapshot.rig = rig_;
+      snapshot.pose_at = pose_at_;
       if (swap_left_right_) std::swap(frame->left, frame->right);
     }
     Result<pipeline::FrameResult> result = ProcessFrame(pipeline_, *frame, snapshot);

@@ -13,11 +13,21 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   if (!pipeline_config.ok()) problems.push_back(pipeline_config.error().message);
   if (!problems.empty()) return Error::Invalid(problems);
 
+  // The synthetic airfield rig hovers at Pisa unless the config gives a pose.
+  std::optional<geo::VehicleState> synthetic_pose;
+  if (config.source().kind() != v1::SOURCE_KIND_IMAGES &&
+      config.source().synthetic().scene() != "chessboard") {
+    synthetic_pose = SyntheticRigPose(drivers::DefaultScene().camera_height_m);
+  }
+  Result<std::unique_ptr<PoseSource>> poses = PoseSource::Create(config.geo(), synthetic_pose);
+  if (!poses.ok()) return poses.error();
+
   Result<std::unique_ptr<drivers::StereoSource>> source =
       OpenSource(config.source(), /*loop_images=*/true);
   if (!source.ok()) return source.error();
 
   std::unique_ptr<Server> server(new Server());
+  server->poses_ = std::move(poses).value();
   server->listen_ = config.has_listen() ? config.listen() : kDefaultListen;
   const uint32_t queue =
       config.has_subscriber_queue_frames() ? config.subscriber_queue_frames() : kDefaultQueueFrames;
@@ -33,11 +43,14 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
       });
   if (!engine.ok()) return engine.error();
   server->engine_ = std::move(engine).value();
+  PoseSource* pose_source = server->poses_.get();
+  server->engine_->SetPoseSource([pose_source](int64_t t) { return pose_source->At(t); });
   Result<std::unique_ptr<CalibrationManager>> calibration = CalibrationManager::Open(
       config.has_data_dir() ? config.data_dir() : kDefaultDataDir, *server->engine_);
   if (!calibration.ok()) return calibration.error();
   server->calibration_ = std::move(calibration).value();
-  server->service_ = std::make_unique<ObstacleServiceImpl>(*server->engine_, *broadcaster);
+  server->service_ =
+      std::make_unique<ObstacleServiceImpl>(*server->engine_, *broadcaster, *server->poses_);
   server->calibration_service_ = std::make_unique<CalibrationServiceImpl>(*server->calibration_);
 
   const int max_message =

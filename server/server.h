@@ -37,6 +37,7 @@ class Server {
   std::string listen_;
   int port_ = 0;
   std::unique_ptr<FrameBroadcaster> broadcaster_;
+  std::unique_ptr<PoseSource> poses_;
   std::unique_ptr<Engine> engine_;
   std::unique_ptr<CalibrationManager> calibration_;
   std::unique_ptr<ObstacleServiceImpl> service_;

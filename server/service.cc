@@ -111,6 +111,36 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
   v1::TrackFrame current_;
 };
 
+// PublishVehicleState: each state into the pose source; refusals are counted, the stream goes on.
+class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleState> {
+ public:
+  VehicleStateReactor(PoseSource& poses, v1::PublishVehicleStateResponse* response)
+      : poses_(poses), response_(response) {
+    StartRead(&state_);
+  }
+
+  void OnReadDone(bool ok) override {
+    if (!ok) {
+      Finish(grpc::Status::OK);
+      return;
+    }
+    if (Status added = poses_.Publish(FromProto(state_)); added.ok()) {
+      response_->set_accepted(response_->accepted() + 1);
+    } else {
+      response_->set_refused(response_->refused() + 1);
+      response_->set_last_error(added.error().message);
+    }
+    StartRead(&state_);
+  }
+
+  void OnDone() override { delete this; }
+
+ private:
+  PoseSource& poses_;
+  v1::PublishVehicleStateResponse* response_;
+  v1::VehicleState state_;
+};
+
 grpc::ServerUnaryReactor* Reply(grpc::CallbackServerContext* context, const grpc::Status& status) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   reactor->Finish(status);
@@ -235,6 +265,11 @@ grpc::ServerUnaryReactor* ObstacleServiceImpl::GetDisparitySnapshot(
     grpc::CallbackServerContext* context, const v1::GetDisparitySnapshotRequest* request,
     v1::DisparitySnapshot* response) {
   return Reply(context, GetDisparitySnapshotImpl(engine_, *request, response));
+}
+
+grpc::ServerReadReactor<v1::VehicleState>* ObstacleServiceImpl::PublishVehicleState(
+    grpc::CallbackServerContext* /*context*/, v1::PublishVehicleStateResponse* response) {
+  return new VehicleStateReactor(poses_, response);
 }
 
 }  // namespace stevi::server

@@ -9,6 +9,7 @@
 
 #include "server/broadcaster.h"
 #include "server/engine.h"
+#include "server/pose_source.h"
 #include "stevi/v1/obstacle_service.grpc.pb.h"
 
 namespace stevi::server {
@@ -35,8 +36,8 @@ grpc::Status GetDisparitySnapshotImpl(const Engine& engine,
 
 class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
  public:
-  ObstacleServiceImpl(Engine& engine, FrameBroadcaster& broadcaster)
-      : engine_(engine), broadcaster_(broadcaster) {}
+  ObstacleServiceImpl(Engine& engine, FrameBroadcaster& broadcaster, PoseSource& poses)
+      : engine_(engine), broadcaster_(broadcaster), poses_(poses) {}
 
   grpc::ServerWriteReactor<v1::TrackFrame>* StreamTracks(
       grpc::CallbackServerContext* context, const v1::StreamTracksRequest* request) override;
@@ -52,10 +53,13 @@ class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
   grpc::ServerUnaryReactor* GetDisparitySnapshot(grpc::CallbackServerContext* context,
                                                  const v1::GetDisparitySnapshotRequest* request,
                                                  v1::DisparitySnapshot* response) override;
+  grpc::ServerReadReactor<v1::VehicleState>* PublishVehicleState(
+      grpc::CallbackServerContext* context, v1::PublishVehicleStateResponse* response) override;
 
  private:
   Engine& engine_;
   FrameBroadcaster& broadcaster_;
+  PoseSource& poses_;
   std::mutex config_mu_;
 };
 

@@ -26,7 +26,8 @@ struct PoseSigma {
 // The vehicle's state at one instant: the position of its reference point (the point the
 // navigation solution refers to, e.g. the IMU or the GNSS antenna), its attitude and velocity.
 struct VehicleState {
-  // Time of validity, nanoseconds, on the monotonic clock of the frames' capture time (t_ns).
+  // Time of validity, nanoseconds, on the clock frames are looked up with (the pipeline asks with
+  // the frame's capture_unix_time_ns: Unix time, which a GNSS-disciplined autopilot shares).
   int64_t t_ns = 0;
   // WGS84 geodetic position, degrees. lat in [-90, 90], lon in [-180, 180].
   double lat_deg = 0;

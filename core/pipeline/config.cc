@@ -59,6 +59,7 @@ std::vector<std::string> PipelineConfig::Validate() const {
   AppendPrefixed(problems, "stevie.", stevie.Validate());
   AppendPrefixed(problems, "stevis.", stevis.Validate());
   AppendPrefixed(problems, "tracking.", tracking.Validate());
+  AppendPrefixed(problems, "mount.", mount.Validate());
   return problems;
 }
 

@@ -14,6 +14,7 @@
 #include "core/detection/stevis.h"
 #include "core/geometry/range.h"
 #include "core/stereo/matcher.h"
+#include "core/geo/mount.h"
 #include "core/tracking/tracker.h"
 
 namespace stevi::pipeline {
@@ -33,6 +34,9 @@ struct PipelineConfig {
   detection::SteViSOptions stevis;
   // Tracking of the detections over frames; can change while serving (the tracks are kept).
   tracking::TrackerOptions tracking;
+  // How the camera sits on the vehicle, for georeferencing the tracks (core/geo/mount.h). Can
+  // change while serving.
+  geo::MountOptions mount;
 
   // Every problem of every stage, each as "field.path: problem".
   std::vector<std::string> Validate() const;

@@ -54,6 +54,8 @@ struct Pipeline::State {
   cv::Mat rect_right;
   // Tracks across frames; created at the first frame with the config's options.
   std::unique_ptr<tracking::Tracker> tracker;
+  // Rebuilt when the mount changes.
+  std::unique_ptr<geo::Georeferencer> georeferencer;
 };
 
 Pipeline::Pipeline() : state_(std::make_unique<State>()) {}
@@ -81,7 +83,7 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
   result.source_index = frame.index;
   result.algorithm = config.algorithm;
   result.rig = snapshot.rig;
-  result.timings.reserve(5);
+  result.timings.reserve(6);
 
   // Stage: rectify. The left output is a fresh buffer (published with the result).
   Clock::time_point t = Clock::now();
@@ -159,6 +161,37 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
                                      rig.image_size().width, rig.image_size().height};
   result.tracks = state_->tracker->Update(result.detections, frame.t_ns, camera);
   result.timings.push_back({"track", MsSince(t)});
+
+  // Stage: geo.
+  if (snapshot.pose_at) {
+    t = Clock::now();
+    if (state_->georeferencer == nullptr || !(state_->georeferencer->mount() == config.mount)) {
+      const std::vector<std::string> problems = config.mount.Validate();
+      if (!problems.empty()) {
+        std::vector<std::string> prefixed;
+        AppendPrefixed(prefixed, "mount.", problems);
+        return Error::Invalid(prefixed);
+      }
+      state_->georeferencer = std::make_unique<geo::Georeferencer>(config.mount);
+    }
+    result.pose = snapshot.pose_at(frame.unix_time_ns);
+    result.track_geo.assign(result.tracks.size(), std::nullopt);
+    if (result.pose->ok()) {
+      for (size_t i = 0; i < result.tracks.size(); ++i) {
+        const tracking::Track& track = result.tracks[i];
+        geo::PointInCam point;
+        point.position_m = Eigen::Vector3d(track.position_cam_m[0], track.position_cam_m[1],
+                                           track.position_cam_m[2]);
+        point.velocity_mps = Eigen::Vector3d(track.velocity_cam_mps[0], track.velocity_cam_mps[1],
+                                             track.velocity_cam_mps[2]);
+        point.covariance_m2 = geo::DiagonalCovariance(track.position_sigma_m);
+        Result<geo::GeoPoint> geo_point =
+            state_->georeferencer->Georeference(*result.pose->pose, point);
+        if (geo_point.ok()) result.track_geo[i] = std::move(geo_point).value();
+      }
+    }
+    result.timings.push_back({"geo", MsSince(t)});
+  }
 
   result.rectified_left = std::move(rect_left);
   result.frame_id = next_frame_id_++;

@@ -2,7 +2,9 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -11,6 +13,8 @@
 #include "core/common/error.h"
 #include "core/common/stereo_frame.h"
 #include "core/detection/detection.h"
+#include "core/geo/georeferencer.h"
+#include "core/geo/pose_buffer.h"
 #include "core/geometry/stereo_rig.h"
 #include "core/pipeline/config.h"
 #include "core/stereo/disparity.h"
@@ -20,7 +24,7 @@
 namespace stevi::pipeline {
 
 struct StageTiming {
-  std::string stage;  // "rectify", "disparity", "extract", "track", "total"
+  std::string stage;  // "rectify", "disparity", "extract", "track", "geo", "total"
   double ms = 0;
 };
 
@@ -34,6 +38,11 @@ struct FrameResult {
   std::vector<detection::Detection> detections;
   // Every live track after this frame's detections (tentative, confirmed, coasting), by id.
   std::vector<tracking::Track> tracks;
+  // Georeferencing: the vehicle pose looked up at the capture time (absent when there is no pose
+  // source), and per track, in the order of `tracks`, its WGS84 position, NED velocity and sigma
+  // (absent when the pose was not found or the track could not be georeferenced).
+  std::optional<geo::PoseLookup> pose;
+  std::vector<std::optional<geo::GeoPoint>> track_geo;
   stereo::DisparityMap disparity;
   cv::Mat rectified_left;         // 8-bit grey
   std::vector<StageTiming> timings;
@@ -44,6 +53,10 @@ struct FrameResult {
 struct Snapshot {
   std::shared_ptr<const PipelineConfig> config;
   std::shared_ptr<const geometry::StereoRig> rig;
+  // The vehicle pose at a capture time, asked with the frame's unix_time_ns (the wall clock an
+  // autopilot's GNSS-disciplined states share): a pose buffer fed by the autopilot, or a fixed
+  // pose. Empty: the tracks are not georeferenced.
+  std::function<geo::PoseLookup(int64_t t_ns)> pose_at = {};
 };
 
 // Thread-compatible: call Process() from one thread at a time.

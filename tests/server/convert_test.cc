@@ -130,6 +130,8 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryStevieAndStevisField) {
   original.tracking.delete_misses = 20;
   original.tracking.fading_beta = 0.5;
   original.tracking.min_score = 0.25;
+  original.mount.pitch_deg = -30;
+  original.mount.lever_arm_m = Eigen::Vector3d(0.5, -0.1, 0.2);
 
   const v1::PipelineConfig proto = ToProto(original);
   EXPECT_EQ(proto.stevie().morphology().shape(), v1::STRUCTURING_SHAPE_CROSS);
@@ -159,6 +161,7 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryStevieAndStevisField) {
   EXPECT_DOUBLE_EQ(copy.stevie.blobs.max_attached_fraction, 0.7);
   EXPECT_TRUE(copy.tracking == original.tracking);
   EXPECT_DOUBLE_EQ(copy.tracking.min_score, 0.25);
+  EXPECT_TRUE(copy.mount == original.mount);
   EXPECT_EQ(copy.stevie.ground.min_row_pixels, 25);
   EXPECT_DOUBLE_EQ(copy.stevis.ground.min_row_spread, 0.4);
   EXPECT_THAT(copy.Validate(), ::testing::IsEmpty());
@@ -284,6 +287,67 @@ TEST(ToJsonLine, UsesProtoFieldNamesOnOneLine) {
   EXPECT_THAT(json, HasSubstr("\"frame_id\""));
   EXPECT_THAT(json, HasSubstr("\"range_sigma_m\""));
   EXPECT_EQ(json.find('\n'), std::string::npos);
+}
+
+TEST(VehicleStateConversion, RoundTripsEveryField) {
+  geo::VehicleState s;
+  s.t_ns = 1'700'000'000'123'456'789;
+  s.lat_deg = 43.6839;
+  s.lon_deg = 10.3925;
+  s.alt_m = 89.5;
+  s.roll_deg = -2;
+  s.pitch_deg = 3;
+  s.yaw_deg = 43;
+  s.velocity_ned_mps = Eigen::Vector3d(20, -1, 0.5);
+  s.sigma = {1.5, 3.0, 0.2, 0.8};
+  const v1::VehicleState p = ToProto(s);
+  EXPECT_EQ(p.unix_time_ns(), s.t_ns);
+  EXPECT_DOUBLE_EQ(p.position().alt_m(), 89.5);
+  EXPECT_DOUBLE_EQ(p.velocity().e_mps(), -1);
+  EXPECT_TRUE(FromProto(p) == s);
+}
+
+TEST(ToTrackFrame, GeoreferencedTracksCarryTheirPositionAndTheFrameItsStatus) {
+  pipeline::FrameResult result;
+  tracking::Track a, b;
+  a.id = 1;
+  b.id = 2;
+  result.tracks = {a, b};
+  geo::GeoPoint g;
+  g.lat_deg = 43.7;
+  g.lon_deg = 10.4;
+  g.alt_m = 120;
+  g.velocity_ned_mps = Eigen::Vector3d(3, 4, -1);
+  g.sigma.horizontal_m = 0.6;
+  g.sigma.vertical_m = 0.9;
+  result.track_geo = {g, std::nullopt};
+  geo::PoseLookup lookup;
+  lookup.status = geo::GeoStatus::kOk;
+  lookup.message = "fixed pose";
+  lookup.pose = geo::VehiclePose{};
+  lookup.pose->state.lat_deg = 43.6839;
+  result.pose = lookup;
+  const v1::TrackFrame f = ToTrackFrame(result);
+  EXPECT_EQ(f.geo_status(), v1::GEO_STATUS_OK);
+  EXPECT_EQ(f.geo_message(), "fixed pose");
+  EXPECT_DOUBLE_EQ(f.vehicle().position().lat_deg(), 43.6839);
+  ASSERT_EQ(f.tracks_size(), 2);
+  ASSERT_TRUE(f.tracks(0).has_geodetic());
+  EXPECT_DOUBLE_EQ(f.tracks(0).geodetic().alt_m(), 120);
+  EXPECT_DOUBLE_EQ(f.tracks(0).velocity_ned().e_mps(), 4);
+  EXPECT_DOUBLE_EQ(f.tracks(0).position_sigma_m().vertical_m(), 0.9);
+  EXPECT_FALSE(f.tracks(1).has_geodetic());
+
+  geo::PoseLookup stale;
+  stale.status = geo::GeoStatus::kPoseTooOld;
+  stale.message = "pose too old (0.82 s)";
+  result.pose = stale;
+  result.track_geo = {std::nullopt, std::nullopt};
+  const v1::TrackFrame g2 = ToTrackFrame(result);
+  EXPECT_EQ(g2.geo_status(), v1::GEO_STATUS_POSE_TOO_OLD);
+  EXPECT_EQ(g2.geo_message(), "pose too old (0.82 s)");
+  EXPECT_FALSE(g2.has_vehicle());
+  EXPECT_FALSE(g2.tracks(0).has_geodetic());
 }
 
 }  // namespace

@@ -6,11 +6,15 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include <algorithm>
 #include <cmath>
+#include <numeric>
 #include <thread>
 #include <tuple>
 
 #include "client/client.h"
+#include "core/geo/georeferencer.h"
+#include "server/pose_source.h"
 #include "server/service.h"
 #include "tests/server/truth_check.h"
 #include "tests/testing/data.h"
@@ -189,6 +193,159 @@ TEST_F(ServerTest, StatusCountsSubscribersAndShutdownEndsStreams) {
   streaming.join();
   EXPECT_EQ(stream_status.error_code(), grpc::StatusCode::UNAVAILABLE);
   EXPECT_THAT(stream_status.error_message(), HasSubstr("shutting down"));
+}
+
+// With no autopilot, the synthetic rig hovers at Pisa (a fixed pose): every track carries a WGS84
+// position, compared here with the truth's, georeferenced independently of the pipeline's path
+// (from the renderer's truth point through the same pose), by range band.
+TEST_F(ServerTest, TracksCarryGeodeticPositionsMatchingTheTruth) {
+  const std::vector<v1::TrackFrame> frames = Collect(*client_, 25);
+  ASSERT_EQ(frames.size(), 25u);
+  drivers::SyntheticOptions options;
+  options.fps = kFps;
+  drivers::SyntheticRenderer renderer(options);
+  const geo::VehicleState rig = SyntheticRigPose(drivers::DefaultScene().camera_height_m);
+  const geo::Georeferencer georeferencer;
+  struct Band {
+    double lo, hi;
+    std::vector<double> horizontal, vertical, sigma;
+  };
+  std::vector<Band> bands{{0, 25, {}, {}, {}}, {25, 35, {}, {}, {}}, {35, 45, {}, {}, {}}, {45, 60, {}, {}, {}}};
+  int checked = 0;
+  for (const v1::TrackFrame& f : frames) {
+    ASSERT_EQ(f.geo_status(), v1::GEO_STATUS_OK) << f.geo_message();
+    EXPECT_NEAR(f.vehicle().position().lat_deg(), rig.lat_deg, 1e-12);
+    drivers::FrameTruth truth;
+    renderer.Render(f.source_index(), &truth);
+    std::vector<cv::Rect> boxes, truth_boxes;
+    std::vector<const v1::Track*> tracks;
+    std::vector<const drivers::ObstacleTruth*> obstacles;
+    for (const v1::Track& t : f.tracks()) {
+      if (t.state() != v1::TRACK_STATE_CONFIRMED) continue;
+      ASSERT_TRUE(t.has_geodetic());
+      boxes.emplace_back(t.bbox().x(), t.bbox().y(), t.bbox().width(), t.bbox().height());
+      tracks.push_back(&t);
+    }
+    for (const drivers::ObstacleTruth& o : truth.obstacles) {
+      if (o.visible_px < 300 || options.f_px * options.baseline_m / o.depth_m < 8) continue;
+      truth_boxes.push_back(o.bbox);
+      obstacles.push_back(&o);
+    }
+    for (const auto& [d, k] : testing::MatchByIoU(boxes, truth_boxes, 0.3)) {
+      // The tower and the hangar stand on the ground with their lower parts cut off by the ground
+      // model: their blobs' centroids are not their faces' centres, so only the aircraft and
+      // drones (whole in view) are compared.
+      if (obstacles[k]->name == "tower" || obstacles[k]->name == "hangar") continue;
+      geo::VehiclePose pose;
+      pose.state = rig;
+      geo::PointInCam point;
+      const cv::Vec3d& p = obstacles[k]->position_cam_m;
+      point.position_m = Eigen::Vector3d(p[0], p[1], p[2]);
+      Result<geo::GeoPoint> expected = georeferencer.Georeference(pose, point);
+      ASSERT_TRUE(expected.ok());
+      const v1::Geodetic& got = tracks[d]->geodetic();
+      const double north = (got.lat_deg() - expected->lat_deg) * 111132.0;
+      const double east = (got.lon_deg() - expected->lon_deg) * 111320.0 *
+                          std::cos(expected->lat_deg * M_PI / 180.0);
+      const double range = cv::norm(p);
+      for (Band& b : bands) {
+        if (range >= b.lo && range < b.hi) {
+          b.horizontal.push_back(std::hypot(north, east));
+          b.vertical.push_back(std::abs(got.alt_m() - expected->alt_m));
+          b.sigma.push_back(tracks[d]->position_sigma_m().horizontal_m());
+        }
+      }
+      // Within 2 % of the range (the depth rule) horizontally and vertically once the track's
+      // filter has settled (20 frames); a young track of a moving obstacle starts at rest and lags
+      // (aircraft-1, crossing at 6 m/s: 1.05 m at 33 m, 3 %, shrinking to 2 % in 15 frames).
+      const double bound = tracks[d]->age_frames() >= 20 ? 0.02 : 0.05;
+      EXPECT_LT(std::hypot(north, east), bound * range)
+          << obstacles[k]->name << " frame " << f.source_index();
+      EXPECT_LT(std::abs(got.alt_m() - expected->alt_m), bound * range)
+          << obstacles[k]->name << " frame " << f.source_index();
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 100);
+  for (const Band& b : bands) {
+    if (b.horizontal.empty()) continue;
+    const auto rms = [](const std::vector<double>& v) {
+      double s = 0;
+      for (double x : v) s += x * x;
+      return std::sqrt(s / v.size());
+    };
+    std::printf("geodetic error %2.0f-%2.0f m: %zu tracks, horizontal rms %.2f m max %.2f m, "
+                "vertical rms %.2f m, reported sigma_h mean %.2f m\n",
+                b.lo, b.hi, b.horizontal.size(), rms(b.horizontal),
+                *std::max_element(b.horizontal.begin(), b.horizontal.end()), rms(b.vertical),
+                std::accumulate(b.sigma.begin(), b.sigma.end(), 0.0) / b.sigma.size());
+  }
+}
+
+// An autopilot's states take over from the fixed pose; bad ones are refused and counted.
+TEST(ServerPublish, PublishedVehicleStatesGeoreferenceTheTracks) {
+  // States published ahead of time: the frames' age against the newest state is allowed up to
+  // 30 s here (the default 0.5 s suits a live 10 Hz feed, not a test that publishes at once).
+  v1::ServerConfig config = TestConfig();
+  config.mutable_geo()->set_max_age_s(30);
+  Result<std::unique_ptr<Server>> server = Server::Start(config);
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  client::ClientOptions options;
+  options.address = "127.0.0.1:" + std::to_string((*server)->port());
+  options.timeout = std::chrono::seconds(20);
+  client::Client client(options);
+  const int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                          .count();
+  std::vector<v1::VehicleState> states;
+  for (int k = -10; k <= 200; ++k) {  // 10 Hz from 1 s ago to 20 s ahead
+    v1::VehicleState s;
+    s.set_unix_time_ns(now + k * 100'000'000LL);
+    s.mutable_position()->set_lat_deg(45.0);
+    s.mutable_position()->set_lon_deg(9.0);
+    s.mutable_position()->set_alt_m(300);
+    s.set_yaw_deg(90);
+    s.set_position_sigma_horizontal_m(1.0);
+    s.set_position_sigma_vertical_m(2.0);
+    states.push_back(s);
+  }
+  v1::VehicleState bad = states.back();
+  bad.set_unix_time_ns(bad.unix_time_ns() + 1);
+  bad.mutable_position()->set_lat_deg(91);
+  states.push_back(bad);
+  states.push_back(states.front());  // out of order
+  v1::PublishVehicleStateResponse response;
+  ASSERT_TRUE(client.PublishVehicleStates(states, &response).ok());
+  EXPECT_EQ(response.accepted(), 211u);
+  EXPECT_EQ(response.refused(), 2u);
+  EXPECT_FALSE(response.last_error().empty());
+
+  std::vector<v1::TrackFrame> frames;
+  client::StreamOptions stream;
+  stream.max_frames = 5;
+  ASSERT_TRUE(client
+                  .StreamTracks(
+                      [&](const v1::TrackFrame& f) {
+                        frames.push_back(f);
+                        return true;
+                      },
+                      stream)
+                  .ok());
+  ASSERT_EQ(frames.size(), 5u);
+  int geodetic = 0;
+  for (const v1::TrackFrame& f : frames) {
+    ASSERT_EQ(f.geo_status(), v1::GEO_STATUS_OK) << f.geo_message();
+    EXPECT_NEAR(f.vehicle().position().lat_deg(), 45.0, 1e-9);
+    for (const v1::Track& t : f.tracks()) {
+      if (!t.has_geodetic()) continue;
+      ++geodetic;
+      // Heading east from (45 N, 9 E): obstacles 15-60 m ahead lie east of the vehicle.
+      EXPECT_NEAR(t.geodetic().lat_deg(), 45.0, 0.001);
+      EXPECT_GT(t.geodetic().lon_deg(), 9.0);
+      EXPECT_GE(t.position_sigma_m().horizontal_m(), 1.0) << "the pose's own sigma is included";
+    }
+  }
+  EXPECT_GT(geodetic, 0);
 }
 
 TEST_F(ServerTest, StreamFiltersAreAppliedAndABadOneIsRefused) {

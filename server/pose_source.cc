@@ -1,0 +1,49 @@
+#include "server/pose_source.h"
+
+#include <utility>
+
+#include "server/convert.h"
+
+namespace stevi::server {
+
+Result<std::unique_ptr<PoseSource>> PoseSource::Create(
+    const v1::GeoConfig& config, const std::optional<geo::VehicleState>& synthetic_default) {
+  std::vector<std::string> problems;
+  geo::PoseBufferOptions options;
+  if (config.has_max_age_s()) options.max_age_s = config.max_age_s();
+  if (config.has_max_extrapolation_s()) options.max_extrapolation_s = config.max_extrapolation_s();
+  if (config.has_max_gap_s()) options.max_gap_s = config.max_gap_s();
+  AppendPrefixed(problems, "geo.", options.Validate());
+  std::optional<geo::VehicleState> fixed = synthetic_default;
+  if (config.has_fixed_pose()) {
+    fixed = FromProto(config.fixed_pose());
+    AppendPrefixed(problems, "geo.fixed_pose.", fixed->Validate());
+  }
+  if (!problems.empty()) return Error::Invalid(problems);
+  return std::unique_ptr<PoseSource>(new PoseSource(options, std::move(fixed)));
+}
+
+geo::PoseLookup PoseSource::At(int64_t unix_time_ns) const {
+  if (buffer_.size() > 0 || !fixed_) return buffer_.At(unix_time_ns);
+  geo::PoseLookup lookup;
+  lookup.status = geo::GeoStatus::kOk;
+  lookup.message = "fixed pose";
+  geo::VehiclePose pose;
+  pose.state = *fixed_;
+  pose.state.t_ns = unix_time_ns;
+  lookup.pose = pose;
+  return lookup;
+}
+
+Status PoseSource::Publish(const geo::VehicleState& state) { return buffer_.Add(state); }
+
+geo::VehicleState SyntheticRigPose(double camera_height_m) {
+  geo::VehicleState s;
+  s.lat_deg = 43.6839;
+  s.lon_deg = 10.3925;
+  s.alt_m = 49.5 + camera_height_m;
+  s.yaw_deg = 43;
+  return s;
+}
+
+}  // namespace stevi::server

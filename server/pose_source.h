@@ -1,0 +1,45 @@
+// Where the server's vehicle pose comes from: states the autopilot publishes (PublishVehicleState)
+// into a pose buffer, else a fixed pose from the configuration, else none (tracks then go out
+// without geodetic positions, and the frame says why).
+#pragma once
+
+#include <optional>
+
+#include "core/common/error.h"
+#include "core/geo/pose_buffer.h"
+#include "core/geo/vehicle_state.h"
+#include "stevi/v1/config.pb.h"
+
+namespace stevi::server {
+
+// Thread-safe.
+class PoseSource {
+ public:
+  // From the configuration's GeoConfig: kInvalidArgument naming every bad field ("geo.fixed_pose.
+  // lat_deg: ..."). `synthetic_default` is the fixed pose used when the config gives none (the
+  // synthetic rig's hover at Pisa), or nullopt.
+  static Result<std::unique_ptr<PoseSource>> Create(
+      const v1::GeoConfig& config, const std::optional<geo::VehicleState>& synthetic_default);
+
+  // The pose at a frame's capture time (Unix ns): from the published states once any arrived,
+  // else the fixed pose (its time set to the frame's), else kNoPose.
+  geo::PoseLookup At(int64_t unix_time_ns) const;
+  // A published state: refused (kInvalidArgument naming the field, or out of order) without
+  // changing anything.
+  Status Publish(const geo::VehicleState& state);
+
+ private:
+  PoseSource(geo::PoseBufferOptions options, std::optional<geo::VehicleState> fixed)
+      : buffer_(options), fixed_(std::move(fixed)) {}
+
+  geo::PoseBuffer buffer_;
+  const std::optional<geo::VehicleState> fixed_;
+};
+
+// The synthetic rig's pose: hovering over the threshold of runway 04R at Pisa airport
+// (43.6839 N, 10.3925 E), its camera `camera_height_m` above the ground (the ground there is
+// about 49.5 m above the WGS84 ellipsoid: 2 m above sea level plus a 47.5 m geoid undulation),
+// level, heading 043 (the runway's).
+geo::VehicleState SyntheticRigPose(double camera_height_m);
+
+}  // namespace stevi::server
