@@ -145,7 +145,12 @@ Encounter Assess(const OwnVehicle& own, const Obstacle& obstacle, const AvoidOpt
   e.protected_radius_m =
       options.protected_radius_m +
       options.sigma_factor * std::max(obstacle.sigma_horizontal_m, obstacle.sigma_vertical_m);
-  e.level = Classify(e.distance_m, e.t_cpa_s, e.d_cpa_m, e.protected_radius_m, options);
+  const bool closing = vv > 0 && Dot(p, v) < 0;
+  if (!closing && e.distance_m >= e.protected_radius_m) {
+    e.level = e.distance_m < options.caution_range_m ? AdvisoryLevel::kCaution : AdvisoryLevel::kClear;
+  } else {
+    e.level = Classify(e.distance_m, e.t_cpa_s, e.d_cpa_m, e.protected_radius_m, options);
+  }
   return e;
 }
 

@@ -67,11 +67,14 @@ std::string_view AdvisoryLevelName(AdvisoryLevel level);
 //   CAUTION  d_cpa <  caution_radius_factor * R  and t_cpa <= caution_time_s,
 //            or the distance now < caution_range_m
 //   CLEAR    otherwise.
-// t_cpa is clamped at 0, so an obstacle that is already inside a radius counts as being there now,
-// even when it is receding (a separation lost is still lost).
+// t_cpa is clamped at 0, so an obstacle that is already inside R counts as being there now, even
+// when it is receding (a separation lost is still lost). But an obstacle that is not closing
+// (p.v >= 0: receding, or at its closest now) and is outside R is CLEAR, unless the caution_range_m
+// rule holds: it will never come nearer than it is, so it needs no warning.
+// The defaults suit a small UAV whose stereo rig sees obstacles out to 50-80 m.
 struct AvoidOptions {
   // The separation to keep from any obstacle, metres, > 0.
-  double protected_radius_m = 30;
+  double protected_radius_m = 10;
   // Sigmas of the obstacle's position added to the radius, >= 0. 2 covers ~95 % of a 1-D error.
   double sigma_factor = 2;
   // Horizons, seconds: 0 < avoid_time_s <= warning_time_s <= caution_time_s.
@@ -81,8 +84,9 @@ struct AvoidOptions {
   // Radii as multiples of R: 1 <= warning_radius_factor <= caution_radius_factor.
   double warning_radius_factor = 2;
   double caution_radius_factor = 4;
-  // Any obstacle nearer than this now is at least CAUTION, metres, >= 0 (0 disables the rule).
-  double caution_range_m = 100;
+  // Any obstacle nearer than this now is at least CAUTION, metres, >= 0 (0, the default, disables
+  // the rule).
+  double caution_range_m = 0;
   // Tentative tracks are often clutter: ignored unless this is false. Coasting tracks always count
   // (an occluded obstacle is still there).
   bool ignore_tentative = true;

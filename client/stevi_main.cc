@@ -2,12 +2,17 @@
 #include <algorithm>
 #include <pthread.h>
 
+#include <atomic>
 #include <cctype>
+#include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <mutex>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -16,6 +21,7 @@
 #include <google/protobuf/text_format.h>
 #include <google/protobuf/util/json_util.h>
 
+#include "client/avoid.h"
 #include "client/client.h"
 #include "client/config_edit.h"
 
@@ -49,6 +55,12 @@ Commands:
                                source every S seconds (default 0.5) while the board moves.
                                Prints the quality report; --apply activates the result if every
                                gate passes. The board counts inner corners (e.g. 9x6).
+  avoid [--count N] [--protected-radius M]
+                               the autopilot example: one advisory per frame as a JSON line,
+                               CLEAR, CAUTION, WARNING or AVOID with the worst obstacle's
+                               bearing, distance, time and distance of closest approach against
+                               the vehicle's own velocity; NO_DATA when no frame came for
+                               500 ms or the frame has no vehicle pose. Reconnects on its own.
   calibration list [--json]    stored calibrations and the active one
   calibration get ID [--yaml]  one calibration: report, or its YAML file
   calibration activate ID      switch the running server to it (between two frames)
@@ -505,6 +517,116 @@ int Calibrate(Client& client, const std::vector<std::string>& args) {
   return report.passed() ? 0 : 1;
 }
 
+// WGS84 to a local north-east-down frame at `origin` (flat earth with the ellipsoid's radii of
+// curvature there: centimetres over a few kilometres, which is the obstacle picture's extent).
+stevi::client::Ned LocalNed(const v1::Geodetic& origin, const v1::Geodetic& point) {
+  constexpr double a = 6378137.0, e2 = 6.69437999014e-3, deg = 3.14159265358979323846 / 180;
+  const double s = std::sin(origin.lat_deg() * deg);
+  const double w = std::sqrt(1 - e2 * s * s);
+  const double meridian = a * (1 - e2) / (w * w * w), normal = a / w;
+  double dlon = point.lon_deg() - origin.lon_deg();
+  if (dlon > 180) dlon -= 360;
+  if (dlon < -180) dlon += 360;
+  return {(point.lat_deg() - origin.lat_deg()) * deg * (meridian + origin.alt_m()),
+          dlon * deg * (normal + origin.alt_m()) * std::cos(origin.lat_deg() * deg),
+          origin.alt_m() - point.alt_m()};
+}
+
+int64_t SteadyNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+int Avoid(Client& client, const std::vector<std::string>& args) {
+  namespace sc = stevi::client;
+  sc::AdvisorOptions options;
+  uint64_t count = 0;
+  for (size_t i = 0; i < args.size(); ++i) {
+    double number = 0;
+    if (args[i] == "--count" && i + 1 < args.size()) {
+      if (!ParseNumber(args[++i], 1, 1e12, number) || number != static_cast<double>(static_cast<int64_t>(number))) {
+        return Usage("avoid --count: expected a whole number >= 1, got '" + args[i] + "'");
+      }
+      count = static_cast<uint64_t>(number);
+    } else if (args[i] == "--protected-radius" && i + 1 < args.size()) {
+      if (!ParseNumber(args[++i], 0.1, 10000, number)) {
+        return Usage("avoid --protected-radius: expected metres in [0.1, 10000], got '" + args[i] + "'");
+      }
+      options.avoid.protected_radius_m = number;
+    } else {
+      return Usage("avoid: unexpected argument '" + args[i] + "'");
+    }
+  }
+  sc::Advisor advisor(options);
+  std::mutex mu;  // the advisor and stdout, shared by the stream and the watchdog
+  int64_t last_no_data_print = 0;
+  const auto print = [&](const sc::Advisory& advisory) {
+    std::cout << sc::AdvisoryJson(advisory) << "\n" << std::flush;
+  };
+  // The watchdog: never silent, never CLEAR on stale data.
+  std::atomic<bool> done{false};
+  std::thread watchdog([&] {
+    while (!done) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      std::lock_guard lock(mu);
+      const int64_t now = SteadyNowNs();
+      const sc::Advisory advisory = advisor.OnTick(now);
+      if (advisory.level == sc::AdvisoryLevel::kNoData &&
+          now - last_no_data_print >= options.no_data_after_ns) {
+        print(advisory);
+        last_no_data_print = now;
+      }
+    }
+  });
+  std::optional<v1::Geodetic> origin;
+  sc::StreamOptions stream;
+  stream.max_frames = count;
+  stream.reconnect = true;
+  // Live (no --count): never give up. With --count (tests, scripts): give up after 3 attempts.
+  stream.max_reconnect_attempts = count > 0 ? 3 : 0;
+  const grpc::Status status = client.StreamTracks(
+      [&](const v1::TrackFrame& frame) {
+        std::lock_guard lock(mu);
+        const int64_t now = SteadyNowNs();
+        if (frame.geo_status() != v1::GEO_STATUS_OK || !frame.has_vehicle()) {
+          sc::Advisory advisory;
+          advisory.t_ns = now;
+          advisory.level = sc::AdvisoryLevel::kNoData;
+          advisory.reason = "no vehicle pose: " + frame.geo_message();
+          print(advisory);
+          return true;
+        }
+        if (!origin) origin = frame.vehicle().position();
+        sc::OwnVehicle own;
+        own.position_m = LocalNed(*origin, frame.vehicle().position());
+        own.velocity_mps = {frame.vehicle().velocity().n_mps(), frame.vehicle().velocity().e_mps(),
+                            frame.vehicle().velocity().d_mps()};
+        std::vector<sc::Obstacle> obstacles;
+        for (const v1::Track& t : frame.tracks()) {
+          if (!t.has_geodetic()) continue;
+          sc::Obstacle o;
+          o.track_id = t.track_id();
+          o.position_m = LocalNed(*origin, t.geodetic());
+          o.velocity_mps = {t.velocity_ned().n_mps(), t.velocity_ned().e_mps(), t.velocity_ned().d_mps()};
+          o.sigma_horizontal_m = t.position_sigma_m().horizontal_m();
+          o.sigma_vertical_m = t.position_sigma_m().vertical_m();
+          o.state = t.state() == v1::TRACK_STATE_TENTATIVE ? sc::ObstacleState::kTentative
+                    : t.state() == v1::TRACK_STATE_COASTING ? sc::ObstacleState::kCoasting
+                                                            : sc::ObstacleState::kConfirmed;
+          o.score = t.score();
+          obstacles.push_back(o);
+        }
+        print(advisor.OnFrame(now, own, obstacles));
+        return true;
+      },
+      stream);
+  done = true;
+  watchdog.join();
+  if (!status.ok()) return RpcFailed(client, "avoid", status);
+  return 0;
+}
+
 int Calibration(Client& client, const std::vector<std::string>& args) {
   if (args.empty()) return Usage("calibration: expected list, get ID or activate ID");
   if (args[0] == "list") {
@@ -593,6 +715,7 @@ int main(int argc, char** argv) {
   if (command == "config") return Config(client, rest);
   if (command == "snapshot") return Snapshot(client, rest);
   if (command == "calibrate") return Calibrate(client, rest);
+  if (command == "avoid") return Avoid(client, rest);
   if (command == "calibration") return Calibration(client, rest);
   return Usage("unknown command '" + command + "'");
 }

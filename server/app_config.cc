@@ -44,6 +44,16 @@ std::optional<double> ParseDouble(const std::string& text) {
 
 }  // namespace
 
+std::optional<drivers::Scenario> FindScenario(const std::string& name) {
+  for (std::vector<drivers::Scenario> list : {drivers::EvaluationScenarios(), drivers::TrackingScenarios()}) {
+    for (drivers::Scenario& s : list) {
+      if (s.name == name) return std::move(s);
+    }
+  }
+  return std::nullopt;
+}
+
+
 Result<Flags> ParseFlags(int argc, const char* const* argv, const std::set<std::string>& known,
                          const std::set<std::string>& switches) {
   Flags flags;
@@ -186,9 +196,12 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
             "source: left, right and calibration are for the images source (--source images)");
       }
       if (source.synthetic().has_scene() && source.synthetic().scene() != "airfield" &&
-          source.synthetic().scene() != "chessboard") {
-        problems.push_back("source.synthetic.scene: must be airfield or chessboard (got '" +
-                           source.synthetic().scene() + "')");
+          source.synthetic().scene() != "chessboard" && !FindScenario(source.synthetic().scene())) {
+        std::string names = "airfield, chessboard";
+        for (const drivers::Scenario& s : drivers::EvaluationScenarios()) names += ", " + s.name;
+        for (const drivers::Scenario& s : drivers::TrackingScenarios()) names += ", " + s.name;
+        problems.push_back("source.synthetic.scene: unknown scene '" + source.synthetic().scene() +
+                           "' (one of: " + names + ")");
       }
       break;
     case v1::SOURCE_KIND_IMAGES:
@@ -261,6 +274,9 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig
     return std::unique_ptr<drivers::StereoSource>(std::move(source).value());
   }
   drivers::SyntheticOptions options;
+  if (std::optional<drivers::Scenario> scenario = FindScenario(s.scene())) {
+    options = scenario->options;  // its rig, noise, seed and scene; the loop repeats it
+  }
   if (s.has_width()) options.width = s.width();
   if (s.has_height()) options.height = s.height();
   if (s.has_f_px()) options.f_px = s.f_px();

@@ -4,6 +4,7 @@
 
 #include <map>
 #include <memory>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -11,6 +12,7 @@
 #include "core/common/error.h"
 #include "core/pipeline/config.h"
 #include "drivers/stereo_source.h"
+#include "drivers/synthetic/synthetic_source.h"
 #include "stevi/v1/config.pb.h"
 
 namespace stevi::server {
@@ -45,6 +47,9 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config);
 
 // The pipeline configuration: core defaults, then the config's fields, then validation.
 Result<pipeline::PipelineConfig> BuildPipelineConfig(const v1::PipelineConfig& config);
+
+// A named evaluation or tracking scenario (drivers/synthetic), to play live with --scene NAME.
+std::optional<drivers::Scenario> FindScenario(const std::string& name);
 
 // Opens the configured source. `loop_images` is what an image source does at its end when the
 // config does not say (the server loops; stevi-process does not).

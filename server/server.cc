@@ -17,7 +17,9 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   std::optional<geo::VehicleState> synthetic_pose;
   if (config.source().kind() != v1::SOURCE_KIND_IMAGES &&
       config.source().synthetic().scene() != "chessboard") {
-    synthetic_pose = SyntheticRigPose(drivers::DefaultScene().camera_height_m);
+    const std::optional<drivers::Scenario> scenario = FindScenario(config.source().synthetic().scene());
+    synthetic_pose = SyntheticRigPose(scenario ? scenario->options.scene.camera_height_m
+                                               : drivers::DefaultScene().camera_height_m);
   }
   Result<std::unique_ptr<PoseSource>> poses = PoseSource::Create(config.geo(), synthetic_pose);
   if (!poses.ok()) return poses.error();

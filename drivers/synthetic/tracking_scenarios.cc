@@ -137,6 +137,23 @@ Scenario HeadOn() {
   return s;
 }
 
+Scenario Departing() {
+  Scene scene = SkyScene();
+  // head_on played backwards: from 12.6 m out to 50 m, receding at 6.33 m/s.
+  scene.obstacles.push_back(MakeObstacle(1, "drone-departing", {2.0, 1.0, 2.0},
+                                         Leg({2.5, -1.2, 13.0}, {3.5, -2.0, 51.0}, 6.0), 0.25,
+                                         0.45, 0.12));
+  Scenario s;
+  s.name = "departing";
+  s.description =
+      "head_on backwards: drone-departing (2 x 1 x 2 m) flies straight away from the camera, its "
+      "front face from 12.6 m (33 px of disparity) to 50 m (8.4 px) in 6 s, receding at 6.33 m/s: "
+      "a diverging obstacle, for the autopilot consumer to stay CLEAR on. 60 frames.";
+  s.options = ScenarioOptions(204, std::move(scene));
+  s.frames = 60;
+  return s;
+}
+
 }  // namespace
 
 std::vector<Scenario> TrackingScenarios() {
@@ -144,6 +161,7 @@ std::vector<Scenario> TrackingScenarios() {
   scenarios.push_back(CrossingOcclusion());
   scenarios.push_back(EntriesExits());
   scenarios.push_back(HeadOn());
+  scenarios.push_back(Departing());
   return scenarios;
 }
 

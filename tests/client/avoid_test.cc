@@ -44,30 +44,39 @@ Obstacle MakeObstacle(std::uint64_t id, Ned position_m, Ned velocity_mps) {
 
 const OwnVehicle kNorthAt10{{0, 0, 0}, {10, 0, 0}};  // at the origin, flying north at 10 m/s
 
+// The geometry cases below were worked out for a 30 m protected radius and a 100 m caution range
+// (a larger aircraft than the defaults' small UAV): they pass them explicitly.
+const AvoidOptions kR30 = [] {
+  AvoidOptions o;
+  o.protected_radius_m = 30;
+  o.caution_range_m = 100;
+  return o;
+}();
+
 TEST(Assess, HeadOnCollisionCourseIsAvoidAtDistanceOverClosingSpeed) {
   // 200 m ahead, closing at 10 + 10 m/s: collision in 10 s.
-  const Encounter e = Assess(kNorthAt10, MakeObstacle(1, {200, 0, 0}, {-10, 0, 0}), {});
+  const Encounter e = Assess(kNorthAt10, MakeObstacle(1, {200, 0, 0}, {-10, 0, 0}), kR30);
   EXPECT_THAT(e, IsEncounter(AdvisoryLevel::kAvoid, 200.0 / 20.0, 0.0, 1e-9));
   EXPECT_DOUBLE_EQ(e.distance_m, 200);
   EXPECT_DOUBLE_EQ(e.bearing_deg, 0);
   EXPECT_DOUBLE_EQ(e.protected_radius_m, 30);
   // The same at 500 m: 25 s away, beyond the 15 s AVOID horizon but inside WARNING's 30 s.
-  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(1, {500, 0, 0}, {-10, 0, 0}), {}),
+  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(1, {500, 0, 0}, {-10, 0, 0}), kR30),
               IsEncounter(AdvisoryLevel::kWarning, 25.0, 0.0, 1e-9));
   // At 1000 m (50 s): CAUTION's 60 s horizon; at 1400 m (70 s): beyond every horizon.
-  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(1, {1000, 0, 0}, {-10, 0, 0}), {}),
+  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(1, {1000, 0, 0}, {-10, 0, 0}), kR30),
               IsEncounter(AdvisoryLevel::kCaution, 50.0, 0.0, 1e-9));
-  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(1, {1400, 0, 0}, {-10, 0, 0}), {}),
+  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(1, {1400, 0, 0}, {-10, 0, 0}), kR30),
               IsEncounter(AdvisoryLevel::kClear, 70.0, 0.0, 1e-9));
 }
 
 TEST(Assess, DivergingObstacleIsClear) {
   const OwnVehicle hovering{{0, 0, 0}, {0, 0, 0}};
-  const Encounter e = Assess(hovering, MakeObstacle(2, {0, 300, 0}, {0, 10, 0}), {});
+  const Encounter e = Assess(hovering, MakeObstacle(2, {0, 300, 0}, {0, 10, 0}), kR30);
   EXPECT_THAT(e, IsEncounter(AdvisoryLevel::kClear, 0.0, 300.0, 1e-9));
   EXPECT_DOUBLE_EQ(e.bearing_deg, 90);
   // Diverging diagonally while the vehicle flies the other way.
-  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(2, {-200, -200, 0}, {-5, -5, 0}), {}),
+  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(2, {-200, -200, 0}, {-5, -5, 0}), kR30),
               IsEncounter(AdvisoryLevel::kClear, 0.0, std::hypot(200.0, 200.0), 1e-9));
 }
 
@@ -78,7 +87,7 @@ TEST(Assess, CrossingAtKnownMissDistance) {
   const Obstacle crossing = MakeObstacle(3, {150, -100, 0}, {0, 10, 0});
   const double miss_m = 500 / std::sqrt(200.0);
   ASSERT_NEAR(miss_m, std::hypot(25.0, 25.0), 1e-12);
-  const Encounter e = Assess(kNorthAt10, crossing, {});
+  const Encounter e = Assess(kNorthAt10, crossing, kR30);
   // 35.4 m misses the 30 m protected radius but not twice it.
   EXPECT_THAT(e, IsEncounter(AdvisoryLevel::kWarning, 12.5, miss_m, 1e-9));
   EXPECT_NEAR(e.bearing_deg, 360 - std::atan2(100.0, 150.0) * 180 / std::numbers::pi, 1e-9);
@@ -87,26 +96,26 @@ TEST(Assess, CrossingAtKnownMissDistance) {
   // A 3 m horizontal sigma widens the radius to 30 + 2 * 3 = 36 m: now inside it.
   Obstacle uncertain = crossing;
   uncertain.sigma_horizontal_m = 3;
-  const Encounter u = Assess(kNorthAt10, uncertain, {});
+  const Encounter u = Assess(kNorthAt10, uncertain, kR30);
   EXPECT_DOUBLE_EQ(u.protected_radius_m, 36);
   EXPECT_THAT(u, IsEncounter(AdvisoryLevel::kAvoid, 12.5, miss_m, 1e-9));
   // The vertical sigma counts the same way (the larger of the two).
   uncertain.sigma_horizontal_m = 0.5;
   uncertain.sigma_vertical_m = 3;
-  EXPECT_THAT(Assess(kNorthAt10, uncertain, {}),
+  EXPECT_THAT(Assess(kNorthAt10, uncertain, kR30),
               IsEncounter(AdvisoryLevel::kAvoid, 12.5, miss_m, 1e-9));
 }
 
 TEST(Assess, VerticalSeparationCountsIn3D) {
   // Head-on, 10 s away, but 20 m or 40 m above (down is negative): the miss is vertical.
-  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(4, {200, 0, -20}, {-10, 0, 0}), {}),
+  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(4, {200, 0, -20}, {-10, 0, 0}), kR30),
               IsEncounter(AdvisoryLevel::kAvoid, 10.0, 20.0, 1e-9));
-  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(4, {200, 0, -40}, {-10, 0, 0}), {}),
+  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(4, {200, 0, -40}, {-10, 0, 0}), kR30),
               IsEncounter(AdvisoryLevel::kWarning, 10.0, 40.0, 1e-9));
   // A climbing vehicle meets a level obstacle: relative v = (-10, 0, 2) from p = (100, 0, -20),
   // t_cpa = (1000 + 40) / 104 = 10 s, where p + v t = (0, 0, 0).
   const OwnVehicle climbing{{0, 0, 0}, {10, 0, -2}};
-  EXPECT_THAT(Assess(climbing, MakeObstacle(4, {100, 0, -20}, {0, 0, 0}), {}),
+  EXPECT_THAT(Assess(climbing, MakeObstacle(4, {100, 0, -20}, {0, 0, 0}), kR30),
               IsEncounter(AdvisoryLevel::kAvoid, 10.0, 0.0, 1e-9));
 }
 
@@ -115,27 +124,40 @@ TEST(Assess, StationaryObstacleAheadOfAMovingVehicle) {
   // 300 m ahead: closest approach in 20 s at 10 m.
   OwnVehicle own{{0, 200, 0}, {0, 15, 0}};
   const Obstacle hovering = MakeObstacle(5, {10, 500, 0}, {0, 0, 0});
-  const Encounter far = Assess(own, hovering, {});
+  const Encounter far = Assess(own, hovering, kR30);
   EXPECT_THAT(far, IsEncounter(AdvisoryLevel::kWarning, 20.0, 10.0, 1e-9));
   EXPECT_NEAR(far.bearing_deg, std::atan2(300.0, 10.0) * 180 / std::numbers::pi, 1e-9);
   // 200 m further on it is 100 m ahead: 6.7 s, AVOID.
   own.position_m.e += 200;
-  EXPECT_THAT(Assess(own, hovering, {}),
+  EXPECT_THAT(Assess(own, hovering, kR30),
               IsEncounter(AdvisoryLevel::kAvoid, 100.0 / 15, 10.0, 1e-9));
   // Passed: behind and receding at 100 m, 10 m to the side. Closest approach is now (t = 0).
   own.position_m.e += 210;
-  const Encounter passed = Assess(own, hovering, {});
+  const Encounter passed = Assess(own, hovering, kR30);
   EXPECT_DOUBLE_EQ(passed.t_cpa_s, 0);
   EXPECT_NEAR(passed.d_cpa_m, std::hypot(10.0, 110.0), 1e-9);
   EXPECT_NEAR(passed.bearing_deg, 270 + std::atan2(10.0, 110.0) * 180 / std::numbers::pi, 1e-9);
-  EXPECT_EQ(passed.level, AdvisoryLevel::kCaution) << "within 4 R = 120 m";
-  own.position_m.e += 100;
-  EXPECT_EQ(Assess(own, hovering, {}).level, AdvisoryLevel::kClear);
+  EXPECT_EQ(passed.level, AdvisoryLevel::kClear)
+      << "within 4 R = 120 m but receding, outside R and beyond the 100 m caution range";
+  own.position_m.e -= 20;  // 90 m behind: within the caution range
+  EXPECT_EQ(Assess(own, hovering, kR30).level, AdvisoryLevel::kCaution);
+}
+
+TEST(Assess, WithTheDefaultsADivergingObstacleOutsideTheRadiusIsClear) {
+  // The defaults (a small UAV: R = 10 m, no caution range): an obstacle 25 m ahead moving away
+  // faster than the vehicle is CLEAR; the same obstacle closing at 5 m/s is AVOID (t_cpa 5 s,
+  // d_cpa 0); one inside R is AVOID even while receding.
+  const Obstacle diverging = MakeObstacle(8, {25, 0, 0}, {15, 0, 0});
+  EXPECT_EQ(Assess(kNorthAt10, diverging, {}).level, AdvisoryLevel::kClear);
+  const Obstacle closing = MakeObstacle(8, {25, 0, 0}, {5, 0, 0});
+  EXPECT_THAT(Assess(kNorthAt10, closing, {}), IsEncounter(AdvisoryLevel::kAvoid, 5.0, 0.0, 1e-9));
+  const Obstacle inside = MakeObstacle(8, {8, 0, 0}, {15, 0, 0});
+  EXPECT_EQ(Assess(kNorthAt10, inside, {}).level, AdvisoryLevel::kAvoid);
 }
 
 TEST(Assess, ObstacleBehindAndRecedingIsClear) {
   // 150 m behind, following at 5 m/s while the vehicle makes 10 m/s.
-  const Encounter e = Assess(kNorthAt10, MakeObstacle(6, {-150, 0, 0}, {5, 0, 0}), {});
+  const Encounter e = Assess(kNorthAt10, MakeObstacle(6, {-150, 0, 0}, {5, 0, 0}), kR30);
   EXPECT_THAT(e, IsEncounter(AdvisoryLevel::kClear, 0.0, 150.0, 1e-9));
   EXPECT_DOUBLE_EQ(e.bearing_deg, 180);
   // The proximity rule alone makes it CAUTION when the caution range reaches it.
@@ -144,22 +166,22 @@ TEST(Assess, ObstacleBehindAndRecedingIsClear) {
   EXPECT_EQ(Assess(kNorthAt10, MakeObstacle(6, {-150, 0, 0}, {5, 0, 0}), wide).level,
             AdvisoryLevel::kCaution);
   // Already inside the protected radius and receding: still AVOID, the separation is lost now.
-  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(6, {-20, 0, 0}, {5, 0, 0}), {}),
+  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(6, {-20, 0, 0}, {5, 0, 0}), kR30),
               IsEncounter(AdvisoryLevel::kAvoid, 0.0, 20.0, 1e-9));
 }
 
 TEST(Assess, NoRelativeMotionKeepsTheDistance) {
   // Formation flight: same velocity, 25 m to the right. No approach, but inside the radius.
-  const Encounter e = Assess(kNorthAt10, MakeObstacle(7, {0, 25, 0}, {10, 0, 0}), {});
+  const Encounter e = Assess(kNorthAt10, MakeObstacle(7, {0, 25, 0}, {10, 0, 0}), kR30);
   EXPECT_THAT(e, IsEncounter(AdvisoryLevel::kAvoid, 0.0, 25.0, 0));
-  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(7, {0, 500, 0}, {10, 0, 0}), {}),
+  EXPECT_THAT(Assess(kNorthAt10, MakeObstacle(7, {0, 500, 0}, {10, 0, 0}), kR30),
               IsEncounter(AdvisoryLevel::kClear, 0.0, 500.0, 0));
 }
 
 TEST(Assess, BearingIsClockwiseFromNorthInZeroTo360) {
   const OwnVehicle own{{100, -50, 0}, {0, 0, 0}};
   auto bearing = [&](double dn, double de) {
-    return Assess(own, MakeObstacle(1, {100 + dn, -50 + de, 0}, {}), {}).bearing_deg;
+    return Assess(own, MakeObstacle(1, {100 + dn, -50 + de, 0}, {}), kR30).bearing_deg;
   };
   EXPECT_DOUBLE_EQ(bearing(10, 0), 0);
   EXPECT_DOUBLE_EQ(bearing(10, 10), 45);
@@ -169,7 +191,7 @@ TEST(Assess, BearingIsClockwiseFromNorthInZeroTo360) {
   EXPECT_DOUBLE_EQ(bearing(10, -10), 315);
   EXPECT_DOUBLE_EQ(bearing(0, 0), 0) << "straight above or below";
   // Just west of north: -tiny + 360 rounds to 360, which must come back as 0.
-  EXPECT_EQ(Assess(OwnVehicle{}, MakeObstacle(1, {10, -1e-300, 0}, {}), {}).bearing_deg, 0);
+  EXPECT_EQ(Assess(OwnVehicle{}, MakeObstacle(1, {10, -1e-300, 0}, {}), kR30).bearing_deg, 0);
 }
 
 TEST(AssessFrame, TheWorstOfSeveralWins) {
@@ -179,7 +201,7 @@ TEST(AssessFrame, TheWorstOfSeveralWins) {
       MakeObstacle(12, {150, -100, 0}, {0, 10, 0}),    // WARNING: 12.5 s, 35 m
       MakeObstacle(13, {0, 300, 0}, {0, 10, 0}),       // CLEAR
   };
-  const Advisory a = AssessFrame(7, kNorthAt10, obstacles, {});
+  const Advisory a = AssessFrame(7, kNorthAt10, obstacles, kR30);
   EXPECT_EQ(a.t_ns, 7);
   EXPECT_EQ(a.level, AdvisoryLevel::kAvoid);
   ASSERT_TRUE(a.worst.has_value());
@@ -190,7 +212,7 @@ TEST(AssessFrame, TheWorstOfSeveralWins) {
 
   // Without the AVOID one the WARNING wins, whatever the order.
   const std::vector<Obstacle> rest = {obstacles[3], obstacles[2], obstacles[0]};
-  const Advisory b = AssessFrame(7, kNorthAt10, rest, {});
+  const Advisory b = AssessFrame(7, kNorthAt10, rest, kR30);
   EXPECT_EQ(b.level, AdvisoryLevel::kWarning);
   ASSERT_TRUE(b.worst.has_value());
   EXPECT_EQ(b.worst->track_id, 12u);
@@ -198,17 +220,17 @@ TEST(AssessFrame, TheWorstOfSeveralWins) {
   // Two at the same level: the sooner closest approach wins (8 s against 10 s).
   const std::vector<Obstacle> two_avoid = {obstacles[1],
                                            MakeObstacle(14, {160, 5, 0}, {-10, 0, 0})};
-  const Advisory c = AssessFrame(7, kNorthAt10, two_avoid, {});
+  const Advisory c = AssessFrame(7, kNorthAt10, two_avoid, kR30);
   ASSERT_TRUE(c.worst.has_value());
   EXPECT_EQ(c.worst->track_id, 14u);
   EXPECT_NEAR(c.worst->t_cpa_s, 8, 1e-9);
 }
 
 TEST(AssessFrame, ClearWithoutObstacleFields) {
-  const Advisory empty = AssessFrame(1, kNorthAt10, {}, {});
+  const Advisory empty = AssessFrame(1, kNorthAt10, {}, kR30);
   EXPECT_EQ(empty.level, AdvisoryLevel::kClear);
   EXPECT_FALSE(empty.worst.has_value());
-  const Advisory far = AssessFrame(1, kNorthAt10, {MakeObstacle(1, {0, 300, 0}, {0, 10, 0})}, {});
+  const Advisory far = AssessFrame(1, kNorthAt10, {MakeObstacle(1, {0, 300, 0}, {0, 10, 0})}, kR30);
   EXPECT_EQ(far.level, AdvisoryLevel::kClear);
   EXPECT_FALSE(far.worst.has_value());
 }
@@ -216,13 +238,13 @@ TEST(AssessFrame, ClearWithoutObstacleFields) {
 TEST(AssessFrame, TentativeTracksAreIgnoredUnlessAsked) {
   Obstacle head_on = MakeObstacle(20, {200, 0, 0}, {-10, 0, 0});
   head_on.state = ObstacleState::kTentative;
-  EXPECT_EQ(AssessFrame(1, kNorthAt10, {head_on}, {}).level, AdvisoryLevel::kClear);
+  EXPECT_EQ(AssessFrame(1, kNorthAt10, {head_on}, kR30).level, AdvisoryLevel::kClear);
   AvoidOptions all;
   all.ignore_tentative = false;
   EXPECT_EQ(AssessFrame(1, kNorthAt10, {head_on}, all).level, AdvisoryLevel::kAvoid);
   // A coasting (occluded) track is still an obstacle.
   head_on.state = ObstacleState::kCoasting;
-  EXPECT_EQ(AssessFrame(1, kNorthAt10, {head_on}, {}).level, AdvisoryLevel::kAvoid);
+  EXPECT_EQ(AssessFrame(1, kNorthAt10, {head_on}, kR30).level, AdvisoryLevel::kAvoid);
   // Below the minimum score it is ignored.
   head_on.score = 0.2;
   AvoidOptions picky;
@@ -235,7 +257,7 @@ TEST(AssessFrame, NonFiniteInputsAreNeverClear) {
   const double inf = std::numeric_limits<double>::infinity();
   // A vehicle state that cannot be used: NO_DATA, not CLEAR.
   const OwnVehicle lost{{0, 0, 0}, {nan, 0, 0}};
-  const Advisory a = AssessFrame(3, lost, {MakeObstacle(1, {200, 0, 0}, {})}, {});
+  const Advisory a = AssessFrame(3, lost, {MakeObstacle(1, {200, 0, 0}, {})}, kR30);
   EXPECT_EQ(a.level, AdvisoryLevel::kNoData);
   EXPECT_EQ(a.reason, "vehicle state not finite");
   // Obstacles that cannot be assessed are counted, the others still assessed.
@@ -245,7 +267,7 @@ TEST(AssessFrame, NonFiniteInputsAreNeverClear) {
                                            MakeObstacle(3, {0, 0, 0}, {inf, 0, 0}), bad_sigma,
                                            MakeObstacle(4, {500, 0, 0}, {-10, 0, 0}),
                                            MakeObstacle(5, {1e300, 1e300, 0}, {0, 0, 0})};
-  const Advisory b = AssessFrame(3, kNorthAt10, obstacles, {});
+  const Advisory b = AssessFrame(3, kNorthAt10, obstacles, kR30);
   EXPECT_EQ(b.invalid_obstacles, 4) << "3 non-finite or negative inputs and 1 overflowing";
   EXPECT_EQ(b.level, AdvisoryLevel::kWarning);
   ASSERT_TRUE(b.worst.has_value());

@@ -56,10 +56,14 @@ class ServerProcessTest : public ::testing::Test {
  protected:
   static constexpr double kFps = 20;
 
-  void SetUp() override {
-    server_ = std::make_unique<Subprocess>(std::vector<std::string>{
-        BinaryPath("stevi-server"), "--listen", "127.0.0.1:0", "--fps", "20", "--data-dir",
-        testing::MakeTempDir("stevi-e2e-data")});
+  void SetUp() override { StartServer({}); }
+
+  void StartServer(const std::vector<std::string>& extra) {
+    std::vector<std::string> args{BinaryPath("stevi-server"), "--listen", "127.0.0.1:0", "--fps",
+                                  "20", "--data-dir", testing::MakeTempDir("stevi-e2e-data")};
+    args.insert(args.end(), extra.begin(), extra.end());
+    server_.reset();
+    server_ = std::make_unique<Subprocess>(args);
     const std::optional<std::string> line = server_->WaitForStderrLine("serving", 60s);
     ASSERT_TRUE(line.has_value()) << "the server did not start: " << server_->DrainStderr();
     std::smatch m;
@@ -207,6 +211,58 @@ TEST_F(ServerProcessTest, CalibrateTheRealXimeaCaptures) {
   bool size_warning = false;
   for (const std::string& w : report.warnings()) size_warning |= w.find("640x512") != std::string::npos;
   EXPECT_TRUE(size_warning) << "the report says why it was not applied";
+}
+
+// The levels of `stevi avoid`'s JSON lines (with `frames_only`, without the watchdog's NO_DATA
+// lines, which come before the first frame or when frames are late: correct, but not per frame).
+std::vector<std::string> AdvisoryLevels(const std::string& out, bool frames_only = false) {
+  std::vector<std::string> levels;
+  const std::regex level("\"level\":\"([A-Z_]+)\"");
+  std::istringstream lines(out);
+  std::string line;
+  while (std::getline(lines, line)) {
+    std::smatch m;
+    if (!std::regex_search(line, m, level)) continue;
+    if (frames_only && m[1].str() == "NO_DATA") continue;
+    levels.push_back(m[1].str());
+  }
+  return levels;
+}
+
+// The autopilot example on the synthetic rig hovering at Pisa: a drone flying at it (head_on,
+// missing the camera by 2.4 m) gives AVOID or WARNING; the same drone flying away (departing)
+// never does.
+TEST_F(ServerProcessTest, AvoidWarnsOfACollisionCourseAndStaysClearOfADivergingObstacle) {
+  StartServer({"--scene", "head_on"});
+  const testing::RunResult head_on = Stevi({"avoid", "--count", "40"});
+  ASSERT_EQ(head_on.exit_code, 0) << head_on.err;
+  const std::vector<std::string> levels = AdvisoryLevels(head_on.out, /*frames_only=*/true);
+  ASSERT_EQ(levels.size(), 40u) << head_on.out;
+  const auto alarms = std::count_if(levels.begin(), levels.end(), [](const std::string& l) {
+    return l == "AVOID" || l == "WARNING";
+  });
+  std::cout << "head_on: " << alarms << " of 40 advisories are WARNING or AVOID\n";
+  EXPECT_GE(alarms, 30) << head_on.out;
+  EXPECT_THAT(head_on.out, HasSubstr("\"d_cpa_m\""));
+
+  StartServer({"--scene", "departing"});
+  const testing::RunResult departing = Stevi({"avoid", "--count", "40"});
+  ASSERT_EQ(departing.exit_code, 0) << departing.err;
+  const std::vector<std::string> calm = AdvisoryLevels(departing.out, /*frames_only=*/true);
+  ASSERT_EQ(calm.size(), 40u);
+  EXPECT_EQ(std::count(calm.begin(), calm.end(), "CLEAR"), 40) << departing.out;
+}
+
+// Without frames the autopilot example says NO_DATA: it never falls silent and never says CLEAR.
+TEST(AvoidWithoutAServer, SaysNoDataAndNeverClear) {
+  const testing::RunResult r =
+      testing::Run({BinaryPath("stevi"), "--server", "127.0.0.1:1", "--timeout", "0.5", "avoid",
+                    "--count", "5"},
+                   kCommandTimeout);
+  EXPECT_EQ(r.exit_code, 1) << "gives up after 3 reconnection attempts";
+  const std::vector<std::string> levels = AdvisoryLevels(r.out);
+  ASSERT_GE(levels.size(), 2u) << r.out << r.err;
+  EXPECT_EQ(std::count(levels.begin(), levels.end(), "NO_DATA"), static_cast<long>(levels.size()));
 }
 
 TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
