@@ -22,6 +22,8 @@ struct ClientOptions {
   // Deadline of each unary call, and of connecting a stream.
   std::chrono::milliseconds timeout{5000};
   int max_message_bytes = 64 << 20;
+  // Channel credentials: insecure (loopback) when null; grpc::SslCredentials(...) for TLS.
+  std::shared_ptr<grpc::ChannelCredentials> credentials;
 };
 
 struct StreamOptions {

@@ -24,6 +24,7 @@
 #include "client/avoid.h"
 #include "client/client.h"
 #include "client/config_edit.h"
+#include "client/export.h"
 
 namespace {
 
@@ -61,6 +62,12 @@ Commands:
                                bearing, distance, time and distance of closest approach against
                                the vehicle's own velocity; NO_DATA when no frame came for
                                500 ms or the frame has no vehicle pose. Reconnects on its own.
+  export --format kml|geojson --out FILE (--count N | --in FRAMES.jsonl) [--geoid-undulation M]
+                               each track's trajectory (confirmed and coasting tracks with a
+                               geodetic position) from N live frames or from a file of
+                               `stevi watch --json` lines: KML (opens in Google Earth; altitudes
+                               are ellipsoid heights minus M, the geoid undulation at the site)
+                               or a GeoJSON FeatureCollection (opens in QGIS)
   calibration list [--json]    stored calibrations and the active one
   calibration get ID [--yaml]  one calibration: report, or its YAML file
   calibration activate ID      switch the running server to it (between two frames)
@@ -627,6 +634,102 @@ int Avoid(Client& client, const std::vector<std::string>& args) {
   return 0;
 }
 
+// The track points of one frame: tracks that are not tentative and have a geodetic position.
+void CollectTrackPoints(const v1::TrackFrame& frame, std::vector<stevi::client::TrackPoint>& points) {
+  for (const v1::Track& t : frame.tracks()) {
+    if (!t.has_geodetic() || t.state() == v1::TRACK_STATE_TENTATIVE) continue;
+    stevi::client::TrackPoint p;
+    p.track_id = t.track_id();
+    p.unix_time_ns = frame.capture_unix_time_ns();
+    p.lat_deg = t.geodetic().lat_deg();
+    p.lon_deg = t.geodetic().lon_deg();
+    p.alt_m = t.geodetic().alt_m();
+    if (t.has_position_sigma_m()) p.horizontal_sigma_m = t.position_sigma_m().horizontal_m();
+    points.push_back(p);
+  }
+}
+
+int Export(Client& client, const std::vector<std::string>& args) {
+  std::string format, out_path, in_path;
+  uint64_t count = 0;
+  stevi::client::KmlOptions kml;
+  for (size_t i = 0; i < args.size(); ++i) {
+    const bool has_value = i + 1 < args.size();
+    double number = 0;
+    if (args[i] == "--format" && has_value) {
+      format = args[++i];
+      if (format != "kml" && format != "geojson") {
+        return Usage("export --format: expected kml or geojson, got '" + format + "'");
+      }
+    } else if (args[i] == "--out" && has_value) {
+      out_path = args[++i];
+    } else if (args[i] == "--in" && has_value) {
+      in_path = args[++i];
+    } else if (args[i] == "--count" && has_value) {
+      if (!ParseNumber(args[++i], 1, 1e9, number) || number != static_cast<double>(static_cast<int64_t>(number))) {
+        return Usage("export --count: expected a whole number >= 1, got '" + args[i] + "'");
+      }
+      count = static_cast<uint64_t>(number);
+    } else if (args[i] == "--geoid-undulation" && has_value) {
+      if (!ParseNumber(args[++i], -120, 100, number)) {
+        return Usage("export --geoid-undulation: expected metres in [-120, 100], got '" + args[i] + "'");
+      }
+      kml.geoid_undulation_m = number;
+    } else {
+      return Usage("export: unexpected argument '" + args[i] + "'");
+    }
+  }
+  if (format.empty() || out_path.empty()) return Usage("export: --format and --out are required");
+  if (in_path.empty() == (count == 0)) return Usage("export: give either --count N or --in FILE");
+
+  std::vector<stevi::client::TrackPoint> points;
+  if (!in_path.empty()) {
+    std::ifstream in(in_path);
+    if (!in) {
+      std::cerr << "stevi: export: cannot read " << in_path << "\n";
+      return 1;
+    }
+    std::string line;
+    int number_of_line = 0;
+    while (std::getline(in, line)) {
+      ++number_of_line;
+      if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+      v1::TrackFrame frame;
+      google::protobuf::util::JsonParseOptions parse;
+      parse.ignore_unknown_fields = true;
+      if (!google::protobuf::util::JsonStringToMessage(line, &frame, parse).ok()) {
+        std::cerr << "stevi: export: " << in_path << " line " << number_of_line
+                  << ": not a TrackFrame JSON line (as `stevi watch --json` writes)\n";
+        return 1;
+      }
+      CollectTrackPoints(frame, points);
+    }
+  } else {
+    stevi::client::StreamOptions stream;
+    stream.max_frames = count;
+    const grpc::Status status = client.StreamTracks(
+        [&](const v1::TrackFrame& frame) {
+          CollectTrackPoints(frame, points);
+          return true;
+        },
+        stream);
+    if (!status.ok()) return RpcFailed(client, "export", status);
+  }
+  for (const std::string& problem : stevi::client::ValidateTrackPoints(points)) {
+    std::cerr << "stevi: export: left out " << problem << "\n";
+  }
+  const std::string text =
+      format == "kml" ? stevi::client::ToKml(points, kml) : stevi::client::ToGeoJson(points);
+  std::ofstream out(out_path, std::ios::binary | std::ios::trunc);
+  out << text;
+  if (!out) {
+    std::cerr << "stevi: export: cannot write " << out_path << "\n";
+    return 1;
+  }
+  std::cout << out_path << ": " << points.size() << " points\n";
+  return 0;
+}
+
 int Calibration(Client& client, const std::vector<std::string>& args) {
   if (args.empty()) return Usage("calibration: expected list, get ID or activate ID");
   if (args[0] == "list") {
@@ -716,6 +819,7 @@ int main(int argc, char** argv) {
   if (command == "snapshot") return Snapshot(client, rest);
   if (command == "calibrate") return Calibrate(client, rest);
   if (command == "avoid") return Avoid(client, rest);
+  if (command == "export") return Export(client, rest);
   if (command == "calibration") return Calibration(client, rest);
   return Usage("unknown command '" + command + "'");
 }

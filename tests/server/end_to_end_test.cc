@@ -2,6 +2,7 @@
 #include <signal.h>
 
 #include <gmock/gmock.h>
+#include <google/protobuf/struct.pb.h>
 #include <google/protobuf/util/json_util.h>
 #include <gtest/gtest.h>
 
@@ -263,6 +264,65 @@ TEST(AvoidWithoutAServer, SaysNoDataAndNeverClear) {
   const std::vector<std::string> levels = AdvisoryLevels(r.out);
   ASSERT_GE(levels.size(), 2u) << r.out << r.err;
   EXPECT_EQ(std::count(levels.begin(), levels.end(), "NO_DATA"), static_cast<long>(levels.size()));
+}
+
+// Ground-station exports of the demo flight (the rig hovering at Pisa): KML from the live stream,
+// GeoJSON from a file of `stevi watch --json` lines; both hold the tracks where they are.
+TEST_F(ServerProcessTest, ExportWritesKmlAndGeoJsonAtTheRightPlace) {
+  const std::string dir = testing::MakeTempDir("stevi-export");
+  const testing::RunResult kml =
+      Stevi({"export", "--format", "kml", "--count", "20", "--out", dir + "/demo.kml",
+             "--geoid-undulation", "47.5"});
+  ASSERT_EQ(kml.exit_code, 0) << kml.err;
+  std::ifstream kml_file(dir + "/demo.kml");
+  std::stringstream kml_text;
+  kml_text << kml_file.rdbuf();
+  EXPECT_THAT(kml_text.str(), HasSubstr("<kml xmlns=\"http://www.opengis.net/kml/2.2\""));
+  EXPECT_THAT(kml_text.str(), HasSubstr("<Placemark"));
+  // lon,lat,alt near the rig (10.3925 E, 43.6839 N): within ~100 m.
+  EXPECT_TRUE(std::regex_search(kml_text.str(), std::regex("10\\.39[0-9]+,43\\.68[0-9]+,")))
+      << kml_text.str().substr(0, 2000);
+
+  const testing::RunResult watch = Stevi({"watch", "--json", "--count", "10"});
+  ASSERT_EQ(watch.exit_code, 0) << watch.err;
+  {
+    std::ofstream frames(dir + "/frames.jsonl");
+    frames << watch.out;
+  }
+  const testing::RunResult geojson = Stevi({"export", "--format", "geojson", "--in",
+                                            dir + "/frames.jsonl", "--out", dir + "/demo.geojson"});
+  ASSERT_EQ(geojson.exit_code, 0) << geojson.err;
+  std::ifstream geojson_file(dir + "/demo.geojson");
+  std::stringstream geojson_text;
+  geojson_text << geojson_file.rdbuf();
+  google::protobuf::Struct parsed;
+  ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(geojson_text.str(), &parsed).ok())
+      << geojson_text.str().substr(0, 500);
+  EXPECT_EQ(parsed.fields().at("type").string_value(), "FeatureCollection");
+  const auto& features = parsed.fields().at("features").list_value().values();
+  ASSERT_GE(features.size(), 3);
+  for (const auto& feature : features) {
+    const auto& geometry = feature.struct_value().fields().at("geometry").struct_value().fields();
+    const auto& coordinates = geometry.at("coordinates").list_value().values();
+    ASSERT_FALSE(coordinates.empty());
+    // A LineString's first position or a Point: [lon, lat, alt].
+    const auto& first = coordinates[0].has_list_value() ? coordinates[0].list_value().values()
+                                                        : coordinates;
+    EXPECT_NEAR(first[0].number_value(), 10.3925, 0.002) << "longitude first";
+    EXPECT_NEAR(first[1].number_value(), 43.6839, 0.002);
+  }
+
+  const testing::RunResult missing =
+      Stevi({"export", "--format", "kml", "--in", dir + "/none.jsonl", "--out", dir + "/x.kml"});
+  EXPECT_EQ(missing.exit_code, 1);
+  {
+    std::ofstream bad(dir + "/bad.jsonl");
+    bad << "{\"frame_id\": 1}\nnot json\n";
+  }
+  const testing::RunResult garbage =
+      Stevi({"export", "--format", "kml", "--in", dir + "/bad.jsonl", "--out", dir + "/x.kml"});
+  EXPECT_EQ(garbage.exit_code, 1);
+  EXPECT_THAT(garbage.err, HasSubstr("line 2"));
 }
 
 TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
