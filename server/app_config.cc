@@ -45,6 +45,15 @@ std::optional<double> ParseDouble(const std::string& text) {
 }  // namespace
 
 std::optional<drivers::Scenario> FindScenario(const std::string& name) {
+  if (name == "flight") {
+    drivers::Scenario s;
+    s.name = "flight";
+    s.description = "the airfield scene with the rig flying forward at 3 m/s, repeating every 10 s";
+    s.options.scene.rig_velocity_mps = cv::Vec3d(0.0, 0.0, 3.0);
+    s.options.scene.rig_period_s = 10.0;
+    s.frames = 100;
+    return s;
+  }
   for (std::vector<drivers::Scenario> list : {drivers::EvaluationScenarios(), drivers::TrackingScenarios()}) {
     for (drivers::Scenario& s : list) {
       if (s.name == name) return std::move(s);
@@ -197,7 +206,7 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
       }
       if (source.synthetic().has_scene() && source.synthetic().scene() != "airfield" &&
           source.synthetic().scene() != "chessboard" && !FindScenario(source.synthetic().scene())) {
-        std::string names = "airfield, chessboard";
+        std::string names = "airfield, flight, chessboard";
         for (const drivers::Scenario& s : drivers::EvaluationScenarios()) names += ", " + s.name;
         for (const drivers::Scenario& s : drivers::TrackingScenarios()) names += ", " + s.name;
         problems.push_back("source.synthetic.scene: unknown scene '" + source.synthetic().scene() +

@@ -86,7 +86,7 @@ void Engine::SetRig(std::shared_ptr<const geometry::StereoRig> rig, bool swap_le
   swap_left_right_ = swap_left_right;
 }
 
-void Engine::SetPoseSource(std::function<geo::PoseLookup(int64_t)> pose_at) {
+void Engine::SetPoseSource(std::function<geo::PoseLookup(int64_t, int64_t)> pose_at) {
   std::lock_guard lock(mu_);
   pose_at_ = std::move(pose_at);
 }

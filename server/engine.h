@@ -64,9 +64,9 @@ class Engine {
   // (a calibration found the cameras named the wrong way round) and the engine swaps each pair.
   void SetRig(std::shared_ptr<const geometry::StereoRig> rig, bool swap_left_right = false);
   std::shared_ptr<const geometry::StereoRig> rig() const;
-  // Where the pipeline gets the vehicle pose at a frame's capture time (unix ns), for the
+  // Where the pipeline gets the vehicle pose at a frame's capture (source t_ns, unix ns), for the
   // georeferenced tracks. Set before Start(); empty (the default): no georeferencing.
-  void SetPoseSource(std::function<geo::PoseLookup(int64_t)> pose_at);
+  void SetPoseSource(std::function<geo::PoseLookup(int64_t, int64_t)> pose_at);
 
   // The source's image size (of the rig it was created with).
   cv::Size source_image_size() const { return source_image_size_; }
@@ -110,7 +110,7 @@ class Engine {
   std::shared_ptr<const pipeline::FrameResult> latest_;
   std::shared_ptr<const geometry::StereoRig> rig_;
   bool swap_left_right_ = false;
-  std::function<geo::PoseLookup(int64_t)> pose_at_;
+  std::function<geo::PoseLookup(int64_t, int64_t)> pose_at_;
   std::condition_variable capture_cv_;
   StereoFrame last_capture_;  // shares the images with the frame in the mailbox (never written)
 

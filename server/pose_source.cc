@@ -1,6 +1,10 @@
 #include "server/pose_source.h"
 
+#include <cmath>
+#include <numbers>
 #include <utility>
+
+#include <GeographicLib/LocalCartesian.hpp>
 
 #include "server/convert.h"
 
@@ -23,8 +27,18 @@ Result<std::unique_ptr<PoseSource>> PoseSource::Create(
   return std::unique_ptr<PoseSource>(new PoseSource(options, std::move(fixed)));
 }
 
-geo::PoseLookup PoseSource::At(int64_t unix_time_ns) const {
-  if (buffer_.size() > 0 || !fixed_) return buffer_.At(unix_time_ns);
+geo::PoseLookup PoseSource::At(int64_t t_ns, int64_t unix_time_ns) const {
+  if (buffer_.size() > 0 || (!fixed_ && !path_)) return buffer_.At(unix_time_ns);
+  if (path_) {
+    geo::PoseLookup lookup;
+    lookup.status = geo::GeoStatus::kOk;
+    lookup.message = "synthetic flight";
+    geo::VehiclePose pose;
+    pose.state = path_(t_ns);
+    pose.state.t_ns = unix_time_ns;
+    lookup.pose = pose;
+    return lookup;
+  }
   geo::PoseLookup lookup;
   lookup.status = geo::GeoStatus::kOk;
   lookup.message = "fixed pose";
@@ -36,6 +50,21 @@ geo::PoseLookup PoseSource::At(int64_t unix_time_ns) const {
 }
 
 Status PoseSource::Publish(const geo::VehicleState& state) { return buffer_.Add(state); }
+
+geo::VehicleState MovedRigPose(const geo::VehicleState& start, const cv::Vec3d& offset_m,
+                               const cv::Vec3d& velocity_mps) {
+  const double yaw = start.yaw_deg * std::numbers::pi / 180.0;
+  const auto to_ned = [&](const cv::Vec3d& v) {  // forward z, right x
+    return Eigen::Vector3d(v[2] * std::cos(yaw) - v[0] * std::sin(yaw),
+                           v[2] * std::sin(yaw) + v[0] * std::cos(yaw), v[1]);
+  };
+  const Eigen::Vector3d ned = to_ned(offset_m);
+  const GeographicLib::LocalCartesian local(start.lat_deg, start.lon_deg, start.alt_m);
+  geo::VehicleState moved = start;
+  local.Reverse(ned.y(), ned.x(), -ned.z(), moved.lat_deg, moved.lon_deg, moved.alt_m);
+  moved.velocity_ned_mps = to_ned(velocity_mps);
+  return moved;
+}
 
 geo::VehicleState SyntheticRigPose(double camera_height_m) {
   geo::VehicleState s;

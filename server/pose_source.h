@@ -3,7 +3,10 @@
 // without geodetic positions, and the frame says why).
 #pragma once
 
+#include <functional>
 #include <optional>
+
+#include <opencv2/core.hpp>
 
 #include "core/common/error.h"
 #include "core/geo/pose_buffer.h"
@@ -21,9 +24,14 @@ class PoseSource {
   static Result<std::unique_ptr<PoseSource>> Create(
       const v1::GeoConfig& config, const std::optional<geo::VehicleState>& synthetic_default);
 
+  // The synthetic rig's own flight: its pose at a frame's source time (t_ns, the scene clock).
+  // Used instead of the fixed pose until an autopilot publishes states. Set before the engine
+  // starts.
+  void SetSyntheticPath(std::function<geo::VehicleState(int64_t t_ns)> path) { path_ = std::move(path); }
+
   // The pose at a frame's capture time (Unix ns): from the published states once any arrived,
   // else the fixed pose (its time set to the frame's), else kNoPose.
-  geo::PoseLookup At(int64_t unix_time_ns) const;
+  geo::PoseLookup At(int64_t t_ns, int64_t unix_time_ns) const;
   // A published state: refused (kInvalidArgument naming the field, or out of order) without
   // changing anything.
   Status Publish(const geo::VehicleState& state);
@@ -34,7 +42,13 @@ class PoseSource {
 
   geo::PoseBuffer buffer_;
   const std::optional<geo::VehicleState> fixed_;
+  std::function<geo::VehicleState(int64_t)> path_;
 };
+
+// The synthetic rig's pose after it moved `offset_m` (scene frame: x right, z forward, level)
+// from `start` at `velocity_mps` (same frame): position and NED velocity turned by the heading.
+geo::VehicleState MovedRigPose(const geo::VehicleState& start, const cv::Vec3d& offset_m,
+                               const cv::Vec3d& velocity_mps);
 
 // The synthetic rig's pose: hovering over the threshold of runway 04R at Pisa airport
 // (43.6839 N, 10.3925 E), its camera `camera_height_m` above the ground (the ground there is

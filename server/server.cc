@@ -46,7 +46,19 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   if (!engine.ok()) return engine.error();
   server->engine_ = std::move(engine).value();
   PoseSource* pose_source = server->poses_.get();
-  server->engine_->SetPoseSource([pose_source](int64_t t) { return pose_source->At(t); });
+  if (synthetic_pose) {
+    const std::optional<drivers::Scenario> scenario = FindScenario(config.source().synthetic().scene());
+    if (scenario && scenario->options.scene.rig_velocity_mps != cv::Vec3d(0, 0, 0)) {
+      const drivers::Scene scene = scenario->options.scene;
+      const geo::VehicleState start = *synthetic_pose;
+      pose_source->SetSyntheticPath([scene, start](int64_t t_ns) {
+        return MovedRigPose(start, scene.RigOffsetAt(static_cast<double>(t_ns) * 1e-9),
+                            scene.rig_velocity_mps);
+      });
+    }
+  }
+  server->engine_->SetPoseSource(
+      [pose_source](int64_t t, int64_t unix_t) { return pose_source->At(t, unix_t); });
   Result<std::unique_ptr<CalibrationManager>> calibration = CalibrationManager::Open(
       config.has_data_dir() ? config.data_dir() : kDefaultDataDir, *server->engine_);
   if (!calibration.ok()) return calibration.error();

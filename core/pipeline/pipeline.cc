@@ -174,7 +174,7 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
       }
       state_->georeferencer = std::make_unique<geo::Georeferencer>(config.mount);
     }
-    result.pose = snapshot.pose_at(frame.unix_time_ns);
+    result.pose = snapshot.pose_at(frame.t_ns, frame.unix_time_ns);
     result.track_geo.assign(result.tracks.size(), std::nullopt);
     if (result.pose->ok()) {
       for (size_t i = 0; i < result.tracks.size(); ++i) {

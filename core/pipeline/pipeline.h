@@ -53,10 +53,10 @@ struct FrameResult {
 struct Snapshot {
   std::shared_ptr<const PipelineConfig> config;
   std::shared_ptr<const geometry::StereoRig> rig;
-  // The vehicle pose at a capture time, asked with the frame's unix_time_ns (the wall clock an
-  // autopilot's GNSS-disciplined states share): a pose buffer fed by the autopilot, or a fixed
-  // pose. Empty: the tracks are not georeferenced.
-  std::function<geo::PoseLookup(int64_t t_ns)> pose_at = {};
+  // The vehicle pose at a frame's capture, asked with its source time t_ns and its unix_time_ns
+  // (the wall clock an autopilot's GNSS-disciplined states share): a pose buffer fed by the
+  // autopilot, a fixed pose, or the synthetic rig's own flight. Empty: no georeferencing.
+  std::function<geo::PoseLookup(int64_t t_ns, int64_t unix_time_ns)> pose_at = {};
 };
 
 // Thread-compatible: call Process() from one thread at a time.

@@ -76,8 +76,21 @@ cv::Vec3d Path::PositionAt(double t_s) const {
   return start;
 }
 
+cv::Vec3d Scene::RigOffsetAt(double t_s) const {
+  const double t = rig_period_s > 0.0 ? std::fmod(t_s, rig_period_s) : t_s;
+  return rig_velocity_mps * t;
+}
+
 std::vector<std::string> Scene::Validate() const {
   std::vector<std::string> problems;
+  const bool moving = rig_velocity_mps != cv::Vec3d(0.0, 0.0, 0.0);
+  Check(!std::isfinite(rig_velocity_mps[0]) || !std::isfinite(rig_velocity_mps[2]) ||
+            rig_velocity_mps[1] != 0.0,
+        "rig_velocity_mps", "must be finite and level (y = 0)", problems);
+  Check(!(rig_period_s >= 0.0) || !std::isfinite(rig_period_s), "rig_period_s", "must be >= 0",
+        problems);
+  Check(moving && (!hills.empty() || !marks.empty() || !dashed_lines.empty()), "rig_velocity_mps",
+        "a moving rig supports no hills, marks or dashed lines", problems);
   Check(!(camera_height_m > 0.0) || !std::isfinite(camera_height_m), "camera_height_m",
         "must be > 0", problems);
   Check(!InUnit(ground_albedo), "ground_albedo", "must be in 0..1", problems);

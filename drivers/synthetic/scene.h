@@ -94,6 +94,15 @@ struct Scene {
   std::vector<Hill> hills;
   std::vector<GroundMark> marks;          // painted in order, later over earlier
   std::vector<DashedLine> dashed_lines;   // painted after the marks
+  // The rig's own motion through the scene (world frame, m/s; level: y = 0): at time t the
+  // camera is at rig_velocity_mps * (t mod rig_period_s), so the ground and the obstacles move
+  // past it (the flight repeats every rig_period_s; 0 = never). Hills and marks are not supported
+  // with a moving rig. Zero (the default): the camera is at rest.
+  cv::Vec3d rig_velocity_mps{0.0, 0.0, 0.0};
+  double rig_period_s = 0.0;
+
+  // The camera's offset from its rest position at time t (world frame, metres).
+  cv::Vec3d RigOffsetAt(double t_s) const;
 
   std::vector<std::string> Validate() const;
 };

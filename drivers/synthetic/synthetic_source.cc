@@ -162,6 +162,7 @@ struct FrameSetup {
   std::vector<Box> boxes;
   std::vector<PixelRect> rects[2];  // per view: 0 left, 1 right
   double origin_x[2] = {0.0, 0.0};  // camera centre x per view, metres
+  cv::Vec3d rig_offset{0.0, 0.0, 0.0};  // the moving rig's offset from its rest position
 };
 
 }  // namespace
@@ -226,12 +227,13 @@ struct SyntheticRenderer::Impl {
   FrameSetup Setup(double t_s) const {
     FrameSetup setup;
     setup.origin_x[1] = options.baseline_m;
+    setup.rig_offset = options.scene.RigOffsetAt(t_s);
     const auto& obstacles = options.scene.obstacles;
     for (size_t i = 0; i < obstacles.size(); ++i) {
       const Obstacle& ob = obstacles[i];
       Box box;
       box.id = ob.id;
-      box.centre = ob.path.PositionAt(t_s);
+      box.centre = ob.path.PositionAt(t_s) - setup.rig_offset;
       box.lo = box.centre - ob.size_m * 0.5;
       box.hi = box.centre + ob.size_m * 0.5;
       box.albedo = static_cast<float>(ob.albedo);
@@ -527,7 +529,8 @@ struct SyntheticRenderer::Impl {
       float value = sky;
       if (ground) {
         const double x = ox + a * ground_t;
-        const float n = Texture(ground_seed, x, ground_t, scene.ground_texture_cell_m,
+        const float n = Texture(ground_seed, x + setup.rig_offset[0],
+                                ground_t + setup.rig_offset[2], scene.ground_texture_cell_m,
                                 ground_footprint);
         value = ground_albedo + 2.0f * ground_contrast * n;
         if (n_mark > 0) {

@@ -493,5 +493,28 @@ TEST(DefaultScene, KeepsEveryObstacleUsableOverOneLoop) {
   EXPECT_GT(hidden_frames, 10);  // drone-3 behind aircraft-1
 }
 
+TEST(Render, AMovingRigSeesStandingObstaclesComeNearer) {
+  SyntheticOptions options;
+  options.scene.rig_velocity_mps = cv::Vec3d(0.5, 0.0, 3.0);
+  options.scene.rig_period_s = 10.0;
+  ASSERT_TRUE(options.Validate().empty());
+  const SyntheticRenderer still{SyntheticOptions{}};
+  const SyntheticRenderer moving(options);
+  // Frame 20 at 10 fps: 2 s of flight, the rig 1 m right and 6 m forward. The tower stands still
+  // in the world, so in the camera frame it is 1 m further left and 6 m nearer.
+  const FrameTruth a = still.Truth(20), b = moving.Truth(20);
+  ASSERT_EQ(a.obstacles[0].name, "tower");
+  EXPECT_NEAR(b.obstacles[0].position_cam_m[0], a.obstacles[0].position_cam_m[0] - 1.0, 1e-9);
+  EXPECT_NEAR(b.obstacles[0].depth_m, a.obstacles[0].depth_m - 6.0, 1e-9);
+  // The flight repeats: at 10 s the rig is back where it started.
+  EXPECT_NEAR(moving.Truth(100).obstacles[0].depth_m, still.Truth(100).obstacles[0].depth_m, 1e-9);
+  // A moving rig with hills (or marks) is refused, by name.
+  SyntheticOptions hilly = options;
+  hilly.scene.hills.push_back(Hill{{0.0, 45.0, 200.0}, {20.0, 10.0, 20.0}});
+  bool named = false;
+  for (const std::string& p : hilly.Validate()) named |= p.find("rig_velocity_mps") != std::string::npos;
+  EXPECT_TRUE(named);
+}
+
 }  // namespace
 }  // namespace stevi::drivers

@@ -282,6 +282,65 @@ TEST_F(ServerTest, TracksCarryGeodeticPositionsMatchingTheTruth) {
   }
 }
 
+// The synthetic rig's own flight (--scene flight: forward at 3 m/s): the vehicle's position moves,
+// the tower standing on the ground keeps its latitude and longitude.
+TEST(ServerFlight, AStandingTowerKeepsItsPlaceWhileTheRigFlies) {
+  v1::ServerConfig config = TestConfig();
+  config.mutable_source()->mutable_synthetic()->set_scene("flight");
+  Result<std::unique_ptr<Server>> server = Server::Start(config);
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  client::ClientOptions options;
+  options.address = "127.0.0.1:" + std::to_string((*server)->port());
+  options.timeout = std::chrono::seconds(20);
+  client::Client client(options);
+  std::vector<v1::TrackFrame> frames;
+  client::StreamOptions stream;
+  stream.max_frames = 40;
+  ASSERT_TRUE(client
+                  .StreamTracks(
+                      [&](const v1::TrackFrame& f) {
+                        frames.push_back(f);
+                        return true;
+                      },
+                      stream)
+                  .ok());
+  ASSERT_EQ(frames.size(), 40u);
+  // The tower: the confirmed track nearest the truth's tower bearing (left, 43-45 m).
+  const geo::VehicleState start = SyntheticRigPose(drivers::DefaultScene().camera_height_m);
+  const geo::Georeferencer georeferencer;
+  geo::VehiclePose pose;
+  pose.state = start;
+  geo::PointInCam tower_point;
+  tower_point.position_m = Eigen::Vector3d(-14.0, 0.0, 43.0);  // its front face, at camera height
+  Result<geo::GeoPoint> tower = georeferencer.Georeference(pose, tower_point);
+  ASSERT_TRUE(tower.ok());
+  const auto metres = [](double lat0, double lon0, double lat1, double lon1) {
+    const double north = (lat1 - lat0) * 111132.0;
+    const double east = (lon1 - lon0) * 111320.0 * std::cos(lat0 * M_PI / 180.0);
+    return std::hypot(north, east);
+  };
+  std::vector<double> errors;
+  for (const v1::TrackFrame& f : frames) {
+    ASSERT_EQ(f.geo_status(), v1::GEO_STATUS_OK) << f.geo_message();
+    double best = 1e9;
+    for (const v1::Track& t : f.tracks()) {
+      if (t.state() != v1::TRACK_STATE_CONFIRMED || !t.has_geodetic()) continue;
+      best = std::min(best, metres(tower->lat_deg, tower->lon_deg, t.geodetic().lat_deg(),
+                                   t.geodetic().lon_deg()));
+    }
+    if (best < 1e9) errors.push_back(best);
+  }
+  const double moved =
+      metres(frames.front().vehicle().position().lat_deg(), frames.front().vehicle().position().lon_deg(),
+             frames.back().vehicle().position().lat_deg(), frames.back().vehicle().position().lon_deg());
+  std::printf("rig moved %.2f m; the tower's track stays %.2f m (max %.2f m) from its place, %zu frames\n",
+              moved, std::accumulate(errors.begin(), errors.end(), 0.0) / errors.size(),
+              *std::max_element(errors.begin(), errors.end()), errors.size());
+  EXPECT_GT(moved, 3.0) << "40 frames at 20 fps at 3 m/s: 5.85 m";
+  ASSERT_GE(errors.size(), 30u);
+  for (double e : errors) EXPECT_LT(e, 0.02 * 45) << "within 2 % of its range";
+}
+
 // An autopilot's states take over from the fixed pose; bad ones are refused and counted.
 TEST(ServerPublish, PublishedVehicleStatesGeoreferenceTheTracks) {
   // States published ahead of time: the frames' age against the newest state is allowed up to
