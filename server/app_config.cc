@@ -45,15 +45,7 @@ std::optional<double> ParseDouble(const std::string& text) {
 }  // namespace
 
 std::optional<drivers::Scenario> FindScenario(const std::string& name) {
-  if (name == "flight") {
-    drivers::Scenario s;
-    s.name = "flight";
-    s.description = "the airfield scene with the rig flying forward at 3 m/s, repeating every 10 s";
-    s.options.scene.rig_velocity_mps = cv::Vec3d(0.0, 0.0, 3.0);
-    s.options.scene.rig_period_s = 10.0;
-    s.frames = 100;
-    return s;
-  }
+  if (name == "flight") return drivers::FlightScenario();
   for (std::vector<drivers::Scenario> list : {drivers::EvaluationScenarios(), drivers::TrackingScenarios()}) {
     for (drivers::Scenario& s : list) {
       if (s.name == name) return std::move(s);

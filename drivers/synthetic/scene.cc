@@ -535,6 +535,19 @@ Scenario TowerOnGround() {
 
 }  // namespace
 
+Scenario FlightScenario() {
+  Scenario s;
+  s.name = "flight";
+  s.description =
+      "The demo scene with the rig flying forward at 3 m/s (repeating every 10 s): the tower and "
+      "the hangar come 30 m nearer and the moving obstacles pass by.";
+  s.options.scene = DefaultScene();
+  s.options.scene.rig_velocity_mps = cv::Vec3d(0.0, 0.0, 3.0);
+  s.options.scene.rig_period_s = 10.0;
+  s.frames = 100;
+  return s;
+}
+
 std::vector<Scenario> EvaluationScenarios() {
   std::vector<Scenario> scenarios;
   scenarios.push_back(ClearSky());

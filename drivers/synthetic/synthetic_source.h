@@ -108,6 +108,10 @@ struct Scenario {
 // is mostly in frame. Defined in scene.cc, next to DefaultScene().
 std::vector<Scenario> EvaluationScenarios();
 
+// "flight": the demo scene with the rig flying forward at 3 m/s through it, repeating every 10 s
+// (Scene::rig_velocity_mps), for the georeferencing demo. Defined in scene.cc.
+Scenario FlightScenario();
+
 // The scenarios for evaluating the tracker, on the same rig with the camera 100 m up (every
 // obstacle against the sky, so that detection is clean): "crossing_occlusion" (two obstacles
 // crossing at 30 and 48 m, and a drone hidden for 10 frames behind a nearer hovering one),

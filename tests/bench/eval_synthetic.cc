@@ -18,6 +18,7 @@
 
 #include "core/pipeline/pipeline.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/bench/eval_flags.h"
 #include "tests/testing/truth_match.h"
 
 namespace {
@@ -115,28 +116,13 @@ int main(int argc, char** argv) {
                  "[--algorithm canonical|stevie|stevis|stevis-graph]\n", problem.c_str());
     return 2;
   };
-  for (int i = 1; i < argc; i += 2) {
-    const std::string flag = argv[i];
-    if (i + 1 >= argc) return usage(flag + " needs a value");
-    const std::string value = argv[i + 1];
-    if (flag == "--frames") {
-      size_t used = 0;
-      try {
-        max_frames = std::stoi(value, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used != value.size() || max_frames < 1) {
-        return usage("--frames: expected a whole number >= 1, got '" + value + "'");
-      }
-    } else if (flag == "--scenario") {
-      only_scenario = value;
-    } else if (flag == "--algorithm") {
-      only_algorithm = value;
-    } else {
-      return usage("unknown flag " + flag);
-    }
+  bench::EvalFlags flags;
+  if (std::optional<std::string> problem = bench::ParseEvalFlags(argc, argv, false, flags)) {
+    return usage(*problem);
   }
+  max_frames = flags.max_frames;
+  only_scenario = flags.scenario;
+  only_algorithm = flags.algorithm;
 
   std::vector<drivers::Scenario> scenarios = drivers::EvaluationScenarios();
   drivers::Scenario demo;

@@ -32,6 +32,7 @@
 #include "core/pipeline/config.h"
 #include "core/tracking/tracker.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/bench/eval_flags.h"
 #include "tests/testing/mot_metrics.h"
 #include "tests/testing/tracking_eval.h"
 
@@ -163,34 +164,14 @@ int main(int argc, char** argv) {
                  problem.c_str());
     return 2;
   };
-  bool trace = false;
-  for (int i = 1; i < argc; i += 2) {
-    const std::string flag = argv[i];
-    if (flag == "--trace") {
-      trace = true;
-      --i;
-      continue;
-    }
-    if (i + 1 >= argc) return usage(flag + " needs a value");
-    const std::string value = argv[i + 1];
-    if (flag == "--frames") {
-      size_t used = 0;
-      try {
-        max_frames = std::stoi(value, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used != value.size() || max_frames < 1) {
-        return usage("--frames: expected a whole number >= 1, got '" + value + "'");
-      }
-    } else if (flag == "--scenario") {
-      only_scenario = value;
-    } else if (flag == "--algorithm") {
-      only_algorithm = value;
-    } else {
-      return usage("unknown flag " + flag);
-    }
+  bench::EvalFlags flags;
+  if (std::optional<std::string> problem = bench::ParseEvalFlags(argc, argv, true, flags)) {
+    return usage(*problem);
   }
+  max_frames = flags.max_frames;
+  only_scenario = flags.scenario;
+  only_algorithm = flags.algorithm;
+  const bool trace = flags.trace;
 
   const std::vector<drivers::Scenario> scenarios = drivers::TrackingScenarios();
   if (!only_scenario.empty() &&

@@ -479,6 +479,22 @@ TEST(ServerStart, RefusesABadConfigBeforeOpeningAnything) {
   EXPECT_THAT(server.error().message,
               AllOf(HasSubstr("listen"), HasSubstr("pipeline.range.min_disparity_px"),
                     HasSubstr("source.left")));
+
+  // A bad fixed pose or pose-buffer limit is named before anything opens.
+  v1::ServerConfig geo = TestConfig();
+  geo.mutable_geo()->mutable_fixed_pose()->mutable_position()->set_lat_deg(91);
+  geo.mutable_geo()->set_max_age_s(-1);
+  geo.mutable_source()->mutable_synthetic()->set_scene("moon");
+  Result<std::unique_ptr<Server>> refused = Server::Start(geo);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_THAT(refused.error().message,
+              AllOf(HasSubstr("source.synthetic.scene: unknown scene 'moon'"),
+                    HasSubstr("flight")));
+  geo.mutable_source()->mutable_synthetic()->clear_scene();
+  refused = Server::Start(geo);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_THAT(refused.error().message,
+              AllOf(HasSubstr("geo.fixed_pose.lat_deg"), HasSubstr("geo.max_age_s")));
 }
 
 }  // namespace
