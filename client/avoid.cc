@@ -121,7 +121,8 @@ std::vector<std::string> AdvisorOptions::Validate() const {
 bool ObstacleIsValid(const Obstacle& o) {
   return Finite(o.position_m) && Finite(o.velocity_mps) && std::isfinite(o.sigma_horizontal_m) &&
          std::isfinite(o.sigma_vertical_m) && o.sigma_horizontal_m >= 0 &&
-         o.sigma_vertical_m >= 0;
+         o.sigma_vertical_m >= 0 && std::isfinite(o.range_rate_sigma_mps) &&
+         o.range_rate_sigma_mps >= 0;
 }
 
 Encounter Assess(const OwnVehicle& own, const Obstacle& obstacle, const AvoidOptions& options) {
@@ -145,7 +146,11 @@ Encounter Assess(const OwnVehicle& own, const Obstacle& obstacle, const AvoidOpt
   e.protected_radius_m =
       options.protected_radius_m +
       options.sigma_factor * std::max(obstacle.sigma_horizontal_m, obstacle.sigma_vertical_m);
-  const bool closing = vv > 0 && Dot(p, v) < 0;
+  // Speed towards the vehicle along the line of sight; it must stand out of the velocity noise.
+  const double closing_speed = e.distance_m > 0 ? -Dot(p, v) / e.distance_m : 0.0;
+  const bool closing =
+      vv > 0 && Dot(p, v) < 0 &&
+      closing_speed > options.sigma_factor * obstacle.range_rate_sigma_mps;
   if (!closing && e.distance_m >= e.protected_radius_m) {
     e.level = e.distance_m < options.caution_range_m ? AdvisoryLevel::kCaution : AdvisoryLevel::kClear;
   } else {

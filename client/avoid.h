@@ -41,6 +41,10 @@ struct Obstacle {
   // 1-sigma of the position, metres, >= 0: per horizontal axis (north and east each) and down.
   double sigma_horizontal_m = 0;
   double sigma_vertical_m = 0;
+  // 1-sigma of the obstacle's speed along the line of sight, m/s, >= 0 (the track's
+  // range_rate_sigma_mps). An approach slower than sigma_factor times this is velocity noise, not
+  // closing: a young track's first velocity estimate must not raise an alarm.
+  double range_rate_sigma_mps = 0;
   ObstacleState state = ObstacleState::kConfirmed;
   double score = 1;  // 0..1, of the last detection
 };
@@ -69,13 +73,16 @@ std::string_view AdvisoryLevelName(AdvisoryLevel level);
 //   CLEAR    otherwise.
 // t_cpa is clamped at 0, so an obstacle that is already inside R counts as being there now, even
 // when it is receding (a separation lost is still lost). But an obstacle that is not closing
-// (p.v >= 0: receding, or at its closest now) and is outside R is CLEAR, unless the caution_range_m
-// rule holds: it will never come nearer than it is, so it needs no warning.
+// and is outside R is CLEAR, unless the caution_range_m rule holds: it will never come nearer than
+// it is, so it needs no warning. Closing means a speed along the line of sight towards the vehicle,
+// -p.v / |p|, above sigma_factor * range_rate_sigma_mps: receding, at its closest now, or
+// approaching within the velocity noise of a young track is not closing.
 // The defaults suit a small UAV whose stereo rig sees obstacles out to 50-80 m.
 struct AvoidOptions {
   // The separation to keep from any obstacle, metres, > 0.
   double protected_radius_m = 10;
-  // Sigmas of the obstacle's position added to the radius, >= 0. 2 covers ~95 % of a 1-D error.
+  // Sigmas of the obstacle's position added to the radius, and of its range rate that an approach
+  // must exceed, >= 0. 2 covers ~95 % of a 1-D error.
   double sigma_factor = 2;
   // Horizons, seconds: 0 < avoid_time_s <= warning_time_s <= caution_time_s.
   double avoid_time_s = 15;
@@ -116,7 +123,8 @@ struct Encounter {
 // finite (ObstacleIsValid).
 Encounter Assess(const OwnVehicle& own, const Obstacle& obstacle, const AvoidOptions& options);
 
-// True when the obstacle's positions, velocities and sigmas are finite and the sigmas >= 0.
+// True when the obstacle's positions, velocities and sigmas (position and range rate) are finite
+// and the sigmas >= 0.
 bool ObstacleIsValid(const Obstacle& obstacle);
 
 struct Advisory {

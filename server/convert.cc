@@ -572,6 +572,11 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
     v->set_y_mps(track.velocity_cam_mps[1]);
     v->set_z_mps(track.velocity_cam_mps[2]);
     t->set_range_rate_mps(track.range_rate_mps);
+    t->set_range_rate_sigma_mps(track.range_rate_sigma_mps);
+    v1::VelocityCam* vs = t->mutable_velocity_sigma_cam();
+    vs->set_x_mps(track.velocity_sigma_mps[0]);
+    vs->set_y_mps(track.velocity_sigma_mps[1]);
+    vs->set_z_mps(track.velocity_sigma_mps[2]);
     if (track.time_to_collision_s) t->set_time_to_collision_s(*track.time_to_collision_s);
     if (track.closest_approach_m) t->set_closest_approach_m(*track.closest_approach_m);
     t->set_smoothed_range_m(track.smoothed_range_m);

@@ -365,6 +365,7 @@ Track Tracker::Output(const Entry& e, const CameraModel& camera) const {
   const Eigen::Vector3d line_of_sight = p.norm() > 0 ? Eigen::Vector3d(p / p.norm()) : Eigen::Vector3d::Zero();
   const Eigen::Vector3d velocity_sigma = variance.tail<3>().cwiseMax(0.0).cwiseSqrt();
   const double range_rate_sigma = line_of_sight.cwiseProduct(velocity_sigma).norm();
+  track.range_rate_sigma_mps = range_rate_sigma;
   const bool closing = track.range_rate_mps < -2.0 * range_rate_sigma;
   const double speed2 = v.squaredNorm();
   if (closing && speed2 > 1e-12) {

@@ -93,6 +93,9 @@ struct Track {
   double range_m = 0;           // raw: the last detection's range
   double smoothed_range_m = 0;  // fading filter, predicted to this frame when not measured
   double range_rate_mps = 0;    // d|p|/dt of the Kalman state; negative = closing
+  // 1-sigma of range_rate_mps from the velocity covariance along the line of sight: large while a
+  // track is young, so a consumer can tell a measured approach from velocity noise.
+  double range_rate_sigma_mps = 0;
   // Straight-line extrapolation of the filtered relative position p and velocity v: the time of
   // the closest approach t* = -p.v / |v|^2 (seconds from this frame) and the miss distance
   // |p + v t*| (metres). Set only for a closing obstacle: t* > 0 and a range rate below minus

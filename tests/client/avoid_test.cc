@@ -155,6 +155,22 @@ TEST(Assess, WithTheDefaultsADivergingObstacleOutsideTheRadiusIsClear) {
   EXPECT_EQ(Assess(kNorthAt10, inside, {}).level, AdvisoryLevel::kAvoid);
 }
 
+TEST(Assess, AnApproachWithinTheVelocityNoiseIsNotClosing) {
+  // A hovering vehicle and a just-confirmed track 14 m out whose first velocity estimate drifts
+  // towards the vehicle at 0.85 m/s, crossing inside R (the departing scene's first frames): with a
+  // range-rate sigma of 1 m/s that is noise, so CLEAR; measured to 0.1 m/s it is a real approach.
+  const OwnVehicle hover{{0, 0, 0}, {0, 0, 0}};
+  Obstacle young = MakeObstacle(2, {10, 10, 0}, {-1.0, -0.2, 0});
+  young.range_rate_sigma_mps = 1.0;
+  EXPECT_EQ(Assess(hover, young, {}).level, AdvisoryLevel::kClear);
+  young.range_rate_sigma_mps = 0.1;
+  EXPECT_EQ(Assess(hover, young, {}).level, AdvisoryLevel::kAvoid);
+  // Noise never hides an obstacle already inside R.
+  young.position_m = {5, 5, 0};
+  young.range_rate_sigma_mps = 1.0;
+  EXPECT_EQ(Assess(hover, young, {}).level, AdvisoryLevel::kAvoid);
+}
+
 TEST(Assess, ObstacleBehindAndRecedingIsClear) {
   // 150 m behind, following at 5 m/s while the vehicle makes 10 m/s.
   const Encounter e = Assess(kNorthAt10, MakeObstacle(6, {-150, 0, 0}, {5, 0, 0}), kR30);
@@ -263,12 +279,14 @@ TEST(AssessFrame, NonFiniteInputsAreNeverClear) {
   // Obstacles that cannot be assessed are counted, the others still assessed.
   Obstacle bad_sigma = MakeObstacle(2, {200, 0, 0}, {-10, 0, 0});
   bad_sigma.sigma_vertical_m = -1;
-  const std::vector<Obstacle> obstacles = {MakeObstacle(1, {nan, 0, 0}, {}),
+  Obstacle bad_rate_sigma = MakeObstacle(6, {200, 0, 0}, {-10, 0, 0});
+  bad_rate_sigma.range_rate_sigma_mps = nan;
+  const std::vector<Obstacle> obstacles = {MakeObstacle(1, {nan, 0, 0}, {}), bad_rate_sigma,
                                            MakeObstacle(3, {0, 0, 0}, {inf, 0, 0}), bad_sigma,
                                            MakeObstacle(4, {500, 0, 0}, {-10, 0, 0}),
                                            MakeObstacle(5, {1e300, 1e300, 0}, {0, 0, 0})};
   const Advisory b = AssessFrame(3, kNorthAt10, obstacles, kR30);
-  EXPECT_EQ(b.invalid_obstacles, 4) << "3 non-finite or negative inputs and 1 overflowing";
+  EXPECT_EQ(b.invalid_obstacles, 5) << "4 non-finite or negative inputs and 1 overflowing";
   EXPECT_EQ(b.level, AdvisoryLevel::kWarning);
   ASSERT_TRUE(b.worst.has_value());
   EXPECT_EQ(b.worst->track_id, 4u);

@@ -419,6 +419,7 @@ struct CollisionErrors {
   Eigen::Vector2d last_rms = Eigen::Vector2d::Zero();          // RMS error at the last frame
   Eigen::Vector2d last_tolerance = Eigen::Vector2d::Zero();    // mean tolerance at the last frame
   double mean_rate_error_mps = 0;  // mean of (range rate - truth) over runs and frames
+  double rate_error_over_sigma_rms = 0;  // RMS of (range rate - truth) / range_rate_sigma_mps
   double smoothed_over_raw = 0;    // RMS range error, smoothed / raw
   bool always_closing = true;      // a time to collision at every checked frame
 };
@@ -426,7 +427,7 @@ struct CollisionErrors {
 CollisionErrors MeasureCollision(const Target& target, int frames, int first_frame, int runs) {
   CollisionErrors e;
   Eigen::Vector2d normalised_sq = Eigen::Vector2d::Zero();
-  double rate_sum = 0, raw_sq = 0, smoothed_sq = 0;
+  double rate_sum = 0, raw_sq = 0, smoothed_sq = 0, rate_normalised_sq = 0;
   int n = 0;
   for (int run = 0; run < runs; ++run) {
     Tracker tracker;
@@ -452,7 +453,9 @@ CollisionErrors MeasureCollision(const Target& target, int frames, int first_fra
         e.last_rms += error.cwiseAbs2() / runs;
         e.last_tolerance += tolerance / runs;
       }
-      rate_sum += t.range_rate_mps - p.dot(target.v) / p.norm();
+      const double rate_error = t.range_rate_mps - p.dot(target.v) / p.norm();
+      rate_sum += rate_error;
+      rate_normalised_sq += std::pow(rate_error / t.range_rate_sigma_mps, 2);
       raw_sq += std::pow(t.range_m - p.norm(), 2);
       smoothed_sq += std::pow(t.smoothed_range_m - p.norm(), 2);
       ++n;
@@ -461,11 +464,13 @@ CollisionErrors MeasureCollision(const Target& target, int frames, int first_fra
   e.rms_normalised = (normalised_sq / n).cwiseSqrt();
   e.last_rms = e.last_rms.cwiseSqrt();
   e.mean_rate_error_mps = rate_sum / n;
+  e.rate_error_over_sigma_rms = std::sqrt(rate_normalised_sq / n);
   e.smoothed_over_raw = std::sqrt(smoothed_sq / raw_sq);
   std::cout << "error / tolerance: worst " << e.worst_normalised.transpose() << ", rms "
             << e.rms_normalised.transpose() << "; last frame: rms error " << e.last_rms.transpose()
             << ", tolerance " << e.last_tolerance.transpose() << "; mean range-rate error "
-            << e.mean_rate_error_mps << " m/s; smoothed/raw range RMS " << e.smoothed_over_raw
+            << e.mean_rate_error_mps << " m/s, rms over its sigma " << e.rate_error_over_sigma_rms
+            << "; smoothed/raw range RMS " << e.smoothed_over_raw
             << "\n";
   return e;
 }
@@ -515,6 +520,9 @@ TEST(Tracker, PassingObstacleGivesItsClosestApproach) {
   EXPECT_LT(e.last_rms[0], 0.1);
   EXPECT_LT(e.last_rms[1], 0.5);
   EXPECT_LT(std::abs(e.mean_rate_error_mps), 0.5);
+  // The range-rate sigma on the wire is honest: the error over it has an RMS near 1.
+  EXPECT_GT(e.rate_error_over_sigma_rms, 0.5);
+  EXPECT_LT(e.rate_error_over_sigma_rms, 1.5);
 }
 
 TEST(Tracker, RecedingObstacleHasNoTimeToCollision) {
