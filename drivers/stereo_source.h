@@ -1,6 +1,7 @@
 // Where stereo pairs come from: the synthetic rig, image sequences and videos, cameras, replays.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -9,6 +10,18 @@
 #include "core/geometry/stereo_rig.h"
 
 namespace stevi::drivers {
+
+// Health counters of a source, for status. Sources that pair two devices fill the pairing fields;
+// the others leave them 0.
+struct SourceCounters {
+  uint64_t pairs = 0;               // pairs delivered
+  uint64_t unpaired_dropped = 0;    // frames dropped without a partner within the tolerance
+  uint64_t incomplete_dropped = 0;  // incomplete or corrupt buffers dropped
+  uint64_t reconnects = 0;          // successful reopenings after a device was lost
+  int64_t last_skew_ns = 0;         // right minus left capture time of the last pair
+  int64_t max_abs_skew_ns = 0;      // largest |skew| of a delivered pair since the start
+  double mean_abs_skew_ns = 0;      // mean |skew| over the recent pairs (up to 100)
+};
 
 // Thread-compatible: one thread calls Next(). Rig() and the accessors are safe from any thread.
 class StereoSource {
@@ -26,8 +39,12 @@ class StereoSource {
   // kInvalidArgument for an unreadable or mismatched pair (naming the file).
   virtual Result<StereoFrame> Next() = 0;
 
-  // Frames per second the source should be paced at when played live; 0 = as fast as it can.
+  // Frames per second the source should be paced at when played live; 0 = as fast as it can (or
+  // the source paces itself: a camera, a replay at its recorded timing).
   virtual double NominalFps() const = 0;
+
+  // Health counters; safe from any thread while another calls Next().
+  virtual SourceCounters Counters() const { return {}; }
 };
 
 }  // namespace stevi::drivers

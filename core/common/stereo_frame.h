@@ -20,6 +20,9 @@ struct StereoFrame {
   int64_t index = 0;
   // True when the source already delivers rectified pairs (the synthetic rig does).
   bool rectified = false;
+  // Right capture time minus left, for a pair of separately clocked cameras; 0 for sources whose
+  // two images are taken at one instant (synthetic, files).
+  int64_t pair_skew_ns = 0;
 };
 
 }  // namespace stevi
