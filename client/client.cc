@@ -117,6 +117,19 @@ grpc::Status Client::GetStatus(v1::GetStatusResponse* response) {
   return stub_->GetStatus(&context, v1::GetStatusRequest(), response);
 }
 
+grpc::Status Client::StartRecording(const v1::StartRecordingRequest& request,
+                                    v1::RecordingStatus* status) {
+  grpc::ClientContext context;
+  Prepare(context);
+  return stub_->StartRecording(&context, request, status);
+}
+
+grpc::Status Client::StopRecording(v1::RecordingStatus* status) {
+  grpc::ClientContext context;
+  Prepare(context);
+  return stub_->StopRecording(&context, v1::StopRecordingRequest(), status);
+}
+
 grpc::Status Client::GetPipelineConfig(v1::PipelineConfig* response) {
   grpc::ClientContext context;
   Prepare(context);

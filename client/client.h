@@ -67,6 +67,9 @@ class Client {
   // Streams vehicle states to the server (an autopilot's feed) and returns its counts.
   grpc::Status PublishVehicleStates(const std::vector<v1::VehicleState>& states,
                                     v1::PublishVehicleStateResponse* response);
+  // Recording on the server (DATA_DIR/recordings/NAME).
+  grpc::Status StartRecording(const v1::StartRecordingRequest& request, v1::RecordingStatus* status);
+  grpc::Status StopRecording(v1::RecordingStatus* status);
   grpc::Status GetCalibration(const std::string& id, v1::CalibrationRecord* record);
   grpc::Status ActivateCalibration(const std::string& id, v1::CalibrationRecord* record);
 

@@ -39,7 +39,15 @@ Commands:
                                live tracks: a table, or one TrackFrame JSON per line;
                                --confirmed hides tentative tracks, --min-score S (0..1)
                                those whose detection scored below S
-  status [--json]              source state, frame rates, drops, stage timings, subscribers
+  status [--json]              source state, frame rates, drops, stage timings, camera pairing
+                               (skew, unpaired and incomplete frames, reconnects), recording,
+                               subscribers
+  record start [--name NAME] [--max-mb MB] [--json]
+                               record the raw stereo pairs, timestamps, vehicle states and
+                               calibration id on the server, in DATA_DIR/recordings/NAME
+                               (default name from the time; default limit 4096 MiB), for
+                               stevi-server --source replay and stevi-process --replay
+  record stop [--json]         stop it and print what was written
   config get [--json]          the active pipeline configuration
   config set KEY=VALUE...      change it while running, e.g. algorithm=canonical,
                                matcher.kind=semi_global, canonical.threshold_range_m=60
@@ -219,6 +227,67 @@ int Watch(Client& client, const std::vector<std::string>& args) {
   return 0;
 }
 
+std::string RecordingLine(const v1::RecordingStatus& r) {
+  std::ostringstream out;
+  out << (r.active() ? "RECORDING " : "stopped ") << r.dir() << ": " << r.frames_written()
+      << " frames, " << std::fixed << std::setprecision(1) << r.bytes_written() / 1048576.0
+      << " MiB of " << r.max_bytes() / 1048576.0 << " MiB, " << r.frames_dropped() << " dropped";
+  if (!r.stop_reason().empty()) out << " (" << r.stop_reason() << ")";
+  return out.str();
+}
+
+// stevi record start [--name NAME] [--max-mb MB] | stop
+int Record(Client& client, const std::vector<std::string>& args) {
+  if (args.empty()) return Usage("record: expected 'start' or 'stop'");
+  bool json = false;
+  v1::RecordingStatus status;
+  if (args[0] == "stop") {
+    for (size_t i = 1; i < args.size(); ++i) {
+      if (args[i] == "--json") {
+        json = true;
+      } else {
+        return Usage("record stop: unexpected argument '" + args[i] + "'");
+      }
+    }
+    if (grpc::Status s = client.StopRecording(&status); !s.ok()) {
+      return RpcFailed(client, "record stop", s);
+    }
+  } else if (args[0] == "start") {
+    v1::StartRecordingRequest request;
+    for (size_t i = 1; i < args.size(); ++i) {
+      const std::string& a = args[i];
+      if (a == "--json") {
+        json = true;
+      } else if ((a == "--name" || a == "--max-mb") && i + 1 < args.size()) {
+        const std::string& v = args[++i];
+        if (a == "--name") {
+          request.set_name(v);
+        } else {
+          char* end = nullptr;
+          const double mb = std::strtod(v.c_str(), &end);
+          if (end == v.c_str() || *end != '\0' || !(mb >= 1 && mb <= 16e6)) {
+            return Usage("record start: --max-mb must be a size in MiB, 1..16000000 (got '" + v + "')");
+          }
+          request.set_max_bytes(static_cast<uint64_t>(mb * 1048576.0));
+        }
+      } else {
+        return Usage("record start: unexpected argument '" + a + "'");
+      }
+    }
+    if (grpc::Status s = client.StartRecording(request, &status); !s.ok()) {
+      return RpcFailed(client, "record start", s);
+    }
+  } else {
+    return Usage("record: expected 'start' or 'stop' (got '" + args[0] + "')");
+  }
+  if (json) {
+    std::cout << Json(status) << "\n";
+  } else {
+    std::cout << RecordingLine(status) << "\n";
+  }
+  return 0;
+}
+
 int PrintStatus(Client& client, const std::vector<std::string>& args) {
   const bool json = args.size() == 1 && args[0] == "--json";
   if (!args.empty() && !json) return Usage("status: unexpected argument '" + args[0] + "'");
@@ -244,6 +313,17 @@ int PrintStatus(Client& client, const std::vector<std::string>& args) {
   std::cout << std::setprecision(2) << "timings      ";
   for (int i = 0; i < s.timings_size(); ++i) {
     std::cout << (i ? ", " : "") << s.timings(i).stage() << " " << s.timings(i).ms() << " ms";
+  }
+  const v1::PairingStatus& p = s.pairing();
+  if (p.pairs() > 0 || p.unpaired_dropped() > 0 || p.incomplete_dropped() > 0 || p.reconnects() > 0) {
+    std::cout << "\npairing      " << p.pairs() << " pairs, " << p.unpaired_dropped()
+              << " unpaired dropped, " << p.incomplete_dropped() << " incomplete dropped, "
+              << p.reconnects() << " reconnects; skew last " << p.last_skew_ns() * 1e-6
+              << " ms, mean |skew| " << p.mean_abs_skew_ns() * 1e-6 << " ms, max "
+              << p.max_abs_skew_ns() * 1e-6 << " ms";
+  }
+  if (!s.recording().dir().empty()) {
+    std::cout << "\nrecording    " << RecordingLine(s.recording());
   }
   std::cout << "\nsubscribers  " << s.subscribers_size() << "\n";
   for (const v1::SubscriberStatus& sub : s.subscribers()) {
@@ -820,6 +900,7 @@ int main(int argc, char** argv) {
   if (command == "snapshot") return Snapshot(client, rest);
   if (command == "calibrate") return Calibrate(client, rest);
   if (command == "avoid") return Avoid(client, rest);
+  if (command == "record") return Record(client, rest);
   if (command == "export") return Export(client, rest);
   if (command == "calibration") return Calibration(client, rest);
   return Usage("unknown command '" + command + "'");

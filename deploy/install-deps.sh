@@ -10,7 +10,7 @@ packages=(
   libeigen3-dev
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libgeographiclib-dev
-  libaravis-dev libusb-1.0-0-dev aravis-tools
+  libaravis-dev libusb-1.0-0-dev aravis-tools iproute2 util-linux
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 

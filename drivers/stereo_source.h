@@ -34,6 +34,10 @@ class StereoSource {
   // The rig whose calibration the frames follow (an ideal rectified rig for synthetic frames).
   virtual std::shared_ptr<const geometry::StereoRig> Rig() const = 0;
 
+  // The size of the images Next() delivers: the rig's, or (a source without a calibration yet,
+  // such as cameras) the source's own.
+  virtual cv::Size ImageSize() const { return Rig() ? Rig()->image_size() : cv::Size(); }
+
   // Produces the next frame as soon as it can (no pacing: the caller paces, see NominalFps()).
   // kOutOfRange at the end of a finite sequence; kUnavailable when a device is down;
   // kInvalidArgument for an unreadable or mismatched pair (naming the file).

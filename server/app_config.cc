@@ -13,7 +13,9 @@
 #include <fstream>
 #include <sstream>
 
+#include "drivers/aravis/aravis_source.h"
 #include "drivers/files/image_source.h"
+#include "drivers/recording/replay_source.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/convert.h"
 
@@ -140,8 +142,73 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
       source->set_kind(v1::SOURCE_KIND_SYNTHETIC);
     } else if (*v == "images") {
       source->set_kind(v1::SOURCE_KIND_IMAGES);
+    } else if (*v == "aravis") {
+      source->set_kind(v1::SOURCE_KIND_ARAVIS);
+    } else if (*v == "replay") {
+      source->set_kind(v1::SOURCE_KIND_REPLAY);
     } else {
-      problems.push_back("--source: unknown source '" + *v + "' (synthetic or images)");
+      problems.push_back("--source: unknown source '" + *v +
+                         "' (synthetic, images, aravis or replay)");
+    }
+  }
+  if (const std::string* v = get("replay")) source->mutable_replay()->set_dir(*v);
+  if (const std::string* v = get("rate")) {
+    const std::optional<double> rate = *v == "max" ? std::optional<double>(0.0) : ParseDouble(*v);
+    if (!rate || *rate < 0 || *rate > 1000) {
+      problems.push_back("--rate: must be a speed in (0, 1000] or 'max' (got '" + *v + "')");
+    } else {
+      source->mutable_replay()->set_rate(*rate);
+    }
+  }
+  if (const std::string* v = get("record")) config.mutable_record()->set_dir(*v);
+  if (const std::string* v = get("roi")) {
+    const size_t x = v->find('x');
+    const std::optional<double> w = x == std::string::npos ? std::nullopt : ParseDouble(v->substr(0, x));
+    const std::optional<double> h = x == std::string::npos ? std::nullopt : ParseDouble(v->substr(x + 1));
+    if (!w || !h || *w < 16 || *h < 16 || *w > 16384 || *h > 16384 || *w != std::floor(*w) ||
+        *h != std::floor(*h)) {
+      problems.push_back("--roi: expected WIDTHxHEIGHT in pixels, 16..16384 each (got '" + *v + "')");
+    } else {
+      source->mutable_aravis()->set_width(static_cast<uint32_t>(*w));
+      source->mutable_aravis()->set_height(static_cast<uint32_t>(*h));
+    }
+  }
+  if (const std::string* v = get("exposure-us")) {
+    const std::optional<double> e = ParseDouble(*v);
+    if (!e || *e <= 0) {
+      problems.push_back("--exposure-us: must be a time in microseconds > 0 (got '" + *v + "')");
+    } else {
+      source->mutable_aravis()->set_exposure_us(*e);
+    }
+  }
+  if (const std::string* v = get("gain-db")) {
+    const std::optional<double> g = ParseDouble(*v);
+    if (!g) {
+      problems.push_back("--gain-db: must be a number of dB (got '" + *v + "')");
+    } else {
+      source->mutable_aravis()->set_gain_db(*g);
+    }
+  }
+  if (const std::string* v = get("timestamps")) {
+    if (*v == "camera") {
+      source->mutable_aravis()->set_timestamps(v1::TIMESTAMP_SOURCE_CAMERA);
+    } else if (*v == "host") {
+      source->mutable_aravis()->set_timestamps(v1::TIMESTAMP_SOURCE_HOST);
+    } else {
+      problems.push_back("--timestamps: camera or host (got '" + *v + "')");
+    }
+  }
+  if (const std::string* v = get("trigger")) {
+    v1::AravisConfig* aravis = source->mutable_aravis();
+    if (*v == "free") {
+      aravis->set_trigger(v1::TRIGGER_MODE_FREE_RUN);
+    } else if (*v == "software") {
+      aravis->set_trigger(v1::TRIGGER_MODE_SOFTWARE);
+    } else if (v->rfind("hardware:", 0) == 0 && v->size() > 9) {
+      aravis->set_trigger(v1::TRIGGER_MODE_HARDWARE);
+      aravis->set_trigger_line(v->substr(9));
+    } else {
+      problems.push_back("--trigger: free, software or hardware:LINE (got '" + *v + "')");
     }
   }
   if (const std::string* v = get("left")) source->set_left(*v);
@@ -212,6 +279,64 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
         problems.push_back("source.calibration: required for the images source");
       }
       break;
+    case v1::SOURCE_KIND_ARAVIS: {
+      if (source.left().empty()) {
+        problems.push_back("source.left: required for the aravis source (device id, serial or address)");
+      }
+      if (source.right().empty()) {
+        problems.push_back("source.right: required for the aravis source (device id, serial or address)");
+      }
+      if (!source.left().empty() && source.left() == source.right()) {
+        problems.push_back("source.right: must be another camera than source.left (both '" +
+                           source.left() + "')");
+      }
+      const v1::AravisConfig& a = source.aravis();
+      if (a.has_width() && (a.width() < 16 || a.width() > 16384)) {
+        problems.push_back("source.aravis.width: must be 16..16384 pixels (got " + std::to_string(a.width()) + ")");
+      }
+      if (a.has_height() && (a.height() < 16 || a.height() > 16384)) {
+        problems.push_back("source.aravis.height: must be 16..16384 pixels (got " + std::to_string(a.height()) + ")");
+      }
+      if (a.has_frame_rate_hz() && !(a.frame_rate_hz() > 0 && a.frame_rate_hz() <= 1000)) {
+        problems.push_back("source.aravis.frame_rate_hz: must be in (0, 1000] (got " + std::to_string(a.frame_rate_hz()) + ")");
+      }
+      if (a.has_exposure_us() && !(a.exposure_us() > 0 && a.exposure_us() < 1e8)) {
+        problems.push_back("source.aravis.exposure_us: must be in (0, 1e8) (got " + std::to_string(a.exposure_us()) + ")");
+      }
+      if (a.has_gain_db() && !std::isfinite(a.gain_db())) {
+        problems.push_back("source.aravis.gain_db: must be finite");
+      }
+      if (a.trigger() == v1::TRIGGER_MODE_HARDWARE && a.trigger_line().empty()) {
+        problems.push_back("source.aravis.trigger_line: required with a hardware trigger (e.g. Line0)");
+      }
+      if (a.trigger() < v1::TRIGGER_MODE_UNSPECIFIED || a.trigger() > v1::TRIGGER_MODE_HARDWARE) {
+        problems.push_back("source.aravis.trigger: unknown value " + std::to_string(a.trigger()));
+      }
+      if (a.has_pair_tolerance_ms() && !(a.pair_tolerance_ms() > 0 && a.pair_tolerance_ms() <= 1000)) {
+        problems.push_back("source.aravis.pair_tolerance_ms: must be in (0, 1000] (got " + std::to_string(a.pair_tolerance_ms()) + ")");
+      }
+      if (a.has_buffers() && (a.buffers() < 2 || a.buffers() > 64)) {
+        problems.push_back("source.aravis.buffers: must be 2..64 (got " + std::to_string(a.buffers()) + ")");
+      }
+      if (a.timestamps() < v1::TIMESTAMP_SOURCE_UNSPECIFIED || a.timestamps() > v1::TIMESTAMP_SOURCE_HOST) {
+        problems.push_back("source.aravis.timestamps: unknown value " + std::to_string(a.timestamps()));
+      }
+      break;
+    }
+    case v1::SOURCE_KIND_REPLAY: {
+      if (source.replay().dir().empty()) {
+        problems.push_back("source.replay.dir: required for the replay source (--replay DIR)");
+      }
+      if (source.has_left() || source.has_right() || source.has_calibration()) {
+        problems.push_back("source: left, right and calibration do not apply to a replay (the "
+                           "recording holds its frames and calibration)");
+      }
+      const v1::ReplayConfig& r = source.replay();
+      if (r.has_rate() && !(r.rate() >= 0 && r.rate() <= 1000)) {
+        problems.push_back("source.replay.rate: must be in [0, 1000], 0 = as fast as possible (got " + std::to_string(r.rate()) + ")");
+      }
+      break;
+    }
     default:
       problems.push_back("source.kind: unknown value " + std::to_string(source.kind()));
   }
@@ -228,6 +353,13 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
   }
   if (config.has_data_dir() && config.data_dir().empty()) {
     problems.push_back("data_dir: must not be empty");
+  }
+  if (config.record().has_dir() && config.record().dir().empty()) {
+    problems.push_back("record.dir: must not be empty");
+  }
+  if (config.record().has_max_bytes() && config.record().max_bytes() < (uint64_t{1} << 20)) {
+    problems.push_back("record.max_bytes: must be at least 1 MiB (got " +
+                       std::to_string(config.record().max_bytes()) + ")");
   }
   return problems;
 }
@@ -246,6 +378,65 @@ Result<pipeline::PipelineConfig> BuildPipelineConfig(const v1::PipelineConfig& c
 Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig& config,
                                                           bool loop_images) {
   const double fps = config.has_fps() ? config.fps() : kDefaultFps;
+  if (config.kind() == v1::SOURCE_KIND_ARAVIS) {
+    const v1::AravisConfig& a = config.aravis();
+    drivers::AravisOptions options;
+    options.left_id = config.left();
+    options.right_id = config.right();
+    if (a.has_width()) options.roi_width = static_cast<int>(a.width());
+    if (a.has_height()) options.roi_height = static_cast<int>(a.height());
+    options.frame_rate_hz = a.has_frame_rate_hz() ? a.frame_rate_hz()
+                            : config.has_fps()    ? config.fps()
+                                                  : 30.0;
+    if (a.has_exposure_us()) options.exposure_us = a.exposure_us();
+    if (a.has_gain_db()) options.gain_db = a.gain_db();
+    switch (a.trigger()) {
+      case v1::TRIGGER_MODE_SOFTWARE: options.trigger.mode = drivers::TriggerMode::kSoftware; break;
+      case v1::TRIGGER_MODE_HARDWARE:
+        options.trigger.mode = drivers::TriggerMode::kHardware;
+        options.trigger.line = a.trigger_line();
+        break;
+      default: options.trigger.mode = drivers::TriggerMode::kFreeRun; break;
+    }
+    if (a.has_pair_tolerance_ms()) {
+      options.pair_tolerance_ns = static_cast<int64_t>(a.pair_tolerance_ms() * 1e6);
+    }
+    if (a.has_buffers()) options.buffers = static_cast<int>(a.buffers());
+    if (a.has_pixel_format()) options.pixel_format = a.pixel_format();
+    options.timestamps = a.timestamps() == v1::TIMESTAMP_SOURCE_HOST ? drivers::TimestampSource::kHost
+                                                                      : drivers::TimestampSource::kCamera;
+    std::shared_ptr<const geometry::StereoRig> rig;
+    if (!config.calibration().empty()) {
+      Result<geometry::StereoRig> loaded = geometry::StereoRig::FromFile(config.calibration());
+      if (!loaded.ok()) {
+        Error error = loaded.error();
+        error.message = "source.calibration: " + error.message;
+        return error;
+      }
+      rig = std::make_shared<const geometry::StereoRig>(std::move(loaded).value());
+    }
+    Result<std::unique_ptr<drivers::AravisStereoSource>> source =
+        drivers::AravisStereoSource::Open(std::move(options), std::move(rig));
+    if (!source.ok()) {
+      Error error = source.error();
+      error.message = "source.aravis: " + error.message;
+      return error;
+    }
+    return std::unique_ptr<drivers::StereoSource>(std::move(source).value());
+  }
+  if (config.kind() == v1::SOURCE_KIND_REPLAY) {
+    drivers::ReplayOptions options;
+    if (config.replay().has_rate()) options.rate = config.replay().rate();
+    options.loop = config.replay().loop();
+    Result<std::unique_ptr<drivers::ReplaySource>> source =
+        drivers::ReplaySource::Open(config.replay().dir(), options);
+    if (!source.ok()) {
+      Error error = source.error();
+      error.message = "source.replay: " + error.message;
+      return error;
+    }
+    return std::unique_ptr<drivers::StereoSource>(std::move(source).value());
+  }
   if (config.kind() == v1::SOURCE_KIND_IMAGES) {
     drivers::ImageSourceOptions options;
     options.left = config.left();

@@ -540,6 +540,7 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
   f.set_capture_time_ns(result.capture_time_ns);
   f.set_capture_unix_time_ns(result.capture_unix_time_ns);
   f.set_source_index(result.source_index);
+  f.set_pair_skew_ns(result.pair_skew_ns);
   f.set_algorithm(ToProto(result.algorithm));
   if (result.rig) f.set_calibration_id(result.rig->calibration_id());
   ToProto(result.timings, f.mutable_timings());

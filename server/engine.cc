@@ -10,7 +10,8 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr size_t kRateWindow = 30;    // frames over which fps and mean timings are taken
 constexpr auto kRetryFirst = std::chrono::milliseconds(200);
-constexpr auto kRetryMax = std::chrono::seconds(5);
+// Capped at 2 s so that a camera that comes back is streaming again within a few seconds.
+constexpr auto kRetryMax = std::chrono::seconds(2);
 
 void PushBounded(std::deque<Clock::time_point>& times, Clock::time_point t) {
   times.push_back(t);
@@ -74,7 +75,7 @@ Engine::Engine(std::unique_ptr<drivers::StereoSource> source, pipeline::Pipeline
                Sink sink)
     : source_(std::move(source)),
       source_description_(source_->Describe()),
-      source_image_size_(source_->Rig() ? source_->Rig()->image_size() : cv::Size()),
+      source_image_size_(source_->ImageSize()),
       config_(std::move(config)),
       sink_(std::move(sink)),
       started_(Clock::now()),
@@ -167,6 +168,7 @@ void Engine::CaptureLoop() {
     }
     retry = std::chrono::duration_cast<Clock::duration>(kRetryFirst);
     if (frame->unix_time_ns == 0) frame->unix_time_ns = UnixNowNs();
+    std::shared_ptr<const CaptureTap> tap;
     {
       std::lock_guard lock(mu_);
       source_state_ = SourceState::kRunning;
@@ -174,8 +176,10 @@ void Engine::CaptureLoop() {
       ++frames_captured_;
       PushBounded(capture_times_, now);
       last_capture_ = *frame;
+      tap = capture_tap_;
     }
     capture_cv_.notify_all();
+    if (tap) (*tap)(*frame);
     mailbox_.Put(std::move(frame).value());
     // Pace; when the source itself is slower than the period, do not try to catch up.
     next_tick = std::max(next_tick + period, now);
@@ -217,9 +221,16 @@ std::shared_ptr<const pipeline::FrameResult> Engine::Latest() const {
   return latest_;
 }
 
+void Engine::SetCaptureTap(CaptureTap tap) {
+  auto shared = tap ? std::make_shared<const CaptureTap>(std::move(tap)) : nullptr;
+  std::lock_guard lock(mu_);
+  capture_tap_ = std::move(shared);
+}
+
 EngineStatus Engine::Status() const {
   EngineStatus s;
   s.source = source_description_;
+  s.pairing = source_->Counters();
   s.frames_dropped_capture = mailbox_.dropped();
   const std::shared_ptr<const pipeline::PipelineConfig> config = config_.Get();
   s.algorithm = config->algorithm;

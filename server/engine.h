@@ -37,6 +37,7 @@ struct EngineStatus {
   pipeline::Algorithm algorithm = pipeline::Algorithm::kCanonical;
   std::string calibration_id;
   double uptime_s = 0;
+  drivers::SourceCounters pairing;  // the source's pairing and reconnection counters
 };
 
 // Thread-safe. Start() launches the threads; Stop() (also run by the destructor) joins them.
@@ -67,6 +68,11 @@ class Engine {
   // Where the pipeline gets the vehicle pose at a frame's capture (source t_ns, unix ns), for the
   // georeferenced tracks. Set before Start(); empty (the default): no georeferencing.
   void SetPoseSource(std::function<geo::PoseLookup(int64_t, int64_t)> pose_at);
+
+  // Called on the capture thread with every frame the source delivers, before the pipeline may
+  // drop it (the recorder). Must return quickly. Empty: none. Safe to change while running.
+  using CaptureTap = std::function<void(const StereoFrame&)>;
+  void SetCaptureTap(CaptureTap tap);
 
   // The source's image size (of the rig it was created with).
   cv::Size source_image_size() const { return source_image_size_; }
@@ -111,6 +117,7 @@ class Engine {
   std::shared_ptr<const geometry::StereoRig> rig_;
   bool swap_left_right_ = false;
   std::function<geo::PoseLookup(int64_t, int64_t)> pose_at_;
+  std::shared_ptr<const CaptureTap> capture_tap_;
   std::condition_variable capture_cv_;
   StereoFrame last_capture_;  // shares the images with the frame in the mailbox (never written)
 

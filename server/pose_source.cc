@@ -27,8 +27,27 @@ Result<std::unique_ptr<PoseSource>> PoseSource::Create(
   return std::unique_ptr<PoseSource>(new PoseSource(options, std::move(fixed)));
 }
 
+void PoseSource::SetRecordedStates(const std::vector<geo::VehicleState>& states) {
+  for (const geo::VehicleState& s : states) recorded_[s.t_ns] = s;
+}
+
 geo::PoseLookup PoseSource::At(int64_t t_ns, int64_t unix_time_ns) const {
-  if (buffer_.size() > 0 || (!fixed_ && !path_)) return buffer_.At(unix_time_ns);
+  if (buffer_.size() > 0 || (!fixed_ && !path_ && recorded_.empty())) {
+    return buffer_.At(unix_time_ns);
+  }
+  if (!recorded_.empty()) {
+    geo::PoseLookup lookup;
+    const auto it = recorded_.find(unix_time_ns);
+    if (it == recorded_.end()) {
+      lookup.status = geo::GeoStatus::kNoPose;
+      lookup.message = "no pose was recorded with this frame";
+      return lookup;
+    }
+    lookup.status = geo::GeoStatus::kOk;
+    lookup.message = "recorded pose";
+    lookup.pose = geo::VehiclePose{it->second, Eigen::Vector3d::Zero(), false};
+    return lookup;
+  }
   if (path_) {
     geo::PoseLookup lookup;
     lookup.status = geo::GeoStatus::kOk;

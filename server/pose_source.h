@@ -5,6 +5,8 @@
 
 #include <functional>
 #include <optional>
+#include <unordered_map>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -29,8 +31,14 @@ class PoseSource {
   // starts.
   void SetSyntheticPath(std::function<geo::VehicleState(int64_t t_ns)> path) { path_ = std::move(path); }
 
+  // A replay's recorded poses (drivers::ReplaySource::vehicle_states()): each frame's pose was
+  // recorded with the frame's wall-clock time, and is found again by it, exactly. Used instead of
+  // the fixed pose and the synthetic path. Set before the engine starts.
+  void SetRecordedStates(const std::vector<geo::VehicleState>& states);
+
   // The pose at a frame's capture time (Unix ns): from the published states once any arrived,
-  // else the fixed pose (its time set to the frame's), else kNoPose.
+  // else the recorded one of a replay, else the synthetic path, else the fixed pose (its time set
+  // to the frame's), else kNoPose.
   geo::PoseLookup At(int64_t t_ns, int64_t unix_time_ns) const;
   // A published state: refused (kInvalidArgument naming the field, or out of order) without
   // changing anything.
@@ -43,6 +51,7 @@ class PoseSource {
   geo::PoseBuffer buffer_;
   const std::optional<geo::VehicleState> fixed_;
   std::function<geo::VehicleState(int64_t)> path_;
+  std::unordered_map<int64_t, geo::VehicleState> recorded_;  // by the frame's unix_time_ns
 };
 
 // The synthetic rig's pose after it moved `offset_m` (scene frame: x right, z forward, level)

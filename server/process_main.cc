@@ -9,6 +9,8 @@
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/app_config.h"
 #include "server/convert.h"
+#include "server/pose_source.h"
+#include "drivers/recording/replay_source.h"
 
 namespace {
 
@@ -17,7 +19,10 @@ constexpr char kUsage[] = R"(usage: stevi-process [flags]
 Runs the detection pipeline over every frame of a source (no drops) and writes one
 stevi.v1.TrackFrame per line as protobuf JSON (proto field names).
 
-  --source KIND          synthetic (default) or images
+  --source KIND          synthetic (default), images or replay
+  --replay DIR           replay: a recording (stevi-server --record DIR or StartRecording); its
+                         frames, timestamps, vehicle states and calibration are used as recorded,
+                         so that the same recording and config always give the same output
   --left PATTERN|VIDEO   images: left images as a printf pattern ("left_%04d.png") or a video file
   --right PATTERN|VIDEO  images: right images, likewise
   --calibration FILE     images: calibration YAML (OpenCV FileStorage)
@@ -27,6 +32,8 @@ stevi.v1.TrackFrame per line as protobuf JSON (proto field names).
   --frames N             process at most N frames (synthetic: default 100; images: all)
   --out FILE             write the frames here instead of stdout
   --truth FILE           synthetic source: write its truth per frame (stevi.v1.TruthFrame lines)
+  --timings              include the stage timings in each frame (wall-clock measurements: the
+                         output then differs from run to run)
   --help                 this text
 )";
 
@@ -40,8 +47,8 @@ int Fail(const std::string& message, int code = 2) {
 int main(int argc, char** argv) {
   using namespace stevi;
   const std::set<std::string> known = {"source", "left", "right", "calibration", "fps", "algorithm",
-                                       "config", "frames", "out", "truth"};
-  Result<server::Flags> flags = server::ParseFlags(argc, argv, known, {"help"});
+                                       "config", "frames", "out", "truth", "replay"};
+  Result<server::Flags> flags = server::ParseFlags(argc, argv, known, {"help", "timings"});
   if (!flags.ok()) return Fail(flags.error().message);
   if (flags->values.count("help")) {
     std::cout << kUsage;
@@ -59,7 +66,14 @@ int main(int argc, char** argv) {
     return Fail(applied.error().message);
   }
   std::vector<std::string> problems = server::ValidateServerConfig(config);
-  const bool synthetic = config.source().kind() != v1::SOURCE_KIND_IMAGES;
+  const v1::SourceKind kind = config.source().kind();
+  if (kind == v1::SOURCE_KIND_ARAVIS) {
+    problems.push_back("--source: stevi-process runs recorded or generated frames (synthetic, "
+                       "images, replay); record cameras with stevi-server --record DIR");
+  }
+  // Every frame, as fast as it goes: no pacing.
+  if (kind == v1::SOURCE_KIND_REPLAY) config.mutable_source()->mutable_replay()->set_rate(0);
+  const bool synthetic = kind == v1::SOURCE_KIND_SYNTHETIC || kind == v1::SOURCE_KIND_UNSPECIFIED;
   int64_t max_frames = synthetic ? 100 : -1;
   if (auto it = flags->values.find("frames"); it != flags->values.end()) {
     try {
@@ -70,6 +84,7 @@ int main(int argc, char** argv) {
       problems.push_back("--frames: must be a whole number >= 1 (got '" + it->second + "')");
     }
   }
+  const bool timings = flags->values.count("timings") > 0;
   const std::string truth_path = flags->values.count("truth") ? flags->values.at("truth") : "";
   if (!truth_path.empty() && !synthetic) {
     problems.push_back("--truth: only the synthetic source knows the truth");
@@ -94,19 +109,37 @@ int main(int argc, char** argv) {
   }
   std::ostream& out = out_file.is_open() ? static_cast<std::ostream&>(out_file) : std::cout;
 
+  // A replay georeferences its frames with the poses recorded with them, exactly as live.
+  std::unique_ptr<server::PoseSource> poses;
+  if (auto* replay = dynamic_cast<drivers::ReplaySource*>(source->get())) {
+    for (const std::string& note : replay->notes()) std::cerr << "stevi-process: " << note << "\n";
+    if (!replay->vehicle_states().empty()) {
+      Result<std::unique_ptr<server::PoseSource>> created =
+          server::PoseSource::Create(v1::GeoConfig(), std::nullopt);
+      if (!created.ok()) return Fail(created.error().message, 1);
+      poses = std::move(created).value();
+      poses->SetRecordedStates(replay->vehicle_states());
+    }
+  }
   pipeline::Pipeline pipe;
-  const pipeline::Snapshot snapshot{
+  pipeline::Snapshot snapshot{
       std::make_shared<const pipeline::PipelineConfig>(std::move(pipeline_config).value()),
       (*source)->Rig()};
+  if (poses) {
+    snapshot.pose_at = [&poses](int64_t t, int64_t unix_t) { return poses->At(t, unix_t); };
+  }
   for (int64_t n = 0; max_frames < 0 || n < max_frames; ++n) {
     Result<StereoFrame> frame = (*source)->Next();
     if (!frame.ok()) {
       if (frame.error().code == ErrorCode::kOutOfRange) break;
       return Fail(frame.error().message, 1);
     }
+    snapshot.rig = (*source)->Rig();  // a replay follows the calibration changes it recorded
     Result<pipeline::FrameResult> result = pipe.Process(*frame, snapshot);
     if (!result.ok()) return Fail("frame " + std::to_string(frame->index) + ": " + result.error().message, 1);
-    out << server::ToJsonLine(server::ToTrackFrame(*result)) << "\n";
+    v1::TrackFrame track_frame = server::ToTrackFrame(*result);
+    if (!timings) track_frame.clear_timings();
+    out << server::ToJsonLine(track_frame) << "\n";
     if (truth_file.is_open() && synthetic_source != nullptr) {
       truth_file << server::ToJsonLine(
                         server::ToTruthFrame(synthetic_source->last_truth(), frame->t_ns))

@@ -4,6 +4,7 @@
 
 #include "server/app_config.h"
 #include "server/convert.h"
+#include "drivers/recording/replay_source.h"
 
 namespace stevi::server {
 
@@ -15,7 +16,8 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
 
   // The synthetic airfield rig hovers at Pisa unless the config gives a pose.
   std::optional<geo::VehicleState> synthetic_pose;
-  if (config.source().kind() != v1::SOURCE_KIND_IMAGES &&
+  const v1::SourceKind kind = config.source().kind();
+  if ((kind == v1::SOURCE_KIND_SYNTHETIC || kind == v1::SOURCE_KIND_UNSPECIFIED) &&
       config.source().synthetic().scene() != "chessboard") {
     const std::optional<drivers::Scenario> scenario = FindScenario(config.source().synthetic().scene());
     synthetic_pose = SyntheticRigPose(scenario ? scenario->options.scene.camera_height_m
@@ -27,6 +29,10 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   Result<std::unique_ptr<drivers::StereoSource>> source =
       OpenSource(config.source(), /*loop_images=*/true);
   if (!source.ok()) return source.error();
+
+  if (auto* replay = dynamic_cast<drivers::ReplaySource*>(source->get())) {
+    (*poses)->SetRecordedStates(replay->vehicle_states());
+  }
 
   std::unique_ptr<Server> server(new Server());
   server->poses_ = std::move(poses).value();
@@ -61,10 +67,26 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
       [pose_source](int64_t t, int64_t unix_t) { return pose_source->At(t, unix_t); });
   Result<std::unique_ptr<CalibrationManager>> calibration = CalibrationManager::Open(
       config.has_data_dir() ? config.data_dir() : kDefaultDataDir, *server->engine_);
+  // (The recorder comes after the calibration store, so that it records the calibration the
+  // store restored.)
   if (!calibration.ok()) return calibration.error();
   server->calibration_ = std::move(calibration).value();
-  server->service_ =
-      std::make_unique<ObstacleServiceImpl>(*server->engine_, *broadcaster, *server->poses_);
+  const std::string data_dir = config.has_data_dir() ? config.data_dir() : kDefaultDataDir;
+  server->recording_ =
+      std::make_unique<RecordingManager>(data_dir, *server->engine_, *server->poses_);
+  if (config.record().has_dir()) {
+    // From the first frame on: the tap is in place before the engine starts.
+    const uint64_t max_bytes = config.record().has_max_bytes() ? config.record().max_bytes()
+                                                               : kDefaultRecordingMaxBytes;
+    Result<v1::RecordingStatus> recording = server->recording_->StartIn(config.record().dir(), max_bytes);
+    if (!recording.ok()) {
+      Error error = recording.error();
+      error.message = "record: " + error.message;
+      return error;
+    }
+  }
+  server->service_ = std::make_unique<ObstacleServiceImpl>(*server->engine_, *broadcaster,
+                                                           *server->poses_, *server->recording_);
   server->calibration_service_ = std::make_unique<CalibrationServiceImpl>(*server->calibration_);
 
   const int max_message =
@@ -98,6 +120,8 @@ void Server::Shutdown() {
   }
   if (calibration_) calibration_->Stop();
   if (engine_) engine_->Stop();
+  // After the source stopped: every captured frame is in the recording, which is then closed.
+  if (recording_) recording_->Stop("the server stopped");
 }
 
 }  // namespace stevi::server

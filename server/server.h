@@ -9,6 +9,7 @@
 #include "server/calibration_manager.h"
 #include "server/calibration_service.h"
 #include "server/engine.h"
+#include "server/recording_manager.h"
 #include "server/service.h"
 #include "stevi/v1/config.pb.h"
 
@@ -26,6 +27,7 @@ class Server {
   const std::string& listen_address() const { return listen_; }
   Engine& engine() { return *engine_; }
   CalibrationManager& calibration() { return *calibration_; }
+  RecordingManager& recording() { return *recording_; }
 
   // Graceful shutdown: stop accepting, end every stream with a final status, stop the source and
   // the pipeline. Idempotent.
@@ -40,6 +42,7 @@ class Server {
   std::unique_ptr<PoseSource> poses_;
   std::unique_ptr<Engine> engine_;
   std::unique_ptr<CalibrationManager> calibration_;
+  std::unique_ptr<RecordingManager> recording_;
   std::unique_ptr<ObstacleServiceImpl> service_;
   std::unique_ptr<CalibrationServiceImpl> calibration_service_;
   std::unique_ptr<grpc::Server> grpc_server_;

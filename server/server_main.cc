@@ -19,11 +19,25 @@ With no flags: the built-in synthetic rig, the canonical algorithm, listening on
 
   --listen HOST:PORT     address to listen on (default 127.0.0.1:50051)
   --config FILE          stevi.v1.ServerConfig in protobuf text format or JSON; flags override it
-  --source KIND          synthetic (default) or images
+  --source KIND          synthetic (default), images, aravis (two GenICam cameras) or replay
   --left PATTERN|VIDEO   images: left images as a printf pattern ("left_%04d.png") or a video file
-  --right PATTERN|VIDEO  images: right images, likewise
-  --calibration FILE     images: calibration YAML (OpenCV FileStorage)
-  --fps N                frames per second to run the source at (default 10)
+         ID              aravis: the left camera's device id, serial number or IP address
+  --right PATTERN|VIDEO  images: right images, likewise; aravis: the right camera
+  --calibration FILE     images, aravis: calibration YAML (OpenCV FileStorage); aravis without
+                         it uses the data directory's active calibration (or runs uncalibrated:
+                         frames flow for `stevi calibrate --capture`, but no tracks)
+  --fps N                frames per second to run the source at (default 10; aravis: the
+                         cameras' frame rate, default 30)
+  --roi WxH              aravis: centred region of interest on both cameras (default 640x480)
+  --exposure-us US       aravis: fixed exposure (default automatic)
+  --gain-db DB           aravis: fixed gain (default automatic)
+  --trigger MODE         aravis: free (default), software, or hardware:LINE (e.g. hardware:Line0)
+  --timestamps CLOCK     aravis: pair by the cameras' clocks (camera, default; they must share a
+                         time base, e.g. PTP) or by arrival time (host, for unsynchronised cameras)
+  --replay DIR           replay: the recording to play (made with --record or StartRecording)
+  --rate R|max           replay: speed against the recorded timing (default 1; max = no pacing)
+  --record DIR           record the raw pairs, timestamps, vehicle states and calibration id
+                         from the start into DIR (lossless; stops at record.max_bytes, 4 GiB)
   --scene NAME           synthetic: airfield (default) or chessboard (a moving calibration board,
                          9x6 inner corners of 100 mm squares, for `stevi calibrate --capture`)
   --data-dir DIR         where calibrations are stored (default ./stevi-data); its active
@@ -36,8 +50,10 @@ With no flags: the built-in synthetic rig, the canonical algorithm, listening on
 
 int main(int argc, char** argv) {
   using namespace stevi;
-  const std::set<std::string> known = {"listen", "config", "source", "left", "right",
-                                       "calibration", "fps", "algorithm", "data-dir", "scene"};
+  const std::set<std::string> known = {
+      "listen", "config", "source",  "left",        "right",   "calibration", "fps",    "algorithm",
+      "data-dir", "scene", "replay", "rate", "record", "roi", "exposure-us", "gain-db", "trigger",
+      "timestamps"};
   Result<server::Flags> flags = server::ParseFlags(argc, argv, known, {"help"});
   if (!flags.ok()) {
     std::cerr << "stevi-server: " << flags.error().message << "\n";

@@ -172,7 +172,7 @@ void FilterTracks(const v1::StreamTracksRequest& request, v1::TrackFrame& frame)
 }
 
 grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadcaster,
-                           v1::GetStatusResponse* response) {
+                           const RecordingManager* recording, v1::GetStatusResponse* response) {
   const EngineStatus s = engine.Status();
   response->set_source_state(ToProto(s.source_state));
   response->set_source(s.source);
@@ -187,6 +187,15 @@ grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadca
   response->set_algorithm(ToProto(s.algorithm));
   response->set_calibration_id(s.calibration_id);
   response->set_uptime_s(s.uptime_s);
+  v1::PairingStatus* pairing = response->mutable_pairing();
+  pairing->set_pairs(s.pairing.pairs);
+  pairing->set_unpaired_dropped(s.pairing.unpaired_dropped);
+  pairing->set_incomplete_dropped(s.pairing.incomplete_dropped);
+  pairing->set_reconnects(s.pairing.reconnects);
+  pairing->set_last_skew_ns(s.pairing.last_skew_ns);
+  pairing->set_max_abs_skew_ns(s.pairing.max_abs_skew_ns);
+  pairing->set_mean_abs_skew_ns(s.pairing.mean_abs_skew_ns);
+  if (recording != nullptr) *response->mutable_recording() = recording->Status();
   for (const auto& sub : broadcaster.Stats()) {
     v1::SubscriberStatus* out = response->add_subscribers();
     out->set_subscriber_id(sub.id);
@@ -246,7 +255,7 @@ grpc::ServerWriteReactor<v1::TrackFrame>* ObstacleServiceImpl::StreamTracks(
 grpc::ServerUnaryReactor* ObstacleServiceImpl::GetStatus(grpc::CallbackServerContext* context,
                                                          const v1::GetStatusRequest* /*request*/,
                                                          v1::GetStatusResponse* response) {
-  return Reply(context, GetStatusImpl(engine_, broadcaster_, response));
+  return Reply(context, GetStatusImpl(engine_, broadcaster_, &recording_, response));
 }
 
 grpc::ServerUnaryReactor* ObstacleServiceImpl::GetPipelineConfig(
@@ -265,6 +274,24 @@ grpc::ServerUnaryReactor* ObstacleServiceImpl::GetDisparitySnapshot(
     grpc::CallbackServerContext* context, const v1::GetDisparitySnapshotRequest* request,
     v1::DisparitySnapshot* response) {
   return Reply(context, GetDisparitySnapshotImpl(engine_, *request, response));
+}
+
+grpc::ServerUnaryReactor* ObstacleServiceImpl::StartRecording(
+    grpc::CallbackServerContext* context, const v1::StartRecordingRequest* request,
+    v1::RecordingStatus* response) {
+  // Creating the directory and the files is quick; the frames are written by the recorder's own
+  // thread.
+  Result<v1::RecordingStatus> started = recording_.Start(*request);
+  if (started.ok()) *response = std::move(started).value();
+  return Reply(context, started.ok() ? grpc::Status::OK : ToGrpcStatus(started.error()));
+}
+
+grpc::ServerUnaryReactor* ObstacleServiceImpl::StopRecording(
+    grpc::CallbackServerContext* context, const v1::StopRecordingRequest* /*request*/,
+    v1::RecordingStatus* response) {
+  // Waits for the queued frames (at most RecorderOptions::queue_frames) to be written.
+  *response = recording_.Stop();
+  return Reply(context, grpc::Status::OK);
 }
 
 grpc::ServerReadReactor<v1::VehicleState>* ObstacleServiceImpl::PublishVehicleState(

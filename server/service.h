@@ -10,6 +10,7 @@
 #include "server/broadcaster.h"
 #include "server/engine.h"
 #include "server/pose_source.h"
+#include "server/recording_manager.h"
 #include "stevi/v1/obstacle_service.grpc.pb.h"
 
 namespace stevi::server {
@@ -23,8 +24,9 @@ grpc::Status ValidateStreamTracksRequest(const v1::StreamTracksRequest& request)
 // with confirmed_only, and those scoring below min_score.
 void FilterTracks(const v1::StreamTracksRequest& request, v1::TrackFrame& frame);
 
+// `recording` may be null (no recorder).
 grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadcaster,
-                           v1::GetStatusResponse* response);
+                           const RecordingManager* recording, v1::GetStatusResponse* response);
 grpc::Status GetPipelineConfigImpl(Engine& engine, v1::PipelineConfig* response);
 // Merges, validates, swaps in. Serialised by `mu` so that concurrent updates do not lose fields.
 grpc::Status SetPipelineConfigImpl(Engine& engine, std::mutex& mu,
@@ -36,8 +38,9 @@ grpc::Status GetDisparitySnapshotImpl(const Engine& engine,
 
 class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
  public:
-  ObstacleServiceImpl(Engine& engine, FrameBroadcaster& broadcaster, PoseSource& poses)
-      : engine_(engine), broadcaster_(broadcaster), poses_(poses) {}
+  ObstacleServiceImpl(Engine& engine, FrameBroadcaster& broadcaster, PoseSource& poses,
+                      RecordingManager& recording)
+      : engine_(engine), broadcaster_(broadcaster), poses_(poses), recording_(recording) {}
 
   grpc::ServerWriteReactor<v1::TrackFrame>* StreamTracks(
       grpc::CallbackServerContext* context, const v1::StreamTracksRequest* request) override;
@@ -55,11 +58,18 @@ class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
                                                  v1::DisparitySnapshot* response) override;
   grpc::ServerReadReactor<v1::VehicleState>* PublishVehicleState(
       grpc::CallbackServerContext* context, v1::PublishVehicleStateResponse* response) override;
+  grpc::ServerUnaryReactor* StartRecording(grpc::CallbackServerContext* context,
+                                           const v1::StartRecordingRequest* request,
+                                           v1::RecordingStatus* response) override;
+  grpc::ServerUnaryReactor* StopRecording(grpc::CallbackServerContext* context,
+                                          const v1::StopRecordingRequest* request,
+                                          v1::RecordingStatus* response) override;
 
  private:
   Engine& engine_;
   FrameBroadcaster& broadcaster_;
   PoseSource& poses_;
+  RecordingManager& recording_;
   std::mutex config_mu_;
 };
 

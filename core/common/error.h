@@ -14,6 +14,7 @@ namespace stevi {
 enum class ErrorCode {
   kInvalidArgument,     // bad input: a field, a file, an image
   kNotFound,            // a file or an id that does not exist
+  kAlreadyExists,       // something to be created is there already (a recording)
   kFailedPrecondition,  // e.g. no calibration, no frame yet
   kUnavailable,         // a camera or source is down
   kResourceExhausted,   // too large

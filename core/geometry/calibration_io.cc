@@ -339,11 +339,10 @@ Result<StereoCalibration> ParseCalibrationYaml(const std::string& yaml_text) {
   return ParseStorage(fs);
 }
 
-Status SaveCalibrationYaml(const StereoCalibration& calibration, const std::string& path) {
+Result<std::string> CalibrationYamlText(const StereoCalibration& calibration) {
   if (std::vector<std::string> problems = calibration.Validate(); !problems.empty()) {
-    return WithPrefix(Error::Invalid(problems), path + ": refusing to write an invalid calibration: ");
+    return WithPrefix(Error::Invalid(problems), "refusing to write an invalid calibration: ");
   }
-  std::string text;
   try {
     cv::FileStorage fs(".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY |
                                     cv::FileStorage::FORMAT_YAML);
@@ -362,13 +361,16 @@ Status SaveCalibrationYaml(const StereoCalibration& calibration, const std::stri
     if (calibration.Q) fs << "Q" << cv::Mat(*calibration.Q);
     if (calibration.E) fs << "E" << cv::Mat(*calibration.E);
     if (calibration.F) fs << "F" << cv::Mat(*calibration.F);
-    text = fs.releaseAndGetString();
+    return fs.releaseAndGetString();
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInternal,
-                 path + ": could not format the calibration (" + OpenCvReason(e) + ")"};
+    return Error{ErrorCode::kInternal, "could not format the calibration (" + OpenCvReason(e) + ")"};
   }
+}
 
-  return AtomicWriteFile(path, text);
+Status SaveCalibrationYaml(const StereoCalibration& calibration, const std::string& path) {
+  Result<std::string> text = CalibrationYamlText(calibration);
+  if (!text.ok()) return WithPrefix(text.error(), path + ": ");
+  return AtomicWriteFile(path, *text);
 }
 
 StereoCalibration IdealCalibration(cv::Size image_size, double f_px, double baseline_m, double cx,

@@ -37,6 +37,9 @@ Result<StereoCalibration> LoadCalibrationYaml(const std::string& path);
 // Parses calibration YAML held in memory (same rules as LoadCalibrationYaml).
 Result<StereoCalibration> ParseCalibrationYaml(const std::string& yaml_text);
 
+// The YAML text SaveCalibrationYaml writes (kInvalidArgument for an invalid calibration).
+Result<std::string> CalibrationYamlText(const StereoCalibration& calibration);
+
 // Writes a calibration YAML atomically (a temporary file beside it, fsync, rename, fsync of the
 // folder). An invalid calibration is refused and the file left as it was.
 Status SaveCalibrationYaml(const StereoCalibration& calibration, const std::string& path);

@@ -81,6 +81,7 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
   result.capture_time_ns = frame.t_ns;
   result.capture_unix_time_ns = frame.unix_time_ns;
   result.source_index = frame.index;
+  result.pair_skew_ns = frame.pair_skew_ns;
   result.algorithm = config.algorithm;
   result.rig = snapshot.rig;
   result.timings.reserve(6);

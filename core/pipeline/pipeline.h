@@ -34,6 +34,7 @@ struct FrameResult {
   int64_t capture_time_ns = 0;
   int64_t capture_unix_time_ns = 0;
   int64_t source_index = 0;
+  int64_t pair_skew_ns = 0;       // the frame's right minus left capture time (two cameras)
   Algorithm algorithm = Algorithm::kCanonical;
   std::vector<detection::Detection> detections;
   // Every live track after this frame's detections (tentative, confirmed, coasting), by id.

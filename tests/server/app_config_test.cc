@@ -160,6 +160,70 @@ TEST(ApplyFlags, OverridesTheFileAndNamesBadValues) {
   EXPECT_EQ(config.listen(), "127.0.0.1:2") << "nothing applied from a bad set of flags";
 }
 
+TEST(ApplyFlags, CamerasReplayAndRecording) {
+  const auto parse = [](std::vector<const char*> args) {
+    args.insert(args.begin(), "prog");
+    return ParseFlags(static_cast<int>(args.size()), args.data(),
+                      {"source", "left", "right", "roi", "exposure-us", "gain-db", "trigger",
+                       "replay", "rate", "record"});
+  };
+  v1::ServerConfig cameras;
+  Result<Flags> flags = parse({"--source", "aravis", "--left", "GV01", "--right", "10.0.0.2",
+                               "--roi", "800x600", "--exposure-us", "2500", "--gain-db", "0",
+                               "--trigger", "hardware:Line1", "--record", "/data/rec"});
+  ASSERT_TRUE(flags.ok());
+  ASSERT_TRUE(ApplyFlags(*flags, cameras).ok());
+  EXPECT_EQ(cameras.source().kind(), v1::SOURCE_KIND_ARAVIS);
+  EXPECT_EQ(cameras.source().aravis().width(), 800u);
+  EXPECT_EQ(cameras.source().aravis().height(), 600u);
+  EXPECT_DOUBLE_EQ(cameras.source().aravis().exposure_us(), 2500);
+  EXPECT_TRUE(cameras.source().aravis().has_gain_db());
+  EXPECT_EQ(cameras.source().aravis().trigger(), v1::TRIGGER_MODE_HARDWARE);
+  EXPECT_EQ(cameras.source().aravis().trigger_line(), "Line1");
+  EXPECT_EQ(cameras.record().dir(), "/data/rec");
+  EXPECT_TRUE(ValidateServerConfig(cameras).empty()) << ::testing::PrintToString(ValidateServerConfig(cameras));
+
+  v1::ServerConfig replay;
+  ASSERT_TRUE(ApplyFlags(*parse({"--source", "replay", "--replay", "r1", "--rate", "max"}), replay).ok());
+  EXPECT_EQ(replay.source().kind(), v1::SOURCE_KIND_REPLAY);
+  EXPECT_EQ(replay.source().replay().dir(), "r1");
+  EXPECT_TRUE(replay.source().replay().has_rate());
+  EXPECT_DOUBLE_EQ(replay.source().replay().rate(), 0);
+
+  const Status bad = ApplyFlags(*parse({"--roi", "640", "--exposure-us", "-1", "--trigger",
+                                        "hardware", "--rate", "fast", "--gain-db", "loud"}),
+                                replay);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_THAT(bad.error().message, AllOf(HasSubstr("--roi"), HasSubstr("--exposure-us"),
+                                         HasSubstr("--trigger"), HasSubstr("--rate"),
+                                         HasSubstr("--gain-db")));
+
+  // Cross-field: what each source needs, and ranges.
+  v1::ServerConfig incomplete;
+  incomplete.mutable_source()->set_kind(v1::SOURCE_KIND_ARAVIS);
+  incomplete.mutable_source()->mutable_aravis()->set_trigger(v1::TRIGGER_MODE_HARDWARE);
+  incomplete.mutable_source()->mutable_aravis()->set_buffers(1);
+  incomplete.mutable_source()->mutable_aravis()->set_frame_rate_hz(0);
+  incomplete.mutable_record()->set_max_bytes(1000);
+  const std::string problems = ::testing::PrintToString(ValidateServerConfig(incomplete));
+  EXPECT_THAT(problems, AllOf(HasSubstr("source.left"), HasSubstr("source.right"),
+                              HasSubstr("source.aravis.trigger_line"),
+                              HasSubstr("source.aravis.buffers"),
+                              HasSubstr("source.aravis.frame_rate_hz"),
+                              HasSubstr("record.max_bytes")));
+  v1::ServerConfig same;
+  same.mutable_source()->set_kind(v1::SOURCE_KIND_ARAVIS);
+  same.mutable_source()->set_left("GV01");
+  same.mutable_source()->set_right("GV01");
+  EXPECT_THAT(::testing::PrintToString(ValidateServerConfig(same)),
+              HasSubstr("must be another camera than source.left"));
+  v1::ServerConfig nothing;
+  nothing.mutable_source()->set_kind(v1::SOURCE_KIND_REPLAY);
+  nothing.mutable_source()->set_left("x.png");
+  EXPECT_THAT(::testing::PrintToString(ValidateServerConfig(nothing)),
+              AllOf(HasSubstr("source.replay.dir"), HasSubstr("do not apply to a replay")));
+}
+
 TEST(ValidateServerConfig, ListsEveryCrossFieldProblem) {
   v1::ServerConfig config;
   config.set_listen("nowhere");

@@ -20,6 +20,7 @@
 #include "stevi/v1/calibration_service.pb.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "stevi/v1/truth.pb.h"
+#include "tests/server/server_process.h"
 #include "tests/server/truth_check.h"
 #include "tests/testing/data.h"
 #include "tests/testing/subprocess.h"
@@ -32,22 +33,8 @@ using testing::BinaryPath;
 using testing::Subprocess;
 using namespace std::chrono_literals;
 
-constexpr auto kCommandTimeout = 60s;
-
-template <typename Message>
-std::vector<Message> ParseJsonLines(const std::string& text) {
-  std::vector<Message> out;
-  std::istringstream lines(text);
-  std::string line;
-  while (std::getline(lines, line)) {
-    if (line.empty()) continue;
-    Message m;
-    const auto status = google::protobuf::util::JsonStringToMessage(line, &m);
-    EXPECT_TRUE(status.ok()) << "not a " << Message::descriptor()->full_name() << ": " << line;
-    out.push_back(m);
-  }
-  return out;
-}
+using testing::kCommandTimeout;
+using testing::ParseJsonLines;
 
 int CountLines(const std::string& text) {
   return static_cast<int>(std::count(text.begin(), text.end(), '\n'));
@@ -59,25 +46,15 @@ class ServerProcessTest : public ::testing::Test {
 
   void SetUp() override { StartServer({}); }
 
-  void StartServer(const std::vector<std::string>& extra) {
-    std::vector<std::string> args{BinaryPath("stevi-server"), "--listen", "127.0.0.1:0", "--fps",
-                                  "20", "--data-dir", testing::MakeTempDir("stevi-e2e-data")};
-    args.insert(args.end(), extra.begin(), extra.end());
-    server_.reset();
-    server_ = std::make_unique<Subprocess>(args);
-    const std::optional<std::string> line = server_->WaitForStderrLine("serving", 60s);
-    ASSERT_TRUE(line.has_value()) << "the server did not start: " << server_->DrainStderr();
-    std::smatch m;
-    ASSERT_TRUE(std::regex_search(*line, m, std::regex("127\\.0\\.0\\.1:(\\d+)"))) << *line;
-    address_ = "127.0.0.1:" + m[1].str();
+  void StartServer(std::vector<std::string> extra) {
+    extra.insert(extra.begin(), {"--fps", "20"});
+    ASSERT_NO_FATAL_FAILURE(server_.Start(extra));
+    address_ = server_.address();
   }
 
-  testing::RunResult Stevi(std::vector<std::string> args) {
-    args.insert(args.begin(), {BinaryPath("stevi"), "--server", address_, "--timeout", "20"});
-    return testing::Run(args, kCommandTimeout);
-  }
+  testing::RunResult Stevi(std::vector<std::string> args) { return server_.Stevi(std::move(args)); }
 
-  std::unique_ptr<Subprocess> server_;
+  testing::ServerProcess server_;
   std::string address_;
 };
 
@@ -381,9 +358,9 @@ TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
   text << meta.rdbuf();
   EXPECT_THAT(text.str(), HasSubstr("\"f_px\":700"));
 
-  server_->Signal(SIGTERM);
-  EXPECT_EQ(server_->Wait(10s), 0) << server_->DrainStderr();
-  EXPECT_THAT(server_->DrainStderr(), HasSubstr("stopped"));
+  server_.process()->Signal(SIGTERM);
+  EXPECT_EQ(server_.process()->Wait(10s), 0) << server_.process()->DrainStderr();
+  EXPECT_THAT(server_.process()->DrainStderr(), HasSubstr("stopped"));
 }
 
 TEST(Stevi, AnUnreachableServerIsOneClearLine) {

@@ -1,0 +1,77 @@
+// The real binaries in tests: a stevi-server child process on a loopback port, `stevi` commands
+// against it, and JSON-lines parsing of their output.
+#pragma once
+
+#include <google/protobuf/util/json_util.h>
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <memory>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "tests/testing/data.h"
+#include "tests/testing/subprocess.h"
+
+namespace stevi::testing {
+
+inline constexpr std::chrono::seconds kCommandTimeout{60};
+
+// One message per non-empty line; a line that does not parse fails the test.
+template <typename Message>
+std::vector<Message> ParseJsonLines(const std::string& text) {
+  std::vector<Message> out;
+  std::istringstream lines(text);
+  std::string line;
+  while (std::getline(lines, line)) {
+    if (line.empty()) continue;
+    Message m;
+    const auto status = google::protobuf::util::JsonStringToMessage(line, &m);
+    EXPECT_TRUE(status.ok()) << "not a " << Message::descriptor()->full_name() << ": " << line;
+    out.push_back(m);
+  }
+  return out;
+}
+
+// A stevi-server child on 127.0.0.1 with a port of its own choosing, its data directory in a new
+// temporary folder (unless the arguments give one).
+class ServerProcess {
+ public:
+  // Starts the server with `args` after the program name; fails the test when it does not say
+  // "serving" within 60 s. Call with ASSERT_NO_FATAL_FAILURE.
+  void Start(std::vector<std::string> args, bool default_data_dir = true) {
+    args.insert(args.begin(), {BinaryPath("stevi-server"), "--listen", "127.0.0.1:0"});
+    if (default_data_dir) {
+      data_dir_ = MakeTempDir("stevi-server-data");
+      args.insert(args.end(), {"--data-dir", data_dir_});
+    }
+    server_.reset();
+    server_ = std::make_unique<Subprocess>(args);
+    const std::optional<std::string> line =
+        server_->WaitForStderrLine("serving", std::chrono::seconds(60));
+    ASSERT_TRUE(line.has_value()) << "the server did not start: " << server_->DrainStderr();
+    std::smatch m;
+    ASSERT_TRUE(std::regex_search(*line, m, std::regex("127\\.0\\.0\\.1:(\\d+)"))) << *line;
+    address_ = "127.0.0.1:" + m[1].str();
+  }
+
+  // Runs `stevi --server ADDRESS --timeout 20 ARGS...`.
+  RunResult Stevi(std::vector<std::string> args) const {
+    args.insert(args.begin(), {BinaryPath("stevi"), "--server", address_, "--timeout", "20"});
+    return Run(args, kCommandTimeout);
+  }
+
+  void Stop() { server_.reset(); }
+  Subprocess* process() { return server_.get(); }
+  const std::string& address() const { return address_; }
+  const std::string& data_dir() const { return data_dir_; }
+
+ private:
+  std::unique_ptr<Subprocess> server_;
+  std::string address_;
+  std::string data_dir_;
+};
+
+}  // namespace stevi::testing
