@@ -28,5 +28,8 @@ if(TARGET stevi_aravis)
     COMMAND /bin/sh ${CMAKE_CURRENT_SOURCE_DIR}/drivers/fake_camera_netns.sh
             $<TARGET_FILE:drivers_aravis_source_test> --gtest_filter=AravisGigE*)
   set_tests_properties(drivers/aravis_camera_test PROPERTIES LABELS aravis TIMEOUT 120)
-  set_tests_properties(drivers/aravis_source_test PROPERTIES LABELS aravis TIMEOUT 300)
+  # RESOURCE_LOCK: where no private namespace can be made, the fake cameras share the host's
+  # GigE Vision port (see fake_camera_netns.sh).
+  set_tests_properties(drivers/aravis_source_test PROPERTIES LABELS aravis TIMEOUT 300
+    RESOURCE_LOCK fake_gige_cameras)
 endif()

@@ -26,11 +26,22 @@ if [ "${STEVI_FAKE_CAMERA_NETNS:-}" != "inside" ]; then
   done
   # Probe first, so that a refusal is reported as such and not as a test failure.
   if ! probe_error=$(unshare --user --map-root-user --net true 2>&1); then
+    # No namespace (a container without user namespaces, say). As root, the host's loopback can
+    # take 127.0.0.2 instead; the tests that use fake cameras hold a ctest RESOURCE_LOCK, so they
+    # never run at the same time on the shared port.
+    if ip -4 addr show dev lo | grep -q ' 127\.0\.0\.2/' ||
+       ip addr add 127.0.0.2/8 dev lo 2>/dev/null; then
+      echo "fake_camera_netns.sh: no private namespace ($probe_error); using the host's loopback" \
+           "with 127.0.0.2" >&2
+      export STEVI_FAKE_CAMERA_NETNS=inside
+      exec "$@"
+    fi
     echo "fake_camera_netns.sh: cannot create a user + network namespace: $probe_error" >&2
     echo "  (unprivileged user namespaces may be disabled: see sysctl" \
          "kernel.unprivileged_userns_clone, user.max_user_namespaces and, on Ubuntu," \
          "kernel.apparmor_restrict_unprivileged_userns; containers may need" \
-         "--security-opt seccomp=unconfined or CAP_SYS_ADMIN)" >&2
+         "--security-opt seccomp=unconfined or CAP_SYS_ADMIN; as root the host's loopback" \
+         "would do, but 127.0.0.2 could not be added to it either)" >&2
     exit 1
   fi
   export STEVI_FAKE_CAMERA_NETNS=inside
