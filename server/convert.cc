@@ -1,5 +1,7 @@
 #include "server/convert.h"
 
+#include "drivers/recording/recording_reader.h"
+
 #include <google/protobuf/util/json_util.h>
 
 #include <opencv2/imgcodecs.hpp>
@@ -487,41 +489,10 @@ v1::TrackState ToProto(tracking::TrackState state) {
   return v1::TRACK_STATE_UNSPECIFIED;
 }
 
-geo::VehicleState FromProto(const v1::VehicleState& p) {
-  geo::VehicleState s;
-  s.t_ns = p.unix_time_ns();
-  s.lat_deg = p.position().lat_deg();
-  s.lon_deg = p.position().lon_deg();
-  s.alt_m = p.position().alt_m();
-  s.roll_deg = p.roll_deg();
-  s.pitch_deg = p.pitch_deg();
-  s.yaw_deg = p.yaw_deg();
-  s.velocity_ned_mps = Eigen::Vector3d(p.velocity().n_mps(), p.velocity().e_mps(), p.velocity().d_mps());
-  s.sigma.horizontal_m = p.position_sigma_horizontal_m();
-  s.sigma.vertical_m = p.position_sigma_vertical_m();
-  s.sigma.tilt_deg = p.tilt_sigma_deg();
-  s.sigma.yaw_deg = p.yaw_sigma_deg();
-  return s;
-}
+// One conversion for the wire and the recording format (drivers/recording).
+geo::VehicleState FromProto(const v1::VehicleState& p) { return drivers::VehicleStateFromProto(p); }
 
-v1::VehicleState ToProto(const geo::VehicleState& s) {
-  v1::VehicleState p;
-  p.set_unix_time_ns(s.t_ns);
-  p.mutable_position()->set_lat_deg(s.lat_deg);
-  p.mutable_position()->set_lon_deg(s.lon_deg);
-  p.mutable_position()->set_alt_m(s.alt_m);
-  p.set_roll_deg(s.roll_deg);
-  p.set_pitch_deg(s.pitch_deg);
-  p.set_yaw_deg(s.yaw_deg);
-  p.mutable_velocity()->set_n_mps(s.velocity_ned_mps.x());
-  p.mutable_velocity()->set_e_mps(s.velocity_ned_mps.y());
-  p.mutable_velocity()->set_d_mps(s.velocity_ned_mps.z());
-  p.set_position_sigma_horizontal_m(s.sigma.horizontal_m);
-  p.set_position_sigma_vertical_m(s.sigma.vertical_m);
-  p.set_tilt_sigma_deg(s.sigma.tilt_deg);
-  p.set_yaw_sigma_deg(s.sigma.yaw_deg);
-  return p;
-}
+v1::VehicleState ToProto(const geo::VehicleState& s) { return drivers::VehicleStateToProto(s); }
 
 v1::GeoStatus ToProto(geo::GeoStatus status) {
   switch (status) {

@@ -29,6 +29,7 @@
 #include "drivers/recording/replay_source.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/testing/data.h"
+#include "tests/testing/image_match.h"
 
 namespace stevi::drivers {
 namespace {
@@ -38,24 +39,7 @@ using Clock = std::chrono::steady_clock;
 
 // ---- Helpers ------------------------------------------------------------------------------------
 
-// Pixel-exact equality, saying where the first difference is.
-::testing::AssertionResult ImagesIdentical(const cv::Mat& expected, const cv::Mat& actual) {
-  if (expected.type() != actual.type() || expected.size() != actual.size()) {
-    return ::testing::AssertionFailure()
-           << "expected " << cv::typeToString(expected.type()) << " " << expected.cols << "x"
-           << expected.rows << ", got " << cv::typeToString(actual.type()) << " " << actual.cols
-           << "x" << actual.rows;
-  }
-  cv::Mat diff;
-  cv::absdiff(expected, actual, diff);
-  diff = diff.reshape(1, diff.rows);
-  std::vector<cv::Point> where;
-  cv::findNonZero(diff, where);
-  if (where.empty()) return ::testing::AssertionSuccess();
-  return ::testing::AssertionFailure()
-         << where.size() << " channel values differ, the first at column " << where[0].x
-         << " (channel-interleaved) row " << where[0].y;
-}
+using testing::ImagesIdentical;
 
 SyntheticOptions SmallSynthetic(int width = 160, int height = 120) {
   SyntheticOptions o;

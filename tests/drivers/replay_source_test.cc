@@ -15,6 +15,7 @@
 #include "drivers/recording/recorder.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/testing/data.h"
+#include "tests/testing/image_match.h"
 
 namespace stevi::drivers {
 namespace {
@@ -22,19 +23,7 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-::testing::AssertionResult ImagesIdentical(const cv::Mat& expected, const cv::Mat& actual) {
-  if (expected.type() != actual.type() || expected.size() != actual.size()) {
-    return ::testing::AssertionFailure()
-           << "expected " << cv::typeToString(expected.type()) << " " << expected.cols << "x"
-           << expected.rows << ", got " << cv::typeToString(actual.type()) << " " << actual.cols
-           << "x" << actual.rows;
-  }
-  cv::Mat diff;
-  cv::absdiff(expected, actual, diff);
-  const int differing = cv::countNonZero(diff.reshape(1, diff.rows));
-  if (differing == 0) return ::testing::AssertionSuccess();
-  return ::testing::AssertionFailure() << differing << " channel values differ";
-}
+using testing::ImagesIdentical;
 
 // The replayed rig must be the recorded one, down to the bit: results depend on every number.
 ::testing::AssertionResult SameRig(const geometry::StereoRig& expected,
