@@ -45,6 +45,7 @@ grpc::Status Client::Calibrate(const v1::CalibrationSettings& settings,
                                std::chrono::milliseconds calibrate_timeout) {
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + calibrate_timeout);
+  AddCredentials(context);
   std::unique_ptr<grpc::ClientWriter<v1::CalibrationUpload>> writer =
       calibration_stub_->Calibrate(&context, report);
   v1::CalibrationUpload upload;
@@ -65,6 +66,7 @@ grpc::Status Client::CaptureCalibration(
     std::chrono::milliseconds capture_timeout) {
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + capture_timeout);
+  AddCredentials(context);
   std::unique_ptr<grpc::ClientReader<v1::CaptureProgress>> reader =
       calibration_stub_->CaptureCalibration(&context, request);
   v1::CaptureProgress progress;
@@ -107,8 +109,15 @@ grpc::Status Client::ActivateCalibration(const std::string& id, v1::CalibrationR
   return calibration_stub_->ActivateCalibration(&context, request, record);
 }
 
+void Client::AddCredentials(grpc::ClientContext& context) const {
+  if (!options_.bearer_token.empty()) {
+    context.AddMetadata("authorization", "Bearer " + options_.bearer_token);
+  }
+}
+
 void Client::Prepare(grpc::ClientContext& context) const {
   context.set_deadline(std::chrono::system_clock::now() + options_.timeout);
+  AddCredentials(context);
 }
 
 grpc::Status Client::GetStatus(v1::GetStatusResponse* response) {
@@ -163,6 +172,7 @@ grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&
   auto backoff = std::chrono::milliseconds(200);
   while (true) {
     grpc::ClientContext context;
+    AddCredentials(context);
     {
       std::lock_guard lock(stream_mu_);
       if (cancelled_) return grpc::Status::OK;

@@ -24,6 +24,9 @@ struct ClientOptions {
   int max_message_bytes = 64 << 20;
   // Channel credentials: insecure (loopback) when null; grpc::SslCredentials(...) for TLS.
   std::shared_ptr<grpc::ChannelCredentials> credentials;
+  // Sent as "authorization: Bearer TOKEN" with every call when not empty: the server's control
+  // RPCs need it when it has an AuthConfig.token_file. Send it over TLS only.
+  std::string bearer_token;
 };
 
 struct StreamOptions {
@@ -79,7 +82,10 @@ class Client {
   const ClientOptions& options() const { return options_; }
 
  private:
+  // The unary deadline and the credentials metadata.
   void Prepare(grpc::ClientContext& context) const;
+  // The credentials metadata alone (streams set their own deadlines).
+  void AddCredentials(grpc::ClientContext& context) const;
 
   ClientOptions options_;
   std::shared_ptr<grpc::Channel> channel_;

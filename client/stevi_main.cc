@@ -32,7 +32,15 @@ using stevi::client::Client;
 using stevi::client::ClientOptions;
 namespace v1 = stevi::v1;
 
-constexpr char kUsage[] = R"(usage: stevi [--server HOST:PORT] [--timeout SECONDS] COMMAND [ARGS]
+constexpr char kUsage[] = R"(usage: stevi [--server HOST:PORT] [--timeout SECONDS] [--tls-ca PEM]
+             [--tls-cert PEM --tls-key PEM] [--token-file FILE] COMMAND [ARGS]
+
+  --tls-ca PEM       connect with TLS, trusting this CA (the server's certificate must name the
+                     host given in --server)
+  --tls-cert, --tls-key PEM
+                     this client's certificate and key, for a server with mutual TLS
+  --token-file FILE  send the bearer token on its first line (the server's control calls need
+                     it when it has auth.token_file)
 
 Commands:
   watch [--count N] [--json] [--confirmed] [--min-score S]
@@ -866,6 +874,8 @@ int Calibration(Client& client, const std::vector<std::string>& args) {
 
 int main(int argc, char** argv) {
   ClientOptions options;
+  grpc::SslCredentialsOptions tls;
+  bool use_tls = false;
   std::vector<std::string> args(argv + 1, argv + argc);
   size_t i = 0;
   for (; i < args.size() && args[i].rfind("--", 0) == 0; ++i) {
@@ -884,10 +894,32 @@ int main(int argc, char** argv) {
       } catch (const std::exception&) {
         return Usage("--timeout: expected seconds in (0, 3600], got '" + args[i] + "'");
       }
+    } else if ((args[i] == "--tls-ca" || args[i] == "--tls-cert" || args[i] == "--tls-key" ||
+                args[i] == "--token-file") &&
+               i + 1 < args.size()) {
+      const std::string flag = args[i];
+      const std::string path = args[++i];
+      std::ifstream in(path, std::ios::binary);
+      std::ostringstream text;
+      text << in.rdbuf();
+      if (!in || text.str().empty()) return Usage(flag + ": cannot read '" + path + "'");
+      if (flag == "--tls-ca") tls.pem_root_certs = text.str();
+      if (flag == "--tls-cert") tls.pem_cert_chain = text.str();
+      if (flag == "--tls-key") tls.pem_private_key = text.str();
+      if (flag == "--token-file") {
+        std::string token = text.str().substr(0, text.str().find('\n'));
+        while (!token.empty() && (token.back() == '\r' || token.back() == ' ')) token.pop_back();
+        options.bearer_token = token;
+      }
+      use_tls |= flag != "--token-file";
     } else {
       return Usage("unknown option '" + args[i] + "'");
     }
   }
+  if (tls.pem_cert_chain.empty() != tls.pem_private_key.empty()) {
+    return Usage("--tls-cert and --tls-key go together");
+  }
+  if (use_tls) options.credentials = grpc::SslCredentials(tls);
   if (i >= args.size()) {
     return Usage("expected a command (watch, status, config, snapshot, calibrate, calibration)");
   }

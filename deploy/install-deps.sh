@@ -10,8 +10,8 @@ packages=(
   libeigen3-dev
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libgeographiclib-dev
-  libaravis-dev libusb-1.0-0-dev aravis-tools iproute2 util-linux
-  libgtest-dev libgmock-dev libbenchmark-dev
+  libaravis-dev libusb-1.0-0-dev aravis-tools iproute2 util-linux openssl
+  libgtest-dev libgmock-dev libbenchmark-dev systemd
 )
 
 missing=()

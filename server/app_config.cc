@@ -17,6 +17,7 @@
 #include "drivers/files/image_source.h"
 #include "drivers/recording/replay_source.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "server/auth.h"
 #include "server/convert.h"
 
 namespace stevi::server {
@@ -35,6 +36,13 @@ class CollectingErrors : public google::protobuf::io::ErrorCollector {
   void AddWarning(int, google::protobuf::io::ColumnNumber, const std::string&) override {}
   std::vector<std::string> problems;
 };
+
+// A number as %g prints it ("0.5", "86400", "nan").
+std::string FormatNumber(double value) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", value);
+  return buf;
+}
 
 std::optional<double> ParseDouble(const std::string& text) {
   double value = 0;
@@ -152,6 +160,11 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
     }
   }
   if (const std::string* v = get("replay")) source->mutable_replay()->set_dir(*v);
+  if (flags.values.count("allow-insecure")) config.set_allow_insecure(true);
+  if (const std::string* v = get("tls-cert")) config.mutable_tls()->set_cert_file(*v);
+  if (const std::string* v = get("tls-key")) config.mutable_tls()->set_key_file(*v);
+  if (const std::string* v = get("tls-client-ca")) config.mutable_tls()->set_client_ca_file(*v);
+  if (const std::string* v = get("token-file")) config.mutable_auth()->set_token_file(*v);
   if (const std::string* v = get("rate")) {
     const std::optional<double> rate = *v == "max" ? std::optional<double>(0.0) : ParseDouble(*v);
     if (!rate || *rate < 0 || *rate > 1000) {
@@ -354,8 +367,40 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
   if (config.has_data_dir() && config.data_dir().empty()) {
     problems.push_back("data_dir: must not be empty");
   }
+  const auto check_seconds = [&](bool has, double value, const char* name, double lo, double hi) {
+    if (has && !(value >= lo && value <= hi)) {
+      problems.push_back(std::string(name) + ": must be in [" + FormatNumber(lo) + ", " +
+                         FormatNumber(hi) + "] s (got " + FormatNumber(value) + ")");
+    }
+  };
+  check_seconds(config.has_keepalive_time_s(), config.keepalive_time_s(), "keepalive_time_s", 1, 86400);
+  check_seconds(config.has_keepalive_timeout_s(), config.keepalive_timeout_s(), "keepalive_timeout_s", 1, 600);
+  check_seconds(config.has_min_client_ping_interval_s(), config.min_client_ping_interval_s(),
+                "min_client_ping_interval_s", 1, 86400);
+  // Who can reach the server: without authentication only this machine, unless asked explicitly.
+  const bool authenticated = config.auth().has_token_file() || config.tls().has_client_ca_file();
+  const std::string listen = config.has_listen() ? config.listen() : kDefaultListen;
+  if (!authenticated && !config.allow_insecure() && !IsLoopbackListen(listen)) {
+    problems.push_back("listen: '" + listen + "' is not a loopback address, and no authentication "
+                       "is configured (auth.token_file, or tls.client_ca_file for mutual TLS): "
+                       "anyone on the network could change the pipeline; configure one, or give "
+                       "--allow-insecure (allow_insecure: true) to accept that");
+  }
+  if (config.auth().has_token_file() && !config.tls().has_cert_file() && !config.allow_insecure()) {
+    problems.push_back("auth.token_file: a bearer token needs TLS (tls.cert_file and tls.key_file), "
+                       "else it crosses the network in clear text; or give --allow-insecure");
+  }
+  if (!config.auth().allowed_client_names().empty() && !config.tls().has_client_ca_file()) {
+    problems.push_back("auth.allowed_client_names: needs tls.client_ca_file (client certificates "
+                       "exist only with mutual TLS)");
+  }
   if (config.record().has_dir() && config.record().dir().empty()) {
     problems.push_back("record.dir: must not be empty");
+  }
+  if (config.record().has_queue_frames() &&
+      (config.record().queue_frames() < 1 || config.record().queue_frames() > 1024)) {
+    problems.push_back("record.queue_frames: must be 1..1024 (got " +
+                       std::to_string(config.record().queue_frames()) + ")");
   }
   if (config.record().has_max_bytes() && config.record().max_bytes() < (uint64_t{1} << 20)) {
     problems.push_back("record.max_bytes: must be at least 1 MiB (got " +

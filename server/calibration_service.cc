@@ -188,12 +188,18 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
 }  // namespace
 
 grpc::ServerReadReactor<v1::CalibrationUpload>* CalibrationServiceImpl::Calibrate(
-    grpc::CallbackServerContext* /*context*/, v1::CalibrationReport* response) {
+    grpc::CallbackServerContext* context, v1::CalibrationReport* response) {
+  if (grpc::Status allowed = auth_.CheckControl(*context, "Calibrate"); !allowed.ok()) {
+    return new RefusedReadReactor<v1::CalibrationUpload>(std::move(allowed));
+  }
   return new CalibrateReactor(manager_, response);
 }
 
 grpc::ServerWriteReactor<v1::CaptureProgress>* CalibrationServiceImpl::CaptureCalibration(
-    grpc::CallbackServerContext* /*context*/, const v1::CaptureCalibrationRequest* request) {
+    grpc::CallbackServerContext* context, const v1::CaptureCalibrationRequest* request) {
+  if (grpc::Status allowed = auth_.CheckControl(*context, "CaptureCalibration"); !allowed.ok()) {
+    return new CaptureReactor(std::move(allowed));
+  }
   if (Status valid = CalibrationManager::ValidateCapture(*request); !valid.ok()) {
     return new CaptureReactor(ToGrpcStatus(valid));
   }
@@ -219,6 +225,9 @@ grpc::ServerUnaryReactor* CalibrationServiceImpl::GetCalibration(
 grpc::ServerUnaryReactor* CalibrationServiceImpl::ActivateCalibration(
     grpc::CallbackServerContext* context, const v1::ActivateCalibrationRequest* request,
     v1::CalibrationRecord* response) {
+  if (grpc::Status allowed = auth_.CheckControl(*context, "ActivateCalibration"); !allowed.ok()) {
+    return Reply(context, allowed);
+  }
   // Building the rectification maps takes tens of milliseconds: acceptable on this thread.
   Result<v1::CalibrationRecord> record = manager_.Activate(request->calibration_id());
   if (!record.ok()) return Reply(context, ToGrpcStatus(record.error()));

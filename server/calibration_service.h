@@ -4,6 +4,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "server/auth.h"
 #include "server/calibration_manager.h"
 #include "stevi/v1/calibration_service.grpc.pb.h"
 
@@ -11,7 +12,8 @@ namespace stevi::server {
 
 class CalibrationServiceImpl final : public v1::CalibrationService::CallbackService {
  public:
-  explicit CalibrationServiceImpl(CalibrationManager& manager) : manager_(manager) {}
+  CalibrationServiceImpl(CalibrationManager& manager, const Authorizer& auth)
+      : manager_(manager), auth_(auth) {}
 
   grpc::ServerReadReactor<v1::CalibrationUpload>* Calibrate(
       grpc::CallbackServerContext* context, v1::CalibrationReport* response) override;
@@ -29,6 +31,7 @@ class CalibrationServiceImpl final : public v1::CalibrationService::CallbackServ
 
  private:
   CalibrationManager& manager_;
+  const Authorizer& auth_;
 };
 
 }  // namespace stevi::server

@@ -1,5 +1,7 @@
 #include "server/engine.h"
 
+#include "server/log.h"
+
 #include <algorithm>
 #include <chrono>
 #include <map>
@@ -141,9 +143,18 @@ bool Engine::WaitUntil(Clock::time_point deadline) {
 }
 
 void Engine::SetSourceState(SourceState state, std::string error) {
-  std::lock_guard lock(mu_);
-  source_state_ = state;
-  source_error_ = std::move(error);
+  bool changed = false;
+  {
+    std::lock_guard lock(mu_);
+    changed = source_state_ != state;
+    source_state_ = state;
+    source_error_ = error;
+  }
+  if (changed) {
+    Log(state == SourceState::kDown ? LogLevel::kWarning : LogLevel::kInfo, "source_state",
+        {{"state", std::string(SourceStateName(state))}, {"source", source_description_},
+         {"error", error}});
+  }
 }
 
 void Engine::CaptureLoop() {
@@ -169,8 +180,10 @@ void Engine::CaptureLoop() {
     retry = std::chrono::duration_cast<Clock::duration>(kRetryFirst);
     if (frame->unix_time_ns == 0) frame->unix_time_ns = UnixNowNs();
     std::shared_ptr<const CaptureTap> tap;
+    bool recovered = false;
     {
       std::lock_guard lock(mu_);
+      recovered = source_state_ != SourceState::kRunning;
       source_state_ = SourceState::kRunning;
       source_error_.clear();
       ++frames_captured_;
@@ -179,6 +192,9 @@ void Engine::CaptureLoop() {
       tap = capture_tap_;
     }
     capture_cv_.notify_all();
+    if (recovered) {
+      Log(LogLevel::kInfo, "source_state", {{"state", "RUNNING"}, {"source", source_description_}});
+    }
     if (tap) (*tap)(*frame);
     mailbox_.Put(std::move(frame).value());
     // Pace; when the source itself is slower than the period, do not try to catch up.

@@ -64,7 +64,8 @@ RecordingManager::~RecordingManager() {
   Stop("the server stopped");
 }
 
-Result<v1::RecordingStatus> RecordingManager::StartIn(const std::string& dir, uint64_t max_bytes) {
+Result<v1::RecordingStatus> RecordingManager::StartIn(const std::string& dir, uint64_t max_bytes,
+                                                      int queue_frames) {
   if (max_bytes < kMinRecordingMaxBytes) {
     return Error{ErrorCode::kInvalidArgument,
                  "max_bytes: must be at least 1 MiB (got " + std::to_string(max_bytes) + ")"};
@@ -86,6 +87,7 @@ Result<v1::RecordingStatus> RecordingManager::StartIn(const std::string& dir, ui
   }
   drivers::RecorderOptions options;
   options.max_bytes = max_bytes;
+  options.queue_frames = queue_frames;
   drivers::RecordingInfo info;
   info.source = engine_.Status().source;
   info.rig = rig;

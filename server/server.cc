@@ -1,6 +1,10 @@
 #include "server/server.h"
 
 #include <chrono>
+#include <optional>
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
 
 #include "server/app_config.h"
 #include "server/convert.h"
@@ -26,6 +30,13 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   Result<std::unique_ptr<PoseSource>> poses = PoseSource::Create(config.geo(), synthetic_pose);
   if (!poses.ok()) return poses.error();
 
+  // Credentials before the source: a bad certificate or token file is found without touching a
+  // camera.
+  Result<std::shared_ptr<grpc::ServerCredentials>> credentials = MakeServerCredentials(config.tls());
+  if (!credentials.ok()) return credentials.error();
+  Result<Authorizer> auth = Authorizer::Create(config.auth());
+  if (!auth.ok()) return auth.error();
+
   Result<std::unique_ptr<drivers::StereoSource>> source =
       OpenSource(config.source(), /*loop_images=*/true);
   if (!source.ok()) return source.error();
@@ -35,6 +46,7 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   }
 
   std::unique_ptr<Server> server(new Server());
+  server->auth_ = std::move(auth).value();
   server->poses_ = std::move(poses).value();
   server->listen_ = config.has_listen() ? config.listen() : kDefaultListen;
   const uint32_t queue =
@@ -78,24 +90,45 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
     // From the first frame on: the tap is in place before the engine starts.
     const uint64_t max_bytes = config.record().has_max_bytes() ? config.record().max_bytes()
                                                                : kDefaultRecordingMaxBytes;
-    Result<v1::RecordingStatus> recording = server->recording_->StartIn(config.record().dir(), max_bytes);
+    const int record_queue = config.record().has_queue_frames()
+                                 ? static_cast<int>(config.record().queue_frames())
+                                 : kDefaultRecordingQueueFrames;
+    Result<v1::RecordingStatus> recording =
+        server->recording_->StartIn(config.record().dir(), max_bytes, record_queue);
     if (!recording.ok()) {
       Error error = recording.error();
       error.message = "record: " + error.message;
       return error;
     }
   }
-  server->service_ = std::make_unique<ObstacleServiceImpl>(*server->engine_, *broadcaster,
-                                                           *server->poses_, *server->recording_);
-  server->calibration_service_ = std::make_unique<CalibrationServiceImpl>(*server->calibration_);
+  server->service_ = std::make_unique<ObstacleServiceImpl>(
+      *server->engine_, *broadcaster, *server->poses_, *server->recording_, server->auth_);
+  server->calibration_service_ =
+      std::make_unique<CalibrationServiceImpl>(*server->calibration_, server->auth_);
 
   const int max_message =
       static_cast<int>(config.has_max_message_bytes() ? config.max_message_bytes()
                                                       : kDefaultMaxMessageBytes);
+  // grpc.health.v1 (gRPC's own implementation) and server reflection (grpcurl, grpc_cli).
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(server->listen_, grpc::InsecureServerCredentials(), &server->port_);
+  builder.AddListeningPort(server->listen_, *credentials, &server->port_);
   builder.RegisterService(server->service_.get());
   builder.RegisterService(server->calibration_service_.get());
+  // Keepalive: idle connections are pinged and dead ones (half-open: a client that vanished)
+  // closed.
+  const auto ms = [](bool has, double seconds, double fallback) {
+    return static_cast<int>((has ? seconds : fallback) * 1000.0);
+  };
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS,
+                             ms(config.has_keepalive_time_s(), config.keepalive_time_s(), 30));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS,
+                             ms(config.has_keepalive_timeout_s(), config.keepalive_timeout_s(), 10));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  builder.AddChannelArgument(
+      GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS,
+      ms(config.has_min_client_ping_interval_s(), config.min_client_ping_interval_s(), 10));
   builder.SetMaxReceiveMessageSize(max_message);
   builder.SetMaxSendMessageSize(max_message);
   server->grpc_server_ = builder.BuildAndStart();
@@ -103,15 +136,50 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
     return Error{ErrorCode::kUnavailable,
                  "cannot listen on " + server->listen_ + " (address in use or not local?)"};
   }
+  if (grpc::HealthCheckServiceInterface* health = server->grpc_server_->GetHealthCheckService()) {
+    // NOT_SERVING until the first frame comes through (the default is SERVING); naming the
+    // services lets a client ask for each.
+    health->SetServingStatus("stevi.v1.ObstacleService", false);
+    health->SetServingStatus("stevi.v1.CalibrationService", false);
+    health->SetServingStatus(false);
+  }
   server->engine_->Start();
+  server->health_thread_ = std::thread([raw = server.get()] { raw->HealthLoop(); });
   return server;
 }
 
 Server::~Server() { Shutdown(); }
 
+void Server::HealthLoop() {
+  grpc::HealthCheckServiceInterface* health = grpc_server_->GetHealthCheckService();
+  if (health == nullptr) return;
+  std::optional<bool> published;
+  std::unique_lock lock(health_mu_);
+  while (!health_stop_) {
+    lock.unlock();
+    const EngineStatus status = engine_->Status();
+    // Serving: the source delivers and the pipeline turns its frames into tracks.
+    const bool serving = status.source_state == SourceState::kRunning && status.frames_processed > 0;
+    if (published != serving) {
+      health->SetServingStatus(serving);  // the overall status ("") and every service
+      published = serving;
+    }
+    lock.lock();
+    // A quarter of a second: a load balancer or watchdog sees a camera loss about as soon as
+    // the engine does.
+    health_cv_.wait_for(lock, std::chrono::milliseconds(250), [this] { return health_stop_; });
+  }
+}
+
 void Server::Shutdown() {
   if (shut_down_) return;
   shut_down_ = true;
+  {
+    std::lock_guard lock(health_mu_);
+    health_stop_ = true;
+  }
+  health_cv_.notify_all();
+  if (health_thread_.joinable()) health_thread_.join();
   // End the streams first so that Shutdown() does not wait on them, then stop accepting.
   if (broadcaster_) broadcaster_->Close();
   if (grpc_server_) {

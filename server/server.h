@@ -2,10 +2,14 @@
 // order. main() only parses flags and waits for a signal.
 #pragma once
 
+#include <condition_variable>
 #include <memory>
+#include <mutex>
+#include <thread>
 #include <string>
 
 #include "core/common/error.h"
+#include "server/auth.h"
 #include "server/calibration_manager.h"
 #include "server/calibration_service.h"
 #include "server/engine.h"
@@ -35,6 +39,9 @@ class Server {
 
  private:
   Server() = default;
+  // Keeps the gRPC health service (grpc.health.v1) in step with the source and the pipeline:
+  // SERVING while frames are processed, NOT_SERVING while the source is starting, down or ended.
+  void HealthLoop();
 
   std::string listen_;
   int port_ = 0;
@@ -43,10 +50,15 @@ class Server {
   std::unique_ptr<Engine> engine_;
   std::unique_ptr<CalibrationManager> calibration_;
   std::unique_ptr<RecordingManager> recording_;
+  Authorizer auth_;
   std::unique_ptr<ObstacleServiceImpl> service_;
   std::unique_ptr<CalibrationServiceImpl> calibration_service_;
   std::unique_ptr<grpc::Server> grpc_server_;
   bool shut_down_ = false;
+  std::mutex health_mu_;
+  std::condition_variable health_cv_;
+  bool health_stop_ = false;
+  std::thread health_thread_;
 };
 
 }  // namespace stevi::server

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "server/app_config.h"
+#include "server/log.h"
 #include "server/server.h"
 
 namespace {
@@ -43,6 +44,12 @@ With no flags: the built-in synthetic rig, the canonical algorithm, listening on
   --data-dir DIR         where calibrations are stored (default ./stevi-data); its active
                          calibration is applied at start when it fits the source
   --algorithm NAME       canonical (default), stevie (stereo + edges) or stevis (stereo + saliency)
+  --tls-cert FILE        PEM certificate: serve TLS only (with --tls-key)
+  --tls-key FILE         PEM private key of --tls-cert
+  --tls-client-ca FILE   PEM CA: mutual TLS, every client needs a certificate it signed
+  --token-file FILE      bearer token (first line, >= 16 characters) that control calls must carry
+  --allow-insecure       listen on a non-loopback address without authentication (or send a
+                         token without TLS): anyone who can connect may change the pipeline
   --help                 this text
 )";
 
@@ -53,8 +60,8 @@ int main(int argc, char** argv) {
   const std::set<std::string> known = {
       "listen", "config", "source",  "left",        "right",   "calibration", "fps",    "algorithm",
       "data-dir", "scene", "replay", "rate", "record", "roi", "exposure-us", "gain-db", "trigger",
-      "timestamps"};
-  Result<server::Flags> flags = server::ParseFlags(argc, argv, known, {"help"});
+      "timestamps", "tls-cert", "tls-key", "tls-client-ca", "token-file"};
+  Result<server::Flags> flags = server::ParseFlags(argc, argv, known, {"help", "allow-insecure"});
   if (!flags.ok()) {
     std::cerr << "stevi-server: " << flags.error().message << "\n";
     return 2;
@@ -89,25 +96,29 @@ int main(int argc, char** argv) {
   sigaddset(&stop_signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
 
+  using server::Log;
+  using server::LogLevel;
   Result<std::unique_ptr<server::Server>> server = server::Server::Start(config);
   if (!server.ok()) {
-    std::cerr << "stevi-server: " << server.error().message << "\n";
+    Log(LogLevel::kError, "start_failed", {{"error", server.error().message}});
     return 1;
   }
   for (const std::string& problem : (*server)->calibration().problems()) {
-    std::cerr << "stevi-server: calibration store: " << problem << "\n";
+    Log(LogLevel::kWarning, "calibration_store", {{"problem", problem}});
   }
   const server::EngineStatus status = (*server)->engine().Status();
-  std::cerr << "stevi-server: serving " << status.source << ", algorithm "
-            << pipeline::AlgorithmName(status.algorithm) << ", on "
-            << (*server)->listen_address().substr(0, (*server)->listen_address().rfind(':')) << ":"
-            << (*server)->port() << std::endl;
+  const std::string& listen = (*server)->listen_address();
+  Log(LogLevel::kInfo, "serving",
+      {{"source", status.source},
+       {"algorithm", std::string(pipeline::AlgorithmName(status.algorithm))},
+       {"listen", listen.substr(0, listen.rfind(':')) + ":" + std::to_string((*server)->port())},
+       {"tls", config.tls().has_cert_file() ? "on" : "off"},
+       {"auth", config.auth().has_token_file() || config.tls().has_client_ca_file() ? "on" : "off"}});
 
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
-  std::cerr << "stevi-server: " << (signal_number == SIGINT ? "SIGINT" : "SIGTERM")
-            << ", shutting down" << std::endl;
+  Log(LogLevel::kInfo, "shutting_down", {{"signal", signal_number == SIGINT ? "SIGINT" : "SIGTERM"}});
   (*server)->Shutdown();
-  std::cerr << "stevi-server: stopped" << std::endl;
+  Log(LogLevel::kInfo, "stopped");
   return 0;
 }

@@ -267,6 +267,9 @@ grpc::ServerUnaryReactor* ObstacleServiceImpl::GetPipelineConfig(
 grpc::ServerUnaryReactor* ObstacleServiceImpl::SetPipelineConfig(
     grpc::CallbackServerContext* context, const v1::SetPipelineConfigRequest* request,
     v1::PipelineConfig* response) {
+  if (grpc::Status allowed = auth_.CheckControl(*context, "SetPipelineConfig"); !allowed.ok()) {
+    return Reply(context, allowed);
+  }
   return Reply(context, SetPipelineConfigImpl(engine_, config_mu_, *request, response));
 }
 
@@ -279,6 +282,9 @@ grpc::ServerUnaryReactor* ObstacleServiceImpl::GetDisparitySnapshot(
 grpc::ServerUnaryReactor* ObstacleServiceImpl::StartRecording(
     grpc::CallbackServerContext* context, const v1::StartRecordingRequest* request,
     v1::RecordingStatus* response) {
+  if (grpc::Status allowed = auth_.CheckControl(*context, "StartRecording"); !allowed.ok()) {
+    return Reply(context, allowed);
+  }
   // Creating the directory and the files is quick; the frames are written by the recorder's own
   // thread.
   Result<v1::RecordingStatus> started = recording_.Start(*request);
@@ -289,13 +295,19 @@ grpc::ServerUnaryReactor* ObstacleServiceImpl::StartRecording(
 grpc::ServerUnaryReactor* ObstacleServiceImpl::StopRecording(
     grpc::CallbackServerContext* context, const v1::StopRecordingRequest* /*request*/,
     v1::RecordingStatus* response) {
+  if (grpc::Status allowed = auth_.CheckControl(*context, "StopRecording"); !allowed.ok()) {
+    return Reply(context, allowed);
+  }
   // Waits for the queued frames (at most RecorderOptions::queue_frames) to be written.
   *response = recording_.Stop();
   return Reply(context, grpc::Status::OK);
 }
 
 grpc::ServerReadReactor<v1::VehicleState>* ObstacleServiceImpl::PublishVehicleState(
-    grpc::CallbackServerContext* /*context*/, v1::PublishVehicleStateResponse* response) {
+    grpc::CallbackServerContext* context, v1::PublishVehicleStateResponse* response) {
+  if (grpc::Status allowed = auth_.CheckControl(*context, "PublishVehicleState"); !allowed.ok()) {
+    return new RefusedReadReactor<v1::VehicleState>(std::move(allowed));
+  }
   return new VehicleStateReactor(poses_, response);
 }
 

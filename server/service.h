@@ -7,6 +7,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "server/auth.h"
 #include "server/broadcaster.h"
 #include "server/engine.h"
 #include "server/pose_source.h"
@@ -39,8 +40,9 @@ grpc::Status GetDisparitySnapshotImpl(const Engine& engine,
 class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
  public:
   ObstacleServiceImpl(Engine& engine, FrameBroadcaster& broadcaster, PoseSource& poses,
-                      RecordingManager& recording)
-      : engine_(engine), broadcaster_(broadcaster), poses_(poses), recording_(recording) {}
+                      RecordingManager& recording, const Authorizer& auth)
+      : engine_(engine), broadcaster_(broadcaster), poses_(poses), recording_(recording),
+        auth_(auth) {}
 
   grpc::ServerWriteReactor<v1::TrackFrame>* StreamTracks(
       grpc::CallbackServerContext* context, const v1::StreamTracksRequest* request) override;
@@ -70,6 +72,7 @@ class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
   FrameBroadcaster& broadcaster_;
   PoseSource& poses_;
   RecordingManager& recording_;
+  const Authorizer& auth_;
   std::mutex config_mu_;
 };
 

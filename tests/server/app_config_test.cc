@@ -3,6 +3,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 
 #include "tests/testing/data.h"
@@ -229,10 +230,14 @@ TEST(ValidateServerConfig, ListsEveryCrossFieldProblem) {
   config.set_listen("nowhere");
   config.mutable_source()->set_kind(v1::SOURCE_KIND_IMAGES);
   config.set_max_streams(0);
+  config.set_keepalive_time_s(0.1);
+  config.set_keepalive_timeout_s(std::nan(""));
   const std::vector<std::string> problems = ValidateServerConfig(config);
   const std::string all = ::testing::PrintToString(problems);
   EXPECT_THAT(all, AllOf(HasSubstr("listen"), HasSubstr("source.left"), HasSubstr("source.right"),
-                         HasSubstr("source.calibration"), HasSubstr("max_streams")));
+                         HasSubstr("source.calibration"), HasSubstr("max_streams"),
+                         HasSubstr("keepalive_time_s: must be in [1, 86400] s (got 0.1)"),
+                         HasSubstr("keepalive_timeout_s")));
 
   v1::ServerConfig fine;
   fine.set_listen("127.0.0.1:0");

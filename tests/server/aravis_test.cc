@@ -9,6 +9,9 @@
 #include <cstdlib>
 
 #include "core/geometry/calibration_io.h"
+#include <grpcpp/grpcpp.h>
+
+#include "grpc/health/v1/health.grpc.pb.h"
 #include "stevi/v1/obstacle_service.pb.h"
 #include "tests/server/server_process.h"
 #include "tests/testing/fake_gv_camera.h"
@@ -19,6 +22,29 @@ namespace {
 using ::testing::HasSubstr;
 using testing::ParseJsonLines;
 using Clock = std::chrono::steady_clock;
+
+// grpc.health.v1 Check of the obstacle service (what a load balancer or a watchdog asks).
+grpc::health::v1::HealthCheckResponse::ServingStatus Health(const std::string& address) {
+  auto stub = grpc::health::v1::Health::NewStub(
+      grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  grpc::health::v1::HealthCheckRequest request;
+  request.set_service("stevi.v1.ObstacleService");
+  grpc::health::v1::HealthCheckResponse response;
+  const grpc::Status status = stub->Check(&context, request, &response);
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  return response.status();
+}
+
+// Waits (a bounded number of checks, each a round trip) until the health is `want`.
+bool HealthBecomes(const std::string& address,
+                   grpc::health::v1::HealthCheckResponse::ServingStatus want) {
+  for (int i = 0; i < 2000; ++i) {
+    if (Health(address) == want) return true;
+  }
+  return false;
+}
 
 v1::GetStatusResponse Status(const testing::ServerProcess& server) {
   const testing::RunResult r = server.Stevi({"status", "--json"});
@@ -90,6 +116,7 @@ TEST_F(AravisServerTest, StreamsPairedFramesWithSkewAndCountersInStatus) {
 
 TEST_F(AravisServerTest, ALostCameraLeavesTheServerUpAndStreamsResume) {
   ASSERT_EQ(server_.Stevi({"watch", "--count", "5"}).exit_code, 0);
+  EXPECT_TRUE(HealthBecomes(server_.address(), grpc::health::v1::HealthCheckResponse::SERVING));
   // A stream opened before the fault must live through it: 60 frames at 30 fps, of which at
   // most a few come before the kill.
   testing::Subprocess watch({testing::BinaryPath("stevi"), "--server", server_.address(),
@@ -101,6 +128,8 @@ TEST_F(AravisServerTest, ALostCameraLeavesTheServerUpAndStreamsResume) {
   }
   ASSERT_EQ(status.source_state(), v1::SOURCE_STATE_DOWN);
   EXPECT_THAT(status.source_error(), HasSubstr("Aravis-Fake-GV01"));
+  EXPECT_TRUE(HealthBecomes(server_.address(), grpc::health::v1::HealthCheckResponse::NOT_SERVING))
+      << "a camera down is NOT_SERVING";
   const testing::RunResult snapshot = server_.Stevi({"snapshot", "--out", dir_ + "/snap"});
   EXPECT_EQ(snapshot.exit_code, 1);
   EXPECT_THAT(snapshot.err, HasSubstr("UNAVAILABLE"));
@@ -115,6 +144,7 @@ TEST_F(AravisServerTest, ALostCameraLeavesTheServerUpAndStreamsResume) {
   ASSERT_EQ(status.source_state(), v1::SOURCE_STATE_RUNNING);
   EXPECT_LT(recovery_s, 5.0);
   EXPECT_GE(status.pairing().reconnects(), 1u);
+  EXPECT_TRUE(HealthBecomes(server_.address(), grpc::health::v1::HealthCheckResponse::SERVING));
   EXPECT_EQ(watch.Wait(std::chrono::seconds(30)), 0) << watch.DrainStderr();
 }
 

@@ -52,7 +52,10 @@ class ServerProcessTest : public ::testing::Test {
     address_ = server_.address();
   }
 
-  testing::RunResult Stevi(std::vector<std::string> args) { return server_.Stevi(std::move(args)); }
+  testing::RunResult Stevi(std::vector<std::string> args,
+                           std::chrono::milliseconds timeout = kCommandTimeout) {
+    return server_.Stevi(std::move(args), timeout);
+  }
 
   testing::ServerProcess server_;
   std::string address_;
@@ -173,7 +176,9 @@ TEST_F(ServerProcessTest, CalibrateTheRealXimeaCaptures) {
   const std::string dir = *data + "/calib_ximea_stereo";
   const testing::RunResult r =
       Stevi({"calibrate", "--board", "6x9", "--square-mm", "24", "--left", dir + "/left%02d.jpg",
-             "--right", dir + "/right%02d.jpg", "--apply", "--json"});
+             "--right", dir + "/right%02d.jpg", "--apply", "--json"},
+            // 17 s alone on two cores; several times that when other tests share them.
+            std::chrono::minutes(5));
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
   const std::vector<v1::CalibrationReport> reports = ParseJsonLines<v1::CalibrationReport>(r.out);
   ASSERT_EQ(reports.size(), 1u) << r.out;

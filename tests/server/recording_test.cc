@@ -64,10 +64,12 @@ std::string TracksWithoutGeo(const v1::TrackFrame& frame) {
 TEST(Recording, HundredSyntheticFramesReplayTwiceByteIdenticalAndAsLive) {
   const std::string dir = testing::MakeTempDir("stevi-record") + "/airfield";
   testing::ServerProcess server;
-  // 10 fps: the recorder (PNG level 1, ~18 ms a frame on one core) keeps up even while ctest runs
-  // other tests on both cores, so that no frame is dropped and the replay can be compared with
-  // the source frame for frame.
-  ASSERT_NO_FATAL_FAILURE(server.Start({"--fps", "10", "--record", dir}));
+  // 10 fps and a deep writer queue: the recorder (PNG level 1, ~18 ms a frame on one core) keeps
+  // up even while other tests load both cores, so that no frame is dropped and the replay can be
+  // compared with the source frame for frame.
+  const std::string config = testing::MakeTempDir("stevi-record-config") + "/server.textproto";
+  std::ofstream(config) << "record { dir: \"" << dir << "\" queue_frames: 256 }\n";
+  ASSERT_NO_FATAL_FAILURE(server.Start({"--fps", "10", "--config", config}));
   // 105 processed frames: the recorder has been handed at least as many.
   const testing::RunResult watch = server.Stevi({"watch", "--count", "105", "--json"});
   ASSERT_EQ(watch.exit_code, 0) << watch.err;

@@ -57,10 +57,11 @@ class ServerProcess {
     address_ = "127.0.0.1:" + m[1].str();
   }
 
-  // Runs `stevi --server ADDRESS --timeout 20 ARGS...`.
-  RunResult Stevi(std::vector<std::string> args) const {
+  // Runs `stevi --server ADDRESS --timeout 20 ARGS...`, for at most `timeout`.
+  RunResult Stevi(std::vector<std::string> args,
+                  std::chrono::milliseconds timeout = kCommandTimeout) const {
     args.insert(args.begin(), {BinaryPath("stevi"), "--server", address_, "--timeout", "20"});
-    return Run(args, kCommandTimeout);
+    return Run(args, timeout);
   }
 
   void Stop() { server_.reset(); }
