@@ -148,8 +148,9 @@ Encounter Assess(const OwnVehicle& own, const Obstacle& obstacle, const AvoidOpt
       options.sigma_factor * std::max(obstacle.sigma_horizontal_m, obstacle.sigma_vertical_m);
   // Speed towards the vehicle along the line of sight; it must stand out of the velocity noise.
   const double closing_speed = e.distance_m > 0 ? -Dot(p, v) / e.distance_m : 0.0;
+  const bool established = obstacle.hits == 0 || obstacle.hits >= options.min_hits_to_extrapolate;
   const bool closing =
-      vv > 0 && Dot(p, v) < 0 &&
+      established && vv > 0 && Dot(p, v) < 0 &&
       closing_speed > options.sigma_factor * obstacle.range_rate_sigma_mps;
   if (!closing && e.distance_m >= e.protected_radius_m) {
     e.level = e.distance_m < options.caution_range_m ? AdvisoryLevel::kCaution : AdvisoryLevel::kClear;

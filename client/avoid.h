@@ -45,6 +45,8 @@ struct Obstacle {
   // range_rate_sigma_mps). An approach slower than sigma_factor times this is velocity noise, not
   // closing: a young track's first velocity estimate must not raise an alarm.
   double range_rate_sigma_mps = 0;
+  // Detections the track has had (Track.hits); 0 = unknown (then it counts as established).
+  uint32_t hits = 0;
   ObstacleState state = ObstacleState::kConfirmed;
   double score = 1;  // 0..1, of the last detection
 };
@@ -97,6 +99,11 @@ struct AvoidOptions {
   // Tentative tracks are often clutter: ignored unless this is false. Coasting tracks always count
   // (an occluded obstacle is still there).
   bool ignore_tentative = true;
+  // A track with fewer detections than this is judged by where it is, not by where its velocity
+  // says it goes: its first velocity estimates come from a few noisy ranges (a departing drone's
+  // first three gave a 0.6-1 m/s approach), too few to extrapolate 15 s ahead. >= 0 (0 or 1:
+  // extrapolate every track). At 10 fps the default delays an approach alarm by 0.2 s.
+  uint32_t min_hits_to_extrapolate = 5;
   // Obstacles scoring below this are ignored, in [0, 1] (0 takes all).
   double min_score = 0;
 
@@ -119,7 +126,8 @@ struct Encounter {
   AdvisoryLevel level = AdvisoryLevel::kClear;
 };
 
-// The encounter of one obstacle (whether or not the options would ignore it). Inputs must be
+// The encounter of one obstacle (whether or not the options would ignore it); a young track
+// (hits below min_hits_to_extrapolate) is taken as not closing. Inputs must be
 // finite (ObstacleIsValid).
 Encounter Assess(const OwnVehicle& own, const Obstacle& obstacle, const AvoidOptions& options);
 

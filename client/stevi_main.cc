@@ -707,6 +707,7 @@ int Avoid(Client& client, const std::vector<std::string>& args) {
           o.sigma_horizontal_m = t.position_sigma_m().horizontal_m();
           o.sigma_vertical_m = t.position_sigma_m().vertical_m();
           o.range_rate_sigma_mps = t.range_rate_sigma_mps();
+          o.hits = t.hits();
           o.state = t.state() == v1::TRACK_STATE_TENTATIVE ? sc::ObstacleState::kTentative
                     : t.state() == v1::TRACK_STATE_COASTING ? sc::ObstacleState::kCoasting
                                                             : sc::ObstacleState::kConfirmed;

@@ -165,7 +165,14 @@ TEST(Assess, AnApproachWithinTheVelocityNoiseIsNotClosing) {
   EXPECT_EQ(Assess(hover, young, {}).level, AdvisoryLevel::kClear);
   young.range_rate_sigma_mps = 0.1;
   EXPECT_EQ(Assess(hover, young, {}).level, AdvisoryLevel::kAvoid);
-  // Noise never hides an obstacle already inside R.
+  // A track with a handful of detections is not extrapolated, whatever its sigma says; from
+  // min_hits_to_extrapolate on it is.
+  young.hits = 3;
+  EXPECT_EQ(Assess(hover, young, {}).level, AdvisoryLevel::kClear);
+  young.hits = AvoidOptions().min_hits_to_extrapolate;
+  EXPECT_EQ(Assess(hover, young, {}).level, AdvisoryLevel::kAvoid);
+  // Noise and youth never hide an obstacle already inside R.
+  young.hits = 1;
   young.position_m = {5, 5, 0};
   young.range_rate_sigma_mps = 1.0;
   EXPECT_EQ(Assess(hover, young, {}).level, AdvisoryLevel::kAvoid);

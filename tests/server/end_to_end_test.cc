@@ -225,7 +225,10 @@ TEST_F(ServerProcessTest, AvoidWarnsOfACollisionCourseAndStaysClearOfADivergingO
     return l == "AVOID" || l == "WARNING";
   });
   std::cout << "head_on: " << alarms << " of 40 advisories are WARNING or AVOID\n";
-  EXPECT_GE(alarms, 30) << head_on.out;
+  // The scene loops every 60 frames; 40 frames may include a restart, where the drone is seen anew
+  // at 51 m and its track needs AvoidOptions::min_hits_to_extrapolate (5) detections before its
+  // velocity counts: 30-36 of 40 measured.
+  EXPECT_GE(alarms, 25) << head_on.out;
   EXPECT_THAT(head_on.out, HasSubstr("\"d_cpa_m\""));
 
   StartServer({"--scene", "departing"});
