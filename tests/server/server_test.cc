@@ -35,6 +35,20 @@ v1::ServerConfig TestConfig() {
   return config;
 }
 
+// The next n frames of a stream (fails the test when the stream fails).
+std::vector<v1::TrackFrame> CollectFrames(client::Client& c, uint64_t n) {
+  std::vector<v1::TrackFrame> frames;
+  client::StreamOptions options;
+  options.max_frames = n;
+  const grpc::Status status = c.StreamTracks(
+      [&](const v1::TrackFrame& f) {
+        frames.push_back(f);
+        return true;
+      },
+      options);
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  return frames;
+}
 class ServerTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -47,19 +61,8 @@ class ServerTest : public ::testing::Test {
     client_ = std::make_unique<client::Client>(options);
   }
 
-  std::vector<v1::TrackFrame> Collect(client::Client& c, uint64_t n) {
-    std::vector<v1::TrackFrame> frames;
-    client::StreamOptions options;
-    options.max_frames = n;
-    const grpc::Status status = c.StreamTracks(
-        [&](const v1::TrackFrame& f) {
-          frames.push_back(f);
-          return true;
-        },
-        options);
-    EXPECT_TRUE(status.ok()) << status.error_message();
-    return frames;
-  }
+  std::vector<v1::TrackFrame> Collect(client::Client& c, uint64_t n) { return CollectFrames(c, n); }
+
 
   std::unique_ptr<Server> server_;
   std::unique_ptr<client::Client> client_;
@@ -293,17 +296,7 @@ TEST(ServerFlight, AStandingTowerKeepsItsPlaceWhileTheRigFlies) {
   options.address = "127.0.0.1:" + std::to_string((*server)->port());
   options.timeout = std::chrono::seconds(20);
   client::Client client(options);
-  std::vector<v1::TrackFrame> frames;
-  client::StreamOptions stream;
-  stream.max_frames = 40;
-  ASSERT_TRUE(client
-                  .StreamTracks(
-                      [&](const v1::TrackFrame& f) {
-                        frames.push_back(f);
-                        return true;
-                      },
-                      stream)
-                  .ok());
+  const std::vector<v1::TrackFrame> frames = CollectFrames(client, 40);
   ASSERT_EQ(frames.size(), 40u);
   // The tower: the confirmed track nearest the truth's tower bearing (left, 43-45 m).
   const geo::VehicleState start = SyntheticRigPose(drivers::DefaultScene().camera_height_m);
@@ -383,17 +376,7 @@ TEST(ServerPublish, PublishedVehicleStatesGeoreferenceTheTracks) {
   EXPECT_EQ(response.refused(), 2u);
   EXPECT_FALSE(response.last_error().empty());
 
-  std::vector<v1::TrackFrame> frames;
-  client::StreamOptions stream;
-  stream.max_frames = 5;
-  ASSERT_TRUE(client
-                  .StreamTracks(
-                      [&](const v1::TrackFrame& f) {
-                        frames.push_back(f);
-                        return true;
-                      },
-                      stream)
-                  .ok());
+  const std::vector<v1::TrackFrame> frames = CollectFrames(client, 5);
   ASSERT_EQ(frames.size(), 5u);
   int geodetic = 0;
   for (const v1::TrackFrame& f : frames) {
