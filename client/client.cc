@@ -32,11 +32,20 @@ Client::Client(ClientOptions options) : options_(std::move(options)) {
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(options_.max_message_bytes);
   args.SetMaxSendMessageSize(options_.max_message_bytes);
-  channel_ = grpc::CreateCustomChannel(
-      options_.address,
-      options_.credentials ? options_.credentials : grpc::InsecureChannelCredentials(), args);
+  const std::shared_ptr<grpc::ChannelCredentials> credentials =
+      options_.credentials ? options_.credentials : grpc::InsecureChannelCredentials();
+  channel_ = grpc::CreateCustomChannel(options_.address, credentials, args);
   stub_ = v1::ObstacleService::NewStub(channel_);
   calibration_stub_ = v1::CalibrationService::NewStub(channel_);
+  // StreamTracks has a connection of its own with a small, fixed receive window. A reader that
+  // falls behind then falls behind at the server, which drops frames for it (latest wins) and
+  // says so in TrackFrame.dropped_frames. With gRPC's default BDP probing the window grows on a
+  // fast link and the frames queue up in this process instead, ever older and never reported.
+  // The unary calls keep the default window: a snapshot download over a radio link needs it.
+  args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, kStreamLookaheadBytes);
+  stream_channel_ = grpc::CreateCustomChannel(options_.address, credentials, args);
+  stream_stub_ = v1::ObstacleService::NewStub(stream_channel_);
 }
 
 grpc::Status Client::Calibrate(const v1::CalibrationSettings& settings,
@@ -179,7 +188,7 @@ grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&
       stream_context_ = &context;
     }
     // Fail fast when the server cannot be reached within the timeout.
-    bool connected = channel_->WaitForConnected(std::chrono::system_clock::now() + options_.timeout);
+    bool connected = stream_channel_->WaitForConnected(std::chrono::system_clock::now() + options_.timeout);
     grpc::Status status;
     bool stop = false;
     if (!connected) {
@@ -188,7 +197,7 @@ grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&
                                 std::to_string(options_.timeout.count()) + " ms");
     } else {
       std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader =
-          stub_->StreamTracks(&context, request);
+          stream_stub_->StreamTracks(&context, request);
       v1::TrackFrame frame;
       while (reader->Read(&frame)) {
         failures = 0;

@@ -17,6 +17,11 @@
 
 namespace stevi::client {
 
+// The HTTP/2 receive window of StreamTracks (BDP probing off): how far a slow reader may fall
+// behind before the server starts dropping frames for it. 16 KiB holds about 7 TrackFrames of ten
+// tracks. Other clients of the API should do the same (see README, "Slow readers").
+inline constexpr int kStreamLookaheadBytes = 16 << 10;
+
 struct ClientOptions {
   std::string address = "127.0.0.1:50051";
   // Deadline of each unary call, and of connecting a stream.
@@ -91,6 +96,8 @@ class Client {
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::ObstacleService::Stub> stub_;
   std::unique_ptr<v1::CalibrationService::Stub> calibration_stub_;
+  std::shared_ptr<grpc::Channel> stream_channel_;  // StreamTracks only: a small receive window
+  std::unique_ptr<v1::ObstacleService::Stub> stream_stub_;
   std::mutex stream_mu_;
   grpc::ClientContext* stream_context_ = nullptr;
   std::atomic<bool> cancelled_{false};

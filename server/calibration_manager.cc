@@ -166,7 +166,9 @@ Result<std::unique_ptr<CalibrationManager>> CalibrationManager::Open(const std::
       new CalibrationManager(std::move(opened->store), engine));
   manager->problems_ = std::move(opened->problems);
   if (std::optional<calibration::CalibrationId> active = manager->store_->ActiveId()) {
-    Result<v1::CalibrationRecord> applied = manager->ActivateLocked(*active);
+    // Applied, not persisted: when the store fell back from an unreadable choice, the operator's
+    // choice in the `active` file stays for the start after the file is repaired.
+    Result<v1::CalibrationRecord> applied = manager->ActivateLocked(*active, /*persist=*/false);
     if (!applied.ok()) {
       manager->problems_.push_back("the stored active calibration " + active->Name() +
                                    " was not applied: " + applied.error().message);
@@ -348,10 +350,11 @@ Result<v1::CalibrationRecord> CalibrationManager::Activate(const std::string& id
     return Error{ErrorCode::kInvalidArgument,
                  "calibration_id: expected a name like cal-000001, got '" + id + "'"};
   }
-  return ActivateLocked(*parsed);
+  return ActivateLocked(*parsed, /*persist=*/true);
 }
 
-Result<v1::CalibrationRecord> CalibrationManager::ActivateLocked(calibration::CalibrationId id) {
+Result<v1::CalibrationRecord> CalibrationManager::ActivateLocked(calibration::CalibrationId id,
+                                                                 bool persist) {
   std::lock_guard lock(activate_mu_);
   Result<calibration::StoredCalibration> stored = store_->Get(id);
   if (!stored.ok()) return stored.error();
@@ -372,7 +375,9 @@ Result<v1::CalibrationRecord> CalibrationManager::ActivateLocked(calibration::Ca
   // The rectification maps are built here, on the caller's thread, never on the pipeline's.
   Result<geometry::StereoRig> rig = geometry::StereoRig::FromCalibration(stored->calibration, id.Name());
   if (!rig.ok()) return rig.error();
-  if (Status persisted = store_->Activate(id); !persisted.ok()) return persisted.error();
+  if (persist) {
+    if (Status persisted = store_->Activate(id); !persisted.ok()) return persisted.error();
+  }
   engine_.SetRig(std::make_shared<const geometry::StereoRig>(std::move(rig).value()),
                  stored->report.swap_left_right);
   v1::CalibrationRecord record;

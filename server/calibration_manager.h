@@ -69,7 +69,8 @@ class CalibrationManager {
 
  private:
   CalibrationManager(std::unique_ptr<calibration::CalibrationStore> store, Engine& engine);
-  Result<v1::CalibrationRecord> ActivateLocked(calibration::CalibrationId id);
+  // Applies a stored calibration to the engine; with `persist`, the store's `active` file names it.
+  Result<v1::CalibrationRecord> ActivateLocked(calibration::CalibrationId id, bool persist);
   void WorkerLoop();
   bool Stopping() const;
 

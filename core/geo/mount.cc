@@ -27,7 +27,7 @@ std::vector<std::string> MountOptions::Validate() const {
   CheckRange(problems, "roll_deg", roll_deg, -180, 180, "degrees");
   CheckRange(problems, "pitch_deg", pitch_deg, -90, 90, "degrees");
   CheckRange(problems, "yaw_deg", yaw_deg, -180, 180, "degrees");
-  static constexpr const char* kNames[3] = {"lever_arm_m.x", "lever_arm_m.y", "lever_arm_m.z"};
+  static constexpr const char* kNames[3] = {"lever_arm_x_m", "lever_arm_y_m", "lever_arm_z_m"};
   for (int i = 0; i < 3; ++i) {
     CheckRange(problems, kNames[i], lever_arm_m[i], -100, 100, "metres (body frame)");
   }
