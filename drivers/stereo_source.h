@@ -49,6 +49,11 @@ class StereoSource {
 
   // Health counters; safe from any thread while another calls Next().
   virtual SourceCounters Counters() const { return {}; }
+
+  // Makes a Next() blocked in another thread return at once, and every later call too, with
+  // kUnavailable: the owner is stopping. Safe from any thread. A source whose Next() never waits
+  // long (a synthetic scene, image files) need not override it.
+  virtual void Interrupt() {}
 };
 
 }  // namespace stevi::drivers

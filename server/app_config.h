@@ -2,6 +2,7 @@
 // format or JSON of stevi.v1.ServerConfig), command-line flags over it, and what they build.
 #pragma once
 
+#include <chrono>
 #include <map>
 #include <memory>
 #include <optional>
@@ -23,6 +24,9 @@ inline constexpr uint32_t kDefaultQueueFrames = 8;
 inline constexpr uint32_t kDefaultMaxMessageBytes = 16u << 20;
 inline constexpr uint32_t kDefaultMaxStreams = 64;
 inline constexpr double kDefaultFps = 10.0;
+// How long a stop waits for calls in progress (a Calibrate, a snapshot download) before
+// cancelling them; with the other steps a SIGTERM ends well within 5 s.
+inline constexpr std::chrono::milliseconds kShutdownGrace{2000};
 inline constexpr char kDefaultDataDir[] = "stevi-data";
 
 // Parsed "--name value" / "--name=value" flags. Flags not in `known` are an error, and so is a

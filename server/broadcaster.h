@@ -144,8 +144,8 @@ class Broadcaster {
     for (const auto& sub : Snapshot()) sub->Push(item);
   }
 
-  // Ends every subscription and refuses new ones (shutdown).
-  void Close() {
+  // Ends every subscription and refuses new ones (shutdown). Returns how many it ended.
+  size_t Close() {
     std::vector<std::shared_ptr<Subscription<T>>> subs;
     {
       std::lock_guard lock(mu_);
@@ -153,6 +153,12 @@ class Broadcaster {
       for (auto& [id, sub] : subs_) subs.push_back(sub);
     }
     for (const auto& sub : subs) sub->End();
+    return subs.size();
+  }
+
+  bool closed() const {
+    std::lock_guard lock(mu_);
+    return closed_;
   }
 
   std::vector<SubscriberStats> Stats() const {

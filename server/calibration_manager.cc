@@ -223,12 +223,19 @@ void CalibrationManager::WorkerLoop() {
 }
 
 Result<v1::CalibrationReport> CalibrationManager::Calibrate(
-    const v1::CalibrationSettings& settings, const std::vector<calibration::ImagePair>& pairs) {
+    const v1::CalibrationSettings& settings, const std::vector<calibration::ImagePair>& pairs,
+    const std::function<bool()>& abandoned) {
   Result<calibration::CalibrationOptions> options = ToCalibrationOptions(settings);
   if (!options.ok()) return options.error();
   if (pairs.empty()) return Error::Invalid({"no image pair was uploaded"});
+  const auto gone = [&] { return abandoned && abandoned(); };
+  const Error abandoned_error{ErrorCode::kFailedPrecondition,
+                             "the call was cancelled or its deadline passed; nothing was stored"};
+  if (gone()) return abandoned_error;  // it waited behind other work for longer than its deadline
   Result<calibration::CalibrationResult> result = calibration::CalibrateStereo(pairs, *options);
   if (!result.ok()) return result.error();
+  // The caller has gone: it was told DEADLINE_EXCEEDED or CANCELLED, so nothing may change.
+  if (gone()) return abandoned_error;
   calibration::CalibrationReport report = result->report;
   Result<calibration::CalibrationId> id = store_->Add(result->calibration, report);
   if (!id.ok()) return id.error();

@@ -43,9 +43,12 @@ class CalibrationManager {
   // Calibrates from pairs, stores the result (also one that failed its gates, for inspection) and,
   // with settings.apply and every gate passed, activates it. kInvalidArgument names a bad setting
   // or input (no board anywhere, too few pairs, ...): nothing is stored then and the active
-  // calibration is untouched.
+  // calibration is untouched. When `abandoned()` is true before the work starts or before the
+  // result is stored (the caller cancelled, or its deadline passed), nothing is stored or applied:
+  // kFailedPrecondition.
   Result<v1::CalibrationReport> Calibrate(const v1::CalibrationSettings& settings,
-                                          const std::vector<calibration::ImagePair>& pairs);
+                                          const std::vector<calibration::ImagePair>& pairs,
+                                          const std::function<bool()>& abandoned = {});
 
   // Grabs request.pairs() pairs from the engine's source, one every request.interval_s(), calls
   // `emit` with a progress message per pair, then calibrates (as Calibrate) and emits the report.

@@ -1,5 +1,6 @@
 #include "server/calibration_service.h"
 
+#include <atomic>
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -55,6 +56,10 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
     StartRead(&upload_);
   }
 
+  // The client cancelled or its deadline passed: the calibration job (queued or running) stores
+  // and applies nothing.
+  void OnCancel() override { cancelled_ = true; }
+
   void OnDone() override { delete this; }
 
  private:
@@ -65,7 +70,8 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
   void Run() {
     if (!have_settings_) return Refuse("no settings were sent");
     const bool posted = manager_.Post([this] {
-      Result<v1::CalibrationReport> report = manager_.Calibrate(settings_, pairs_);
+      Result<v1::CalibrationReport> report =
+          manager_.Calibrate(settings_, pairs_, [this] { return cancelled_.load(); });
       pairs_.clear();
       if (report.ok()) *response_ = std::move(report).value();
       Finish(report.ok() ? grpc::Status::OK : ToGrpcStatus(report.error()));
@@ -80,6 +86,7 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
   bool have_settings_ = false;
   std::vector<calibration::ImagePair> pairs_;
   int64_t bytes_ = 0;
+  std::atomic<bool> cancelled_{false};
 };
 
 // CaptureCalibration: the worker produces progress messages; this writes them one at a time.

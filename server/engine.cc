@@ -131,6 +131,9 @@ void Engine::Stop() {
   }
   stop_cv_.notify_all();
   capture_cv_.notify_all();
+  // A source waiting for its next frame (a replay's long recorded gap, a camera's timeout) gives
+  // up at once, so that the capture thread joins promptly.
+  if (source_) source_->Interrupt();
   mailbox_.Close();
   if (capture_thread_.joinable()) capture_thread_.join();
   if (pipeline_thread_.joinable()) pipeline_thread_.join();

@@ -8,6 +8,7 @@
 
 #include "server/app_config.h"
 #include "server/convert.h"
+#include "server/log.h"
 #include "drivers/recording/replay_source.h"
 
 namespace stevi::server {
@@ -180,16 +181,44 @@ void Server::Shutdown() {
   }
   health_cv_.notify_all();
   if (health_thread_.joinable()) health_thread_.join();
-  // End the streams first so that Shutdown() does not wait on them, then stop accepting.
-  if (broadcaster_) broadcaster_->Close();
+  // The order of a graceful stop, each step logged (a SIGTERM must end within 5 s):
+  // 1. Stop accepting: gRPC refuses new connections and calls from the moment its Shutdown()
+  //    begins, and then waits for the calls in progress (cancelling them after kShutdownGrace).
+  const auto started = std::chrono::steady_clock::now();
+  const auto elapsed_ms = [&] {
+    return std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(
+                              std::chrono::steady_clock::now() - started)
+                              .count());
+  };
+  Log(LogLevel::kInfo, "shutdown", {{"step", "stop_accepting"}});
+  std::thread stop_accepting;
   if (grpc_server_) {
-    grpc_server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
-    grpc_server_->Wait();
+    stop_accepting = std::thread([this] {
+      grpc_server_->Shutdown(std::chrono::system_clock::now() + kShutdownGrace);
+    });
   }
+  // 2. End the streams, each with a final status (UNAVAILABLE "server shutting down": a client
+  //    reconnects to the next server), so that the calls in progress finish without waiting.
+  const size_t streams = broadcaster_ ? broadcaster_->Close() : 0;
+  if (stop_accepting.joinable()) stop_accepting.join();
+  if (grpc_server_) grpc_server_->Wait();
+  Log(LogLevel::kInfo, "shutdown",
+      {{"step", "streams_ended"}, {"streams", std::to_string(streams)}, {"ms", elapsed_ms()}});
+  // 3. Stop the cameras (the source and the pipeline) and the calibration worker.
   if (calibration_) calibration_->Stop();
   if (engine_) engine_->Stop();
-  // After the source stopped: every captured frame is in the recording, which is then closed.
-  if (recording_) recording_->Stop("the server stopped");
+  Log(LogLevel::kInfo, "shutdown", {{"step", "source_stopped"}, {"ms", elapsed_ms()}});
+  // 4. After the source stopped, every captured frame is in the recording: flush and close it.
+  if (recording_) {
+    const bool was_recording = recording_->Status().active();
+    recording_->Stop("the server stopped");
+    if (was_recording) {
+      const v1::RecordingStatus status = recording_->Status();
+      Log(LogLevel::kInfo, "shutdown",
+          {{"step", "recording_flushed"}, {"dir", status.dir()},
+           {"frames", std::to_string(status.frames_written())}, {"ms", elapsed_ms()}});
+    }
+  }
 }
 
 }  // namespace stevi::server

@@ -34,8 +34,10 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
       : broadcaster_(broadcaster), sub_(std::move(sub)), filter_(std::move(filter)) {
     if (sub_ == nullptr) {
       finished_ = true;
-      Finish(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                          "too many StreamTracks subscribers (see max_streams)"));
+      Finish(broadcaster_.closed()
+                 ? grpc::Status(grpc::StatusCode::UNAVAILABLE, "server shutting down")
+                 : grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                "too many StreamTracks subscribers (see max_streams)"));
       return;
     }
     sub_->SetNotify([this] { WriteNext(); });

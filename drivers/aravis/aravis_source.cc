@@ -132,6 +132,7 @@ struct AravisStereoSource::Impl {
   mutable std::mutex mu;
   std::condition_variable cv;  // a pair, a loss, a recovery, or stop
   bool stop = false;                         // (mu)
+  bool interrupted = false;                  // (mu) Interrupt(): Next() returns at once
   StereoPairer pairer;                       // (mu)
   std::optional<StereoFrame> latest;         // (mu) newest pair not yet taken
   uint64_t reconnects = 0;                   // (mu)
@@ -406,12 +407,21 @@ std::string AravisStereoSource::Describe() const {
 
 std::shared_ptr<const geometry::StereoRig> AravisStereoSource::Rig() const { return impl_->rig; }
 
+void AravisStereoSource::Interrupt() {
+  {
+    std::lock_guard lock(impl_->mu);
+    impl_->interrupted = true;
+  }
+  impl_->cv.notify_all();
+}
+
 Result<StereoFrame> AravisStereoSource::Next() {
   Impl& m = *impl_;
   std::unique_lock lock(m.mu);
   const auto deadline = Clock::now() + m.options.timeout;
   const uint64_t frames_before[2] = {m.slots[0].frames, m.slots[1].frames};
   while (true) {
+    if (m.interrupted) return Error{ErrorCode::kUnavailable, "camera pair: stopped"};
     if (m.latest) {
       StereoFrame frame = std::move(*m.latest);
       m.latest.reset();

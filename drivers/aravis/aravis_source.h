@@ -88,6 +88,7 @@ class AravisStereoSource : public StereoSource {
   // The pairer's counters, plus incomplete_dropped (both cameras, all reopenings) and
   // reconnects.
   SourceCounters Counters() const override;
+  void Interrupt() override;
 
   // The last opened camera's settings as read back, and its stream statistics (frames and
   // incomplete buffers are totals over reopenings).

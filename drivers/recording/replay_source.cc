@@ -135,6 +135,7 @@ SourceCounters ReplaySource::Counters() const {
 Result<StereoFrame> ReplaySource::Next() {
   // Bounded: each pass reads one record, and a lap without a frame ends the replay.
   while (true) {
+    if (Interrupted()) return Error{ErrorCode::kUnavailable, "replay " + dir_ + ": stopped"};
     std::optional<RecordingRecord> record = reader_->Next(/*decode_images=*/true);
     if (!record) {
       if (options_.loop && frames_this_lap_ > 0) {
@@ -171,6 +172,7 @@ Result<StereoFrame> ReplaySource::Next() {
     }
     StereoFrame& frame = record->frame;
     Pace(frame.t_ns);
+    if (Interrupted()) return Error{ErrorCode::kUnavailable, "replay " + dir_ + ": stopped"};
     ++frames_this_lap_;
     {
       std::lock_guard lock(mu_);
@@ -215,7 +217,21 @@ void ReplaySource::Pace(int64_t t_ns) {
     recorded_since_anchor_ns_ = 0;
     return;
   }
-  std::this_thread::sleep_until(due);
+  std::unique_lock lock(mu_);
+  interrupt_cv_.wait_until(lock, due, [&] { return interrupted_; });
+}
+
+void ReplaySource::Interrupt() {
+  {
+    std::lock_guard lock(mu_);
+    interrupted_ = true;
+  }
+  interrupt_cv_.notify_all();
+}
+
+bool ReplaySource::Interrupted() const {
+  std::lock_guard lock(mu_);
+  return interrupted_;
 }
 
 }  // namespace stevi::drivers

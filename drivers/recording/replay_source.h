@@ -2,6 +2,7 @@
 #pragma once
 
 #include <chrono>
+#include <condition_variable>
 #include <cstdint>
 #include <deque>
 #include <memory>
@@ -61,6 +62,8 @@ class ReplaySource : public StereoSource {
   // 0: the replay paces itself.
   double NominalFps() const override { return 0; }
   SourceCounters Counters() const override;
+  // Wakes a Next() waiting for a frame's recorded time (a gap may be 10 s divided by the rate).
+  void Interrupt() override;
 
   // Every vehicle state of the recording, in recorded order (for a geo::PoseBuffer).
   const std::vector<geo::VehicleState>& vehicle_states() const { return vehicle_states_; }
@@ -87,6 +90,7 @@ class ReplaySource : public StereoSource {
   Status Rewind();
   // Waits until the frame with capture time t_ns is due.
   void Pace(int64_t t_ns);
+  bool Interrupted() const;
 
   std::string dir_;
   ReplayOptions options_;
@@ -112,6 +116,8 @@ class ReplaySource : public StereoSource {
 
   // Shared with other threads.
   mutable std::mutex mu_;
+  std::condition_variable interrupt_cv_;  // Interrupt(), to a pacing wait
+  bool interrupted_ = false;              // (mu_)
   std::shared_ptr<const geometry::StereoRig> rig_;
   std::string calibration_id_;
   SourceCounters counters_;

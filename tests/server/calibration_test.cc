@@ -6,6 +6,10 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include <fstream>
+#include <cstdio>
+#include <thread>
+#include <mutex>
+#include <condition_variable>
 
 #include "client/client.h"
 #include "core/calibration/chessboard_render.h"
@@ -280,6 +284,102 @@ TEST_F(CalibrationServiceTest, TooManyPairsIsResourceExhausted) {
   v1::CalibrationReport report;
   const grpc::Status status = client_->Calibrate(Board(true), pairs, &report);
   EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+}
+
+// Deadlines are honoured: a Calibrate whose deadline passes while it waits behind other work
+// (a capture holding the single calibration worker) fails with DEADLINE_EXCEEDED at its deadline,
+// and the server then neither stores nor applies it: what the client was told stays true.
+TEST_F(CalibrationServiceTest, ACalibrationWhoseDeadlinePassedIsNeitherStoredNorApplied) {
+  v1::ListCalibrationsResponse before;
+  ASSERT_TRUE(client_->ListCalibrations(&before).ok());
+  const std::vector<v1::ImagePair> pairs = RenderedPairs(8);
+
+  // A capture of 8 pairs 0.3 s apart keeps the worker busy for about 2.5 s.
+  v1::CaptureCalibrationRequest capture;
+  *capture.mutable_settings() = Board(/*apply=*/false);
+  capture.set_pairs(8);
+  capture.set_interval_s(0.3);
+  std::mutex mu;
+  std::condition_variable cv;
+  bool capturing = false;
+  grpc::Status capture_status;
+  std::unique_ptr<client::Client> capturer = std::make_unique<client::Client>(client_->options());
+  std::thread capture_thread([&] {
+    capture_status = capturer->CaptureCalibration(capture, [&](const v1::CaptureProgress& p) {
+      if (!p.has_pair()) return;
+      {
+        std::lock_guard lock(mu);
+        capturing = true;
+      }
+      cv.notify_all();
+    });
+    std::lock_guard lock(mu);
+    capturing = true;  // also when it failed: never leave the wait below hanging
+    cv.notify_all();
+  });
+  {
+    std::unique_lock lock(mu);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return capturing; }));
+  }
+
+  const auto start = std::chrono::steady_clock::now();
+  v1::CalibrationReport late;
+  const grpc::Status expired =
+      client_->Calibrate(Board(/*apply=*/true), pairs, &late, std::chrono::milliseconds(400));
+  const double waited_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  capture_thread.join();
+  ASSERT_TRUE(capture_status.ok()) << capture_status.error_message();
+  EXPECT_EQ(expired.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED) << expired.error_message();
+  EXPECT_LT(waited_s, 2.0) << "the client waited past its deadline";
+
+  // The worker takes jobs in order: once this call returns, the expired one has been dealt with.
+  v1::CalibrationReport next;
+  const grpc::Status done = client_->Calibrate(Board(/*apply=*/false), pairs, &next);
+  ASSERT_TRUE(done.ok()) << done.error_message();
+  v1::ListCalibrationsResponse after;
+  ASSERT_TRUE(client_->ListCalibrations(&after).ok());
+  // The capture's calibration and the last one; none from the expired call.
+  EXPECT_EQ(after.calibrations_size(), before.calibrations_size() + 2);
+  EXPECT_EQ(ActiveCalibrationId(), "synthetic") << "the expired call's apply=true was applied";
+  std::printf("deadline: the expired Calibrate returned after %.2f s; %d calibrations stored "
+              "before, %d after the capture and one more call\n",
+              waited_s, before.calibrations_size(), after.calibrations_size());
+}
+
+// max_message_bytes bounds every received message: a larger upload is RESOURCE_EXHAUSTED, and
+// a smaller one in the same server still works.
+TEST(CalibrationLimits, AMessageOverMaxMessageBytesIsResourceExhausted) {
+  v1::ServerConfig config = ChessboardConfig(testing::MakeTempDir("stevi-max-message"));
+  config.set_max_message_bytes(64u << 10);  // the smallest allowed
+  Result<std::unique_ptr<Server>> server = Server::Start(config);
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  client::ClientOptions options;
+  options.address = "127.0.0.1:" + std::to_string((*server)->port());
+  client::Client client(options);
+
+  // Noise does not compress: two 640x480 PNGs of about 300 kB each in one message.
+  cv::Mat1b noise(480, 640);
+  cv::randu(noise, 0, 256);
+  v1::ImagePair big;
+  big.set_left(Png(noise));
+  big.set_right(big.left());
+  ASSERT_GT(big.ByteSizeLong(), 64u << 10);
+  v1::CalibrationReport report;
+  const grpc::Status refused = client.Calibrate(Board(false), {big}, &report);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << refused.error_message();
+
+  // A message under the limit goes through (and is judged on its content: no board in it).
+  v1::ImagePair small;
+  small.set_left(Png(cv::Mat1b(48, 64, uchar{128})));
+  small.set_right(small.left());
+  const grpc::Status judged = client.Calibrate(Board(false), {small}, &report);
+  EXPECT_EQ(judged.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << judged.error_message();
+  v1::GetStatusResponse status;
+  EXPECT_TRUE(client.GetStatus(&status).ok());
+  std::printf("max message: %zu-byte message refused with %s (\"%s\") at a limit of %u\n",
+              big.ByteSizeLong(), client::StatusCodeName(refused.error_code()).c_str(),
+              refused.error_message().c_str(), config.max_message_bytes());
 }
 
 }  // namespace

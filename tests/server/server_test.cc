@@ -198,6 +198,72 @@ TEST_F(ServerTest, StatusCountsSubscribersAndShutdownEndsStreams) {
   EXPECT_THAT(stream_status.error_message(), HasSubstr("shutting down"));
 }
 
+// max_streams bounds the concurrent StreamTracks: one more is RESOURCE_EXHAUSTED naming the
+// setting, the open ones go on, and a place freed is taken again.
+TEST(ServerLimits, StreamsBeyondMaxStreamsAreRefusedAndAFreedPlaceIsReused) {
+  v1::ServerConfig config = TestConfig();
+  config.set_max_streams(2);
+  Result<std::unique_ptr<Server>> server = Server::Start(config);
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  client::ClientOptions options;
+  options.address = "127.0.0.1:" + std::to_string((*server)->port());
+  options.timeout = std::chrono::seconds(20);
+  std::vector<std::unique_ptr<client::Client>> holders;
+  std::vector<std::thread> threads;
+  std::mutex mu;
+  std::condition_variable cv;
+  std::vector<int> received(2, 0);
+  for (int i = 0; i < 2; ++i) {
+    holders.push_back(std::make_unique<client::Client>(options));
+    threads.emplace_back([&, i] {
+      holders[i]->StreamTracks([&, i](const v1::TrackFrame&) {
+        {
+          std::lock_guard lock(mu);
+          ++received[i];
+        }
+        cv.notify_all();
+        return true;
+      });
+    });
+  }
+  {
+    std::unique_lock lock(mu);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(30),
+                            [&] { return received[0] > 0 && received[1] > 0; }));
+  }
+  client::Client third(options);
+  client::StreamOptions once;
+  once.max_frames = 1;
+  const grpc::Status refused = third.StreamTracks([](const v1::TrackFrame&) { return true; }, once);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_THAT(refused.error_message(), HasSubstr("max_streams"));
+  // The two still stream.
+  int seen_before = 0;
+  {
+    std::lock_guard lock(mu);
+    seen_before = received[0];
+  }
+  {
+    std::unique_lock lock(mu);
+    EXPECT_TRUE(cv.wait_for(lock, std::chrono::seconds(30),
+                            [&] { return received[0] > seen_before + 2; }));
+  }
+  // One leaves (bounded wait until the server has let it go); its place is taken again.
+  holders[0]->Cancel();
+  threads[0].join();
+  client::Client watcher(options);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  v1::GetStatusResponse status;
+  while (watcher.GetStatus(&status).ok() && status.subscribers_size() > 1 &&
+         std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // poll pacing on the server's report
+  }
+  EXPECT_EQ(status.subscribers_size(), 1);
+  EXPECT_EQ(CollectFrames(third, 3).size(), 3u);
+  holders[1]->Cancel();
+  threads[1].join();
+}
+
 // With no autopilot, the synthetic rig hovers at Pisa (a fixed pose): every track carries a WGS84
 // position, compared here with the truth's, georeferenced independently of the pipeline's path
 // (from the renderer's truth point through the same pose), by range band.

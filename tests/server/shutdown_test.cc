@@ -1,0 +1,170 @@
+// Graceful shutdown of the real stevi-server on SIGTERM: it exits 0 within 5 s, after (1) no
+// longer accepting, (2) ending the streams with a final status, (3) stopping the source and
+// (4) flushing the recording, in that order, each step logged. Also when the source is a replay
+// waiting out a long recorded gap.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <csignal>
+#include <condition_variable>
+#include <mutex>
+#include <regex>
+#include <thread>
+
+#include "drivers/recording/recording_reader.h"
+#include "tests/server/load_helpers.h"
+#include "tests/server/server_process.h"
+
+namespace stevi {
+namespace {
+
+using namespace std::chrono_literals;
+using ::testing::HasSubstr;
+
+constexpr auto kGracefulBound = 5s;  // the bound on a SIGTERM
+
+// A StreamTracks call on a thread of its own: frames counted, the final status kept.
+class Watcher {
+ public:
+  explicit Watcher(const std::string& address) {
+    thread_ = std::thread([this, address] {
+      std::shared_ptr<grpc::Channel> channel = testing::PrivateChannel(address);
+      std::unique_ptr<v1::ObstacleService::Stub> stub = v1::ObstacleService::NewStub(channel);
+      grpc::ClientContext context;
+      context.set_deadline(std::chrono::system_clock::now() + 120s);  // bounded
+      std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader =
+          stub->StreamTracks(&context, v1::StreamTracksRequest());
+      v1::TrackFrame frame;
+      while (reader->Read(&frame)) {
+        std::lock_guard lock(mu_);
+        ++frames_;
+        cv_.notify_all();
+      }
+      const grpc::Status status = reader->Finish();
+      std::lock_guard lock(mu_);
+      status_ = status;
+      ended_ = true;
+      cv_.notify_all();
+    });
+  }
+  ~Watcher() {
+    if (thread_.joinable()) thread_.join();
+  }
+
+  bool WaitForFrames(int n, std::chrono::seconds timeout) {
+    std::unique_lock lock(mu_);
+    return cv_.wait_for(lock, timeout, [&] { return frames_ >= n || ended_; }) && frames_ >= n;
+  }
+  // The final status once the stream ended (bounded).
+  std::optional<grpc::Status> WaitForEnd(std::chrono::seconds timeout) {
+    std::unique_lock lock(mu_);
+    if (!cv_.wait_for(lock, timeout, [&] { return ended_; })) return std::nullopt;
+    return status_;
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  int frames_ = 0;
+  bool ended_ = false;
+  grpc::Status status_;
+  std::thread thread_;
+};
+
+// Offset of the first line of `log` holding every one of `needles`; npos when none does.
+size_t LineWith(const std::string& log, const std::vector<std::string>& needles) {
+  size_t start = 0;
+  while (start < log.size()) {
+    size_t end = log.find('\n', start);
+    if (end == std::string::npos) end = log.size();
+    const std::string line = log.substr(start, end - start);
+    bool all = true;
+    for (const std::string& n : needles) all = all && line.find(n) != std::string::npos;
+    if (all) return start;
+    start = end + 1;
+  }
+  return std::string::npos;
+}
+
+// SIGTERM, then the exit code and how long it took.
+std::pair<std::optional<int>, double> Terminate(testing::ServerProcess& server) {
+  const auto t0 = std::chrono::steady_clock::now();
+  server.process()->Signal(SIGTERM);
+  const std::optional<int> code = server.process()->Wait(30s);  // bounded; judged against 5 s
+  return {code, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count()};
+}
+
+TEST(Shutdown, SigtermEndsStreamsStopsTheSourceFlushesTheRecordingInOrderWithinFiveSeconds) {
+  const std::string dir = testing::MakeTempDir("stevi-shutdown") + "/flight";
+  testing::ServerProcess server;
+  ASSERT_NO_FATAL_FAILURE(server.Start({"--fps", "20", "--record", dir}));
+  Watcher first(server.address());
+  Watcher second(server.address());
+  ASSERT_TRUE(first.WaitForFrames(10, 60s));
+  ASSERT_TRUE(second.WaitForFrames(10, 60s));
+
+  const auto [code, took_s] = Terminate(server);
+  const std::string log = server.process()->DrainStderr();
+  ASSERT_TRUE(code.has_value()) << "no exit within 30 s:\n" << log;
+  EXPECT_EQ(*code, 0) << log;
+  EXPECT_LT(took_s, std::chrono::duration<double>(kGracefulBound).count()) << log;
+
+  // Both streams ended with the final status, not a broken connection.
+  for (Watcher* w : {&first, &second}) {
+    const std::optional<grpc::Status> status = w->WaitForEnd(10s);
+    ASSERT_TRUE(status.has_value());
+    EXPECT_EQ(status->error_code(), grpc::StatusCode::UNAVAILABLE) << status->error_message();
+    EXPECT_THAT(status->error_message(), HasSubstr("shutting down"));
+  }
+
+  // The steps, in order, each logged once.
+  const std::vector<std::vector<std::string>> steps = {
+      {"event=shutting_down", "signal=SIGTERM"},
+      {"event=shutdown", "step=stop_accepting"},
+      {"event=shutdown", "step=streams_ended", "streams=2"},
+      {"event=shutdown", "step=source_stopped"},
+      {"event=shutdown", "step=recording_flushed"},
+      {"event=stopped"}};
+  size_t previous = 0;
+  for (const std::vector<std::string>& step : steps) {
+    const size_t at = LineWith(log, step);
+    ASSERT_NE(at, std::string::npos) << "no line with " << step.back() << " in\n" << log;
+    EXPECT_GE(at, previous) << step.back() << " came too early:\n" << log;
+    previous = at;
+  }
+
+  // The recording was flushed whole: its manifest says why it stopped, and every frame the log
+  // counted reads back, to a clean end.
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(log, m, std::regex("step=recording_flushed.*frames=(\\d+)")));
+  const uint64_t flushed = std::stoull(m[1].str());
+  Result<std::unique_ptr<drivers::RecordingReader>> reader = drivers::RecordingReader::Open(dir);
+  ASSERT_TRUE(reader.ok()) << reader.error().message;
+  EXPECT_EQ((*reader)->manifest().state(), v1::RECORDING_STATE_STOPPED);
+  EXPECT_THAT((*reader)->manifest().stop_reason(), HasSubstr("server stopped"));
+  EXPECT_EQ((*reader)->manifest().frames_written(), flushed);
+  while ((*reader)->Next(/*decode_images=*/false)) {
+  }
+  EXPECT_EQ((*reader)->frames_read(), flushed);
+  EXPECT_EQ((*reader)->end_note(), "");
+  EXPECT_GE(flushed, 10u);
+  std::printf("shutdown: exit %d after %.2f s; 2 streams ended UNAVAILABLE; %llu frames flushed\n",
+              *code, took_s, static_cast<unsigned long long>(flushed));
+
+  // A replay slowed down so that the next frame is seconds away: the stop does not wait for it.
+  testing::ServerProcess replay;
+  ASSERT_NO_FATAL_FAILURE(
+      replay.Start({"--source", "replay", "--replay", dir, "--rate", "0.005"}));  // 50 ms -> 10 s
+  Watcher watcher(replay.address());
+  ASSERT_TRUE(watcher.WaitForFrames(1, 60s));  // the first frame comes at once
+  const auto [replay_code, replay_s] = Terminate(replay);
+  const std::string replay_log = replay.process()->DrainStderr();
+  ASSERT_TRUE(replay_code.has_value()) << replay_log;
+  EXPECT_EQ(*replay_code, 0) << replay_log;
+  EXPECT_LT(replay_s, std::chrono::duration<double>(kGracefulBound).count()) << replay_log;
+  std::printf("shutdown: a replay waiting 10 s for its next frame exited %d after %.2f s\n",
+              *replay_code, replay_s);
+}
+
+}  // namespace
+}  // namespace stevi
