@@ -1,7 +1,8 @@
 // Graceful shutdown of the real stevi-server on SIGTERM: it exits 0 within 5 s, after (1) no
 // longer accepting, (2) ending the streams with a final status, (3) stopping the source and
 // (4) flushing the recording, in that order, each step logged. Also when the source is a replay
-// waiting out a long recorded gap.
+// waiting out a long recorded gap. And server reflection, which operators' tools (grpcurl,
+// grpc_cli) use on the running server.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -9,6 +10,9 @@
 #include <condition_variable>
 #include <mutex>
 #include <regex>
+
+#include <google/protobuf/unknown_field_set.h>
+#include <grpcpp/generic/generic_stub.h>
 #include <thread>
 
 #include "drivers/recording/recording_reader.h"
@@ -164,6 +168,91 @@ TEST(Shutdown, SigtermEndsStreamsStopsTheSourceFlushesTheRecordingInOrderWithinF
   EXPECT_LT(replay_s, std::chrono::duration<double>(kGracefulBound).count()) << replay_log;
   std::printf("shutdown: a replay waiting 10 s for its next frame exited %d after %.2f s\n",
               *replay_code, replay_s);
+}
+
+// One exchange on the reflection service (grpc.reflection.v1alpha, from gRPC's own plugin),
+// without its generated code: the request is ServerReflectionRequest{list_services: ""} (field
+// 7, a string), and the answer's list_services_response (field 6) holds ServiceResponse
+// messages (field 1) whose name is field 1. Bounded: every wait has a deadline.
+std::vector<std::string> ListServicesByReflection(const std::string& address, grpc::Status* status) {
+  std::shared_ptr<grpc::Channel> channel = testing::PrivateChannel(address);
+  grpc::GenericStub stub(channel);
+  grpc::CompletionQueue cq;
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + 20s);
+  std::unique_ptr<grpc::GenericClientAsyncReaderWriter> call = stub.PrepareCall(
+      &context, "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo", &cq);
+  const auto step = [&](void* tag) {
+    void* got = nullptr;
+    bool ok = false;
+    const auto result = cq.AsyncNext(&got, &ok, std::chrono::system_clock::now() + 20s);
+    return result == grpc::CompletionQueue::GOT_EVENT && got == tag && ok;
+  };
+  std::vector<std::string> names;
+  int tags[5];
+  call->StartCall(&tags[0]);
+  if (step(&tags[0])) {
+    const std::string request("\x3a\x00", 2);  // field 7, length 0
+    grpc::Slice slice(request);
+    grpc::ByteBuffer buffer(&slice, 1);
+    call->Write(buffer, &tags[1]);
+    if (step(&tags[1])) {
+      call->WritesDone(&tags[2]);
+      step(&tags[2]);
+      grpc::ByteBuffer reply;
+      call->Read(&reply, &tags[3]);
+      std::vector<grpc::Slice> slices;
+      if (step(&tags[3]) && reply.Dump(&slices).ok()) {
+        std::string bytes;
+        for (const grpc::Slice& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+        google::protobuf::UnknownFieldSet response, list;
+        if (response.ParseFromString(bytes)) {
+          for (int i = 0; i < response.field_count(); ++i) {
+            const google::protobuf::UnknownField& f = response.field(i);
+            if (f.number() != 6 || f.type() != google::protobuf::UnknownField::TYPE_LENGTH_DELIMITED) continue;
+            if (!list.ParseFromString(f.length_delimited())) continue;
+            for (int j = 0; j < list.field_count(); ++j) {
+              google::protobuf::UnknownFieldSet service;
+              if (list.field(j).number() != 1 ||
+                  list.field(j).type() != google::protobuf::UnknownField::TYPE_LENGTH_DELIMITED ||
+                  !service.ParseFromString(list.field(j).length_delimited())) {
+                continue;
+              }
+              for (int k = 0; k < service.field_count(); ++k) {
+                if (service.field(k).number() == 1 &&
+                    service.field(k).type() == google::protobuf::UnknownField::TYPE_LENGTH_DELIMITED) {
+                  names.push_back(service.field(k).length_delimited());
+                }
+              }
+            }
+          }
+        }
+      }
+    }
+  }
+  context.TryCancel();
+  call->Finish(status, &tags[4]);
+  step(&tags[4]);
+  cq.Shutdown();
+  void* ignored = nullptr;
+  bool ok = false;
+  while (cq.Next(&ignored, &ok)) {
+  }
+  return names;
+}
+
+TEST(Reflection, TheRunningServerListsItsServices) {
+  testing::ServerProcess server;
+  ASSERT_NO_FATAL_FAILURE(server.Start({"--fps", "10"}));
+  grpc::Status status;
+  const std::vector<std::string> names = ListServicesByReflection(server.address(), &status);
+  EXPECT_THAT(names, ::testing::IsSupersetOf({"stevi.v1.ObstacleService",
+                                              "stevi.v1.CalibrationService",
+                                              "grpc.health.v1.Health"}))
+      << status.error_message();
+  std::string joined;
+  for (const std::string& n : names) joined += " " + n;
+  std::printf("reflection:%s\n", joined.c_str());
 }
 
 }  // namespace
