@@ -276,6 +276,9 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
         problems.push_back(
             "source: left, right and calibration are for the images source (--source images)");
       }
+      if (source.synthetic().scene() == "chessboard" && source.synthetic().has_loop_frames()) {
+        problems.push_back("source.synthetic.loop_frames: not for the chessboard scene");
+      }
       if (source.synthetic().has_scene() && source.synthetic().scene() != "airfield" &&
           source.synthetic().scene() != "chessboard" && !FindScenario(source.synthetic().scene())) {
         std::string names = "airfield, flight, chessboard";
@@ -520,6 +523,7 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig
   if (s.has_baseline_m()) options.baseline_m = s.baseline_m();
   if (s.has_noise_sigma()) options.noise_sigma = s.noise_sigma();
   if (s.has_seed()) options.seed = s.seed();
+  if (s.has_loop_frames()) options.loop_frames = s.loop_frames();
   options.fps = fps;
   Result<std::unique_ptr<drivers::SyntheticSource>> source =
       drivers::OpenSyntheticSource(std::move(options));

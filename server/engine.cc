@@ -14,6 +14,8 @@ constexpr size_t kRateWindow = 30;    // frames over which fps and mean timings 
 constexpr auto kRetryFirst = std::chrono::milliseconds(200);
 // Capped at 2 s so that a camera that comes back is streaming again within a few seconds.
 constexpr auto kRetryMax = std::chrono::seconds(2);
+// Pipeline workers: one per core, at most this many (each holds a frame's worth of buffers).
+constexpr size_t kMaxWorkers = 4;
 
 void PushBounded(std::deque<Clock::time_point>& times, Clock::time_point t) {
   times.push_back(t);
@@ -37,10 +39,11 @@ Result<StereoFrame> NextFrame(drivers::StereoSource& source) {
   }
 }
 
-Result<pipeline::FrameResult> ProcessFrame(pipeline::Pipeline& pipe, const StereoFrame& frame,
-                                           const pipeline::Snapshot& snapshot) {
+// Runs one half of the pipeline, turning an exception (a library failure) into an error.
+template <typename Fn>
+auto Guarded(Fn&& fn) -> decltype(fn()) {
   try {
-    return pipe.Process(frame, snapshot);
+    return fn();
   } catch (const std::exception& e) {
     return Error{ErrorCode::kInternal, std::string("unexpected failure: ") + e.what()};
   }
@@ -121,7 +124,18 @@ void Engine::Start() {
   if (started_threads_ || stopping_) return;
   started_threads_ = true;
   capture_thread_ = std::thread([this] { CaptureLoop(); });
-  pipeline_thread_ = std::thread([this] { PipelineLoop(); });
+  // One worker per core (at least 1, at most kMaxWorkers): each keeps a frame's worth of buffers.
+  const size_t workers =
+      std::clamp<size_t>(std::thread::hardware_concurrency(), 1, kMaxWorkers);
+  {
+    std::lock_guard order(order_mu_);
+    workers_running_ = workers;
+  }
+  for (size_t i = 0; i < workers; ++i) {
+    fronts_.push_back(std::make_unique<pipeline::FrontEnd>());
+    worker_threads_.emplace_back([this, i] { WorkerLoop(i); });
+  }
+  finish_thread_ = std::thread([this] { FinishLoop(); });
 }
 
 void Engine::Stop() {
@@ -136,7 +150,10 @@ void Engine::Stop() {
   if (source_) source_->Interrupt();
   mailbox_.Close();
   if (capture_thread_.joinable()) capture_thread_.join();
-  if (pipeline_thread_.joinable()) pipeline_thread_.join();
+  for (std::thread& worker : worker_threads_) {
+    if (worker.joinable()) worker.join();  // the last one to stop ends FinishLoop
+  }
+  if (finish_thread_.joinable()) finish_thread_.join();
 }
 
 bool Engine::WaitUntil(Clock::time_point deadline) {
@@ -205,8 +222,17 @@ void Engine::CaptureLoop() {
   }
 }
 
-void Engine::PipelineLoop() {
-  while (std::optional<StereoFrame> frame = mailbox_.Take()) {
+void Engine::WorkerLoop(size_t index) {
+  pipeline::FrontEnd& front = *fronts_[index];
+  while (true) {
+    std::optional<StereoFrame> frame;
+    uint64_t sequence = 0;
+    {
+      std::lock_guard take(take_mu_);
+      frame = mailbox_.Take();
+      if (!frame) break;  // closed: stopping
+      sequence = next_take_++;
+    }
     pipeline::Snapshot snapshot{config_.Get(), nullptr};
     {
       std::lock_guard lock(mu_);
@@ -214,12 +240,45 @@ void Engine::PipelineLoop() {
       snapshot.pose_at = pose_at_;
       if (swap_left_right_) std::swap(frame->left, frame->right);
     }
-    Result<pipeline::FrameResult> result = ProcessFrame(pipeline_, *frame, snapshot);
+    Result<pipeline::PreparedFrame> prepared =
+        Guarded([&] { return front.Prepare(*frame, snapshot); });
+    std::optional<Prepared> item;
+    if (prepared.ok()) {
+      item = Prepared{std::move(prepared).value(), std::move(snapshot)};
+    } else {
+      CountFailure(prepared.error());
+    }
+    {
+      std::lock_guard order(order_mu_);
+      ready_.emplace(sequence, std::move(item));
+    }
+    order_cv_.notify_all();
+  }
+  {
+    std::lock_guard order(order_mu_);
+    --workers_running_;
+  }
+  order_cv_.notify_all();
+}
+
+void Engine::FinishLoop() {
+  while (true) {
+    std::optional<Prepared> item;
+    {
+      std::unique_lock order(order_mu_);
+      order_cv_.wait(order, [&] { return ready_.count(next_finish_) > 0 || workers_running_ == 0; });
+      const auto it = ready_.find(next_finish_);
+      if (it == ready_.end()) return;  // every worker has stopped and nothing is left
+      item = std::move(it->second);
+      ready_.erase(it);
+      ++next_finish_;
+    }
+    if (!item) continue;  // the frame failed in its worker (counted there)
+    Result<pipeline::FrameResult> result =
+        Guarded([&] { return pipeline_.Finish(std::move(item->frame), item->snapshot); });
     const auto now = Clock::now();
     if (!result.ok()) {
-      std::lock_guard lock(mu_);
-      ++frames_failed_;
-      source_error_ = "pipeline: " + result.error().message;
+      CountFailure(result.error());
       continue;
     }
     auto shared = std::make_shared<const pipeline::FrameResult>(std::move(result).value());
@@ -233,6 +292,12 @@ void Engine::PipelineLoop() {
     }
     if (sink_) sink_(shared);
   }
+}
+
+void Engine::CountFailure(const Error& error) {
+  std::lock_guard lock(mu_);
+  ++frames_failed_;
+  source_error_ = "pipeline: " + error.message;
 }
 
 std::shared_ptr<const pipeline::FrameResult> Engine::Latest() const {

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -88,7 +89,13 @@ class Engine {
  private:
   Engine(std::unique_ptr<drivers::StereoSource> source, pipeline::PipelineConfig config, Sink sink);
   void CaptureLoop();
-  void PipelineLoop();
+  // The pipeline on several threads: each WorkerLoop() takes the newest frame from the mailbox
+  // and runs it through a FrontEnd of its own (rectify, disparity, extract), so that consecutive
+  // frames are worked on at once, one per core; FinishLoop() tracks, georeferences and publishes
+  // them in the order they were taken.
+  void WorkerLoop(size_t index);
+  void FinishLoop();
+  void CountFailure(const Error& error);
   // Waits until `deadline` or Stop(); false when stopping.
   bool WaitUntil(std::chrono::steady_clock::time_point deadline);
   void SetSourceState(SourceState state, std::string error);
@@ -99,7 +106,19 @@ class Engine {
   pipeline::ConfigStore config_;
   Sink sink_;
   LatestMailbox<StereoFrame> mailbox_;
-  pipeline::Pipeline pipeline_;
+  pipeline::Pipeline pipeline_;  // Finish() only: the tracker
+  std::vector<std::unique_ptr<pipeline::FrontEnd>> fronts_;  // one per worker
+  struct Prepared {
+    pipeline::PreparedFrame frame;
+    pipeline::Snapshot snapshot;  // the one Prepare() used: Finish() uses it too
+  };
+  std::mutex take_mu_;            // a frame's sequence number is the order it was taken in
+  uint64_t next_take_ = 0;        // (take_mu_)
+  std::mutex order_mu_;           // guards the three below
+  std::condition_variable order_cv_;
+  std::map<uint64_t, std::optional<Prepared>> ready_;  // by sequence; nullopt: the frame failed
+  uint64_t next_finish_ = 0;
+  size_t workers_running_ = 0;
   const std::chrono::steady_clock::time_point started_;
 
   mutable std::mutex mu_;  // guards everything below
@@ -122,7 +141,8 @@ class Engine {
   StereoFrame last_capture_;  // shares the images with the frame in the mailbox (never written)
 
   std::thread capture_thread_;
-  std::thread pipeline_thread_;
+  std::vector<std::thread> worker_threads_;
+  std::thread finish_thread_;
 };
 
 std::string_view SourceStateName(SourceState state);

@@ -56,4 +56,50 @@ class LatestMailbox {
   uint64_t dropped_ = 0;
 };
 
+// A one-value hand-off between two threads with back-pressure: Put() waits while the previous
+// value has not been taken (nothing is dropped). Thread-safe.
+template <typename T>
+class HandoffSlot {
+ public:
+  // Waits for room, then stores `value`; false (value dropped) once closed.
+  bool Put(T value) {
+    {
+      std::unique_lock lock(mu_);
+      cv_.wait(lock, [&] { return !slot_.has_value() || closed_; });
+      if (closed_) return false;
+      slot_ = std::move(value);
+    }
+    cv_.notify_all();
+    return true;
+  }
+
+  // Blocks until a value is there or Close() is called; nullopt once closed and empty.
+  std::optional<T> Take() {
+    std::optional<T> out;
+    {
+      std::unique_lock lock(mu_);
+      cv_.wait(lock, [&] { return slot_.has_value() || closed_; });
+      out = std::move(slot_);
+      slot_.reset();
+    }
+    cv_.notify_all();
+    return out;
+  }
+
+  // Wakes every waiter: Put() refuses from now on; Take() returns what is left, then nullopt.
+  void Close() {
+    {
+      std::lock_guard lock(mu_);
+      closed_ = true;
+    }
+    cv_.notify_all();
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::optional<T> slot_;
+  bool closed_ = false;
+};
+
 }  // namespace stevi

@@ -1,7 +1,6 @@
 #include "core/extraction/blobs.h"
 
 #include <cstdlib>
-#include <numeric>
 #include <vector>
 
 #include <opencv2/imgproc.hpp>
@@ -59,19 +58,13 @@ Shape BlobShape(const cv::Mat1i& labels, int label, const cv::Rect& bbox) {
   return shape;
 }
 
-// Union-find over pixel indices, with path halving.
+// The root of pixel i's set, halving the path on the way.
 int Find(std::vector<int>& parent, int i) {
   while (parent[i] != i) {
     parent[i] = parent[parent[i]];
     i = parent[i];
   }
   return i;
-}
-
-void Union(std::vector<int>& parent, int a, int b) {
-  a = Find(parent, a);
-  b = Find(parent, b);
-  if (a != b) parent[std::max(a, b)] = std::min(a, b);
 }
 
 }  // namespace
@@ -82,8 +75,13 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
   if (mask.empty()) return set;
   CV_Assert(disparity.size() == mask.size());
   const int w = mask.cols, h = mask.rows;
-  std::vector<int> parent(static_cast<size_t>(w) * h);
-  std::iota(parent.begin(), parent.end(), 0);
+  // Union-find over pixel indices. Only mask pixels are ever read, and each is set to itself when
+  // the raster scan reaches it, before any union with its (earlier) neighbours: the buffer needs
+  // no initialisation and is reused from call to call on this thread (no allocation per frame).
+  thread_local std::vector<int> parent_buffer;
+  const size_t pixels = static_cast<size_t>(w) * h;
+  if (parent_buffer.size() < pixels) parent_buffer.resize(pixels);
+  std::vector<int>& parent = parent_buffer;
   const auto joins = [&](int16_t a, int16_t b) { return std::abs(a - b) <= max_step; };
   for (int y = 0; y < h; ++y) {
     const uchar* m = mask[y];
@@ -93,18 +91,31 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
     for (int x = 0; x < w; ++x) {
       if (m[x] == 0) continue;
       const int i = y * w + x;
-      if (x > 0 && m[x - 1] != 0 && joins(d[x], d[x - 1])) Union(parent, i, i - 1);
-      if (m_up == nullptr) continue;
-      for (int dx = -1; dx <= 1; ++dx) {
-        const int xn = x + dx;
-        if (xn < 0 || xn >= w || m_up[xn] == 0 || !joins(d[x], d_up[xn])) continue;
-        Union(parent, i, i - w + dx);
+      // `root`: the root of i's set so far (i alone, or its left neighbour's); each joining
+      // neighbour above merges its set in, the smaller index staying the root.
+      int root = i;
+      if (x > 0 && m[x - 1] != 0 && joins(d[x], d[x - 1])) root = Find(parent, i - 1);
+      if (m_up != nullptr) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int xn = x + dx;
+          if (xn < 0 || xn >= w || m_up[xn] == 0 || !joins(d[x], d_up[xn])) continue;
+          const int other = Find(parent, i - w + dx);
+          if (other < root) {
+            if (root != i) parent[root] = other;
+            root = other;
+          } else if (other > root) {
+            parent[other] = root;
+          }
+        }
       }
+      parent[i] = root;
     }
   }
-  // Consecutive labels from 1, with the statistics of each.
+  // Consecutive labels from 1, in raster order of each blob's first pixel, with the statistics of
+  // each. A union always makes the smaller index the root, so a pixel's parent comes before it in
+  // the scan and has already been pointed at its root: one step finds every root.
   set.labels = cv::Mat1i(h, w, 0);
-  std::vector<int> label_of_root(parent.size(), 0);
+  int* labels = set.labels.ptr<int>(0);  // continuous: index y * w + x
   struct Acc {
     int area = 0, x0 = 0, y0 = 0, x1 = 0, y1 = 0;
     double sx = 0, sy = 0;
@@ -112,16 +123,19 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
   std::vector<Acc> acc(1);
   for (int y = 0; y < h; ++y) {
     const uchar* m = mask[y];
-    int* lab = set.labels[y];
     for (int x = 0; x < w; ++x) {
       if (m[x] == 0) continue;
-      const int root = Find(parent, y * w + x);
-      int& label = label_of_root[root];
-      if (label == 0) {
+      const int i = y * w + x;
+      int label;
+      if (parent[i] == i) {
         label = static_cast<int>(acc.size());
         acc.push_back({0, x, y, x, y, 0, 0});
+      } else {
+        const int root = parent[parent[i]];
+        parent[i] = root;
+        label = labels[root];
       }
-      lab[x] = label;
+      labels[i] = label;
       Acc& a = acc[label];
       ++a.area;
       a.x0 = std::min(a.x0, x);

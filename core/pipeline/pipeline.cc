@@ -45,13 +45,20 @@ Error Invalid(std::string message) {
 
 }  // namespace
 
-struct Pipeline::State {
+struct FrontEnd::State {
   // The matcher and the options it was built with (rebuilt when they change).
   std::unique_ptr<stereo::DisparityMatcher> matcher;
   stereo::MatcherOptions matcher_options;
-  // Rectified right image: only read during Process(), so its buffer is reused frame to frame.
+  // Rectified right image: only read during Prepare(), so its buffer is reused frame to frame.
   // (The rectified left image is published in the FrameResult and gets a fresh buffer.)
   cv::Mat rect_right;
+};
+
+FrontEnd::FrontEnd() : state_(std::make_unique<State>()) {}
+FrontEnd::~FrontEnd() = default;
+
+struct Pipeline::State {
+  FrontEnd front;
   // Tracks across frames; created at the first frame with the config's options.
   std::unique_ptr<tracking::Tracker> tracker;
   // Rebuilt when the mount changes.
@@ -62,6 +69,16 @@ Pipeline::Pipeline() : state_(std::make_unique<State>()) {}
 Pipeline::~Pipeline() = default;
 
 Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& snapshot) {
+  Result<PreparedFrame> prepared = Prepare(frame, snapshot);
+  if (!prepared.ok()) return prepared.error();
+  return Finish(std::move(prepared).value(), snapshot);
+}
+
+Result<PreparedFrame> Pipeline::Prepare(const StereoFrame& frame, const Snapshot& snapshot) {
+  return state_->front.Prepare(frame, snapshot);
+}
+
+Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot& snapshot) {
   const Clock::time_point start = Clock::now();
   if (snapshot.config == nullptr) return Invalid("snapshot.config: is null");
   if (snapshot.rig == nullptr) return Invalid("snapshot.rig: is null (no calibration)");
@@ -77,7 +94,8 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
                    "' expects " + SizeText(want));
   }
 
-  FrameResult result;
+  PreparedFrame prepared;
+  FrameResult& result = prepared.result;
   result.capture_time_ns = frame.t_ns;
   result.capture_unix_time_ns = frame.unix_time_ns;
   result.source_index = frame.index;
@@ -142,9 +160,21 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
       break;
   }
   result.timings.push_back({"extract", MsSince(t)});
+  result.rectified_left = std::move(rect_left);
+  prepared.ms = MsSince(start);
+  return prepared;
+}
+
+Result<FrameResult> Pipeline::Finish(PreparedFrame prepared, const Snapshot& snapshot) {
+  const Clock::time_point start = Clock::now();
+  if (snapshot.config == nullptr) return Invalid("snapshot.config: is null");
+  if (snapshot.rig == nullptr) return Invalid("snapshot.rig: is null (no calibration)");
+  const PipelineConfig& config = *snapshot.config;
+  const geometry::StereoRig& rig = *snapshot.rig;
+  FrameResult result = std::move(prepared.result);
 
   // Stage: track.
-  t = Clock::now();
+  Clock::time_point t = Clock::now();
   if (state_->tracker == nullptr || !(state_->tracker->options() == config.tracking)) {
     const std::vector<std::string> problems = config.tracking.Validate();
     if (!problems.empty()) {
@@ -160,7 +190,7 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
   }
   const tracking::CameraModel camera{rig.f_px(), rig.cx(), rig.cy(), rig.baseline_m(),
                                      rig.image_size().width, rig.image_size().height};
-  result.tracks = state_->tracker->Update(result.detections, frame.t_ns, camera);
+  result.tracks = state_->tracker->Update(result.detections, result.capture_time_ns, camera);
   result.timings.push_back({"track", MsSince(t)});
 
   // Stage: geo.
@@ -175,7 +205,7 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
       }
       state_->georeferencer = std::make_unique<geo::Georeferencer>(config.mount);
     }
-    result.pose = snapshot.pose_at(frame.t_ns, frame.unix_time_ns);
+    result.pose = snapshot.pose_at(result.capture_time_ns, result.capture_unix_time_ns);
     result.track_geo.assign(result.tracks.size(), std::nullopt);
     if (result.pose->ok()) {
       for (size_t i = 0; i < result.tracks.size(); ++i) {
@@ -194,9 +224,8 @@ Result<FrameResult> Pipeline::Process(const StereoFrame& frame, const Snapshot& 
     result.timings.push_back({"geo", MsSince(t)});
   }
 
-  result.rectified_left = std::move(rect_left);
   result.frame_id = next_frame_id_++;
-  result.timings.push_back({"total", MsSince(start)});
+  result.timings.push_back({"total", prepared.ms + MsSince(start)});
   return result;
 }
 

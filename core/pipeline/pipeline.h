@@ -60,7 +60,33 @@ struct Snapshot {
   std::function<geo::PoseLookup(int64_t t_ns, int64_t unix_time_ns)> pose_at = {};
 };
 
-// Thread-compatible: call Process() from one thread at a time.
+// What a frame gives on its own (checks, rectify, disparity, extract), for Pipeline::Finish().
+struct PreparedFrame {
+  FrameResult result;  // the capture fields, rig, algorithm, rectified_left, disparity,
+                       // detections, timings
+  double ms = 0;       // time spent in Prepare()
+};
+
+// The part of the pipeline that needs no other frame: checks, rectification, disparity and
+// extraction. Its state is the matcher and its buffers. Thread-compatible: one Prepare() at a
+// time; several FrontEnds may work on different frames at once (the engine runs one per core).
+class FrontEnd {
+ public:
+  FrontEnd();
+  ~FrontEnd();
+  FrontEnd(const FrontEnd&) = delete;
+  FrontEnd& operator=(const FrontEnd&) = delete;
+
+  Result<PreparedFrame> Prepare(const StereoFrame& frame, const Snapshot& snapshot);
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+// Thread-compatible: call Process() from one thread at a time. Or split it: Prepare() (or the
+// Prepare() of FrontEnds of one's own, on other threads) and Finish(), which must take the frames
+// in their capture order.
 class Pipeline {
  public:
   Pipeline();
@@ -72,6 +98,13 @@ class Pipeline {
   // The matcher is rebuilt only when the matcher options change. The tracker lives across frames:
   // a change of its options, of the algorithm or of the rig keeps the tracks (ids never reuse).
   Result<FrameResult> Process(const StereoFrame& frame, const Snapshot& snapshot);
+
+  // Process() in two halves. Prepare(): this pipeline's own FrontEnd. Finish(): tracking,
+  // georeferencing and the frame id (the tracker, the georeferencer), frame after frame in
+  // capture order. Give Finish() the same snapshot as Prepare(). The "total" timing is the sum of
+  // both halves' work, without the time between them.
+  Result<PreparedFrame> Prepare(const StereoFrame& frame, const Snapshot& snapshot);
+  Result<FrameResult> Finish(PreparedFrame prepared, const Snapshot& snapshot);
 
  private:
   struct State;

@@ -666,6 +666,10 @@ std::vector<std::string> SyntheticOptions::Validate() const {
   if (!(noise_sigma >= 0.0) || !std::isfinite(noise_sigma)) {
     problems.push_back("noise_sigma: must be >= 0");
   }
+  if (loop_frames < 0 || loop_frames > kMaxLoopFrames) {
+    problems.push_back("loop_frames: must be in 0.." + std::to_string(kMaxLoopFrames) +
+                       Got(loop_frames));
+  }
   for (const std::string& p : scene.Validate()) problems.push_back("scene." + p);
   return problems;
 }
@@ -711,7 +715,18 @@ std::string SyntheticSource::Describe() const {
 std::shared_ptr<const geometry::StereoRig> SyntheticSource::Rig() const { return rig_; }
 
 Result<StereoFrame> SyntheticSource::Next() {
-  StereoFrame frame = renderer_.Render(next_index_, &truth_);
+  const int loop_frames = renderer_.options().loop_frames;
+  if (loop_frames <= 0) {
+    StereoFrame frame = renderer_.Render(next_index_, &truth_);
+    ++next_index_;
+    return frame;
+  }
+  const size_t k = static_cast<size_t>(next_index_ % loop_frames);
+  if (k >= loop_.size()) loop_.push_back(renderer_.Render(next_index_));  // the first lap
+  StereoFrame frame = loop_[k];  // shares the images: nobody writes into a source's frames
+  frame.index = next_index_;
+  const double t_s = static_cast<double>(next_index_) / renderer_.options().fps;  // as Render
+  frame.t_ns = std::llround(t_s * 1e9);
   ++next_index_;
   return frame;
 }

@@ -13,6 +13,8 @@
 
 namespace stevi::drivers {
 
+inline constexpr int kMaxLoopFrames = 600;
+
 struct SyntheticOptions {
   int width = 640;
   int height = 480;
@@ -22,6 +24,11 @@ struct SyntheticOptions {
   double noise_sigma = 2.0;  // Gaussian pixel noise, grey levels (0 disables)
   uint64_t seed = 1;         // seeds the pixel noise (frame k uses seed and k) and the textures
   Scene scene = DefaultScene();
+  // SyntheticSource only. > 0: render frames 0..loop_frames-1 once (the first lap) and play them
+  // again and again after that, with t_ns and index still counting up: a source that costs
+  // nothing per frame after the first lap, as a camera does (benchmarks, slow machines). Costs
+  // width * height * 2 bytes a frame; at most kMaxLoopFrames. Moving obstacles jump at each lap.
+  int loop_frames = 0;
 
   std::vector<std::string> Validate() const;
 };
@@ -79,7 +86,7 @@ class SyntheticSource : public StereoSource {
   Result<StereoFrame> Next() override;
   double NominalFps() const override;
 
-  // Truth of the frame last returned by Next().
+  // Truth of the frame last returned by Next() (not kept with loop_frames: empty then).
   const FrameTruth& last_truth() const { return truth_; }
   const SyntheticRenderer& renderer() const { return renderer_; }
 
@@ -88,6 +95,7 @@ class SyntheticSource : public StereoSource {
   std::shared_ptr<const geometry::StereoRig> rig_;
   FrameTruth truth_;
   int64_t next_index_ = 0;
+  std::vector<StereoFrame> loop_;  // loop_frames: the first lap's frames (images shared, read-only)
 };
 
 // Validates the options (every problem listed) and builds the source.

@@ -426,6 +426,31 @@ TEST(SyntheticSource, ProducesAnEndlessSequenceWithTruth) {
   }
 }
 
+// loop_frames: the first lap is rendered, later laps replay it pixel for pixel (against the
+// renderer's own frame), with index and t_ns still counting up; out-of-range values are refused.
+TEST(SyntheticSource, LoopFramesReplaysTheFirstLapExactlyWithTimeGoingOn) {
+  SyntheticOptions options;
+  options.loop_frames = 3;
+  Result<std::unique_ptr<SyntheticSource>> source = OpenSyntheticSource(options);
+  ASSERT_TRUE(source.ok()) << source.error().message;
+  const SyntheticRenderer reference{SyntheticOptions{}};
+  for (int64_t k = 0; k < 8; ++k) {
+    Result<StereoFrame> frame = (*source)->Next();
+    ASSERT_TRUE(frame.ok());
+    EXPECT_EQ(frame->index, k);
+    EXPECT_EQ(frame->t_ns, k * 100'000'000);
+    const StereoFrame expected = reference.Render(k % 3);
+    EXPECT_EQ(cv::norm(frame->left, expected.left, cv::NORM_INF), 0.0) << "frame " << k;
+    EXPECT_EQ(cv::norm(frame->right, expected.right, cv::NORM_INF), 0.0) << "frame " << k;
+  }
+  for (int bad : {-1, kMaxLoopFrames + 1}) {
+    options.loop_frames = bad;
+    const std::vector<std::string> problems = options.Validate();
+    ASSERT_EQ(problems.size(), 1u);
+    EXPECT_THAT(problems[0], ::testing::HasSubstr("loop_frames: must be in 0..600"));
+  }
+}
+
 // The demo scene over one 20 s loop: every moving obstacle is mostly in view, within the range
 // the default rig resolves, big enough to detect; some overlap in the image; the static ones show.
 TEST(DefaultScene, KeepsEveryObstacleUsableOverOneLoop) {

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <iterator>
 #include <optional>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
@@ -155,6 +156,81 @@ TEST(ExtractDisparityBlobs, MomentsAreThoseOfEachBlob) {
     EXPECT_NEAR(blob.moments.m10 / blob.moments.m00, blob.centroid_px.x, 1e-9);
     EXPECT_NEAR(blob.moments.m01 / blob.moments.m00, blob.centroid_px.y, 1e-9);
     ExpectMomentsNear(blob.moments, cv::moments(set.labels == blob.label, true));
+  }
+}
+
+// The independent reference: a breadth-first flood fill over the 8 neighbours, joining two mask
+// pixels when their disparities differ by at most max_step; labels from 1 in raster order of each
+// component's first pixel.
+cv::Mat1i FloodFillLabels(const cv::Mat1b& mask, const cv::Mat1s& disparity, int max_step,
+                          std::vector<int>* areas) {
+  cv::Mat1i labels(mask.size(), 0);
+  areas->assign(1, 0);
+  std::vector<cv::Point> queue;
+  for (int y = 0; y < mask.rows; ++y) {
+    for (int x = 0; x < mask.cols; ++x) {
+      if (mask(y, x) == 0 || labels(y, x) != 0) continue;
+      const int label = static_cast<int>(areas->size());
+      areas->push_back(0);
+      labels(y, x) = label;
+      queue.assign(1, cv::Point(x, y));
+      for (size_t k = 0; k < queue.size(); ++k) {
+        const cv::Point p = queue[k];
+        ++(*areas)[label];
+        for (int dy = -1; dy <= 1; ++dy) {
+          for (int dx = -1; dx <= 1; ++dx) {
+            const cv::Point q(p.x + dx, p.y + dy);
+            if ((dx == 0 && dy == 0) || q.x < 0 || q.y < 0 || q.x >= mask.cols || q.y >= mask.rows ||
+                mask(q) == 0 || labels(q) != 0 ||
+                std::abs(disparity(q) - disparity(p)) > max_step) {
+              continue;
+            }
+            labels(q) = label;
+            queue.push_back(q);
+          }
+        }
+      }
+    }
+  }
+  return labels;
+}
+
+// Random masks and disparities (sparse to dense, smooth to noisy, with steps): the labels equal
+// the flood fill's pixel for pixel, and the blobs are exactly its components of min_area or more.
+TEST(ExtractDisparityBlobs, EqualsAFloodFillOnRandomInputs) {
+  cv::RNG rng(20261121);
+  for (int trial = 0; trial < 60; ++trial) {
+    const cv::Size size(rng.uniform(1, 90), rng.uniform(1, 70));
+    cv::Mat1f noise(size);
+    rng.fill(noise, cv::RNG::UNIFORM, 0.0, 1.0);
+    cv::Mat1f smooth;
+    cv::GaussianBlur(noise, smooth, cv::Size(0, 0), rng.uniform(0.5, 4.0));
+    const double fill = rng.uniform(0.2, 0.9);
+    cv::Mat1b mask = smooth > (1.0 - fill) * 0.6 + 0.2;
+    cv::Mat1s disparity(size);
+    rng.fill(disparity, cv::RNG::UNIFORM, 0, 12);  // noise of a few sixteenths
+    disparity += cv::Mat1s(size, static_cast<int16_t>(rng.uniform(16, 600)));
+    // Steps: a few vertical bands at other disparities.
+    for (int band = 0; band < 3; ++band) {
+      const int x0 = rng.uniform(0, size.width);
+      const int x1 = std::min(size.width, x0 + rng.uniform(1, 20));
+      disparity(cv::Rect(x0, 0, x1 - x0, size.height)) += static_cast<int16_t>(rng.uniform(-200, 200));
+    }
+    const int max_step = rng.uniform(0, 24);
+    const int min_area = rng.uniform(1, 20);
+    std::vector<int> areas;
+    const cv::Mat1i expected = FloodFillLabels(mask, disparity, max_step, &areas);
+    const BlobSet set = ExtractDisparityBlobs(mask, disparity, max_step, min_area);
+    ASSERT_EQ(cv::countNonZero(set.labels != expected), 0) << "trial " << trial;
+    std::vector<int> kept;
+    for (int label = 1; label < static_cast<int>(areas.size()); ++label) {
+      if (areas[label] >= min_area) kept.push_back(label);
+    }
+    ASSERT_EQ(set.blobs.size(), kept.size()) << "trial " << trial;
+    for (size_t k = 0; k < kept.size(); ++k) {
+      EXPECT_EQ(set.blobs[k].label, kept[k]);
+      EXPECT_EQ(set.blobs[k].area_px, areas[kept[k]]);
+    }
   }
 }
 
