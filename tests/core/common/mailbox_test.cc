@@ -74,43 +74,5 @@ TEST(LatestMailbox, CloseStillDeliversTheLastValue) {
   EXPECT_FALSE(box.Take().has_value());
 }
 
-// Two threads hand 2000 values through the slot: every one arrives, in order, none twice.
-TEST(HandoffSlot, EveryValueArrivesInOrder) {
-  HandoffSlot<int> slot;
-  constexpr int kCount = 2000;
-  std::thread producer([&] {
-    for (int i = 0; i < kCount; ++i) ASSERT_TRUE(slot.Put(i));
-    slot.Close();
-  });
-  int expected = 0;
-  while (std::optional<int> v = slot.Take()) {
-    ASSERT_EQ(*v, expected);
-    ++expected;
-  }
-  producer.join();
-  EXPECT_EQ(expected, kCount);
-}
-
-// A full slot makes Put() wait for a Take(); Close() releases a waiting Put() with false.
-TEST(HandoffSlot, PutWaitsWhileFullAndCloseReleasesIt) {
-  HandoffSlot<int> slot;
-  ASSERT_TRUE(slot.Put(1));
-  std::promise<bool> second_put;
-  std::thread producer([&] { second_put.set_value(slot.Put(2)); });
-  std::future<bool> put = second_put.get_future();
-  EXPECT_NE(put.wait_for(std::chrono::seconds(0)), std::future_status::ready);
-  EXPECT_EQ(slot.Take(), std::optional<int>(1));
-  EXPECT_TRUE(put.get());  // the Take() made room
-  producer.join();
-
-  std::promise<bool> third_put;
-  std::thread blocked([&] { third_put.set_value(slot.Put(3)); });  // the slot holds 2: waits
-  slot.Close();
-  EXPECT_FALSE(third_put.get_future().get());
-  blocked.join();
-  EXPECT_EQ(slot.Take(), std::optional<int>(2));  // what was left, then nothing
-  EXPECT_EQ(slot.Take(), std::nullopt);
-}
-
 }  // namespace
 }  // namespace stevi
