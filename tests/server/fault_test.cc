@@ -808,6 +808,42 @@ TEST_F(FaultTest, RandomisedStreamCalibrationAndRecordingRequests) {
   ASSERT_NO_FATAL_FAILURE(ExpectServing("randomised requests"));
 }
 
+// A peer that opened an HTTP/2 connection and then went silent (a client that vanished without a
+// FIN): with keepalive_time_s 1 and keepalive_timeout_s 1 the server pings it, gets no answer and
+// closes the connection within a few seconds; with the defaults (30 s, 10 s) the same connection
+// is still open after those seconds. Measured from the same kind of connection in one test.
+TEST(FaultKeepalive, ASilentPeerIsClosedByTheConfiguredKeepalive) {
+  const std::string preface("PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n", 24);
+  const std::string empty_settings("\x00\x00\x00\x04\x00\x00\x00\x00\x00", 9);
+  // Opens the connection, then reads (answering nothing) for at most `limit`: the seconds until
+  // the server closed it, or nullopt when it was still open.
+  const auto closed_after = [&](const std::string& address,
+                                std::chrono::milliseconds limit) -> std::optional<double> {
+    const int fd = testing::ConnectTcp(testing::PortOf(address), limit);
+    if (fd < 0) return std::nullopt;
+    const auto start = std::chrono::steady_clock::now();
+    testing::SendAll(fd, preface + empty_settings);
+    const bool closed = testing::ReadUntilClosed(fd);
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    ::close(fd);
+    return closed ? std::optional<double>(s) : std::nullopt;
+  };
+  const std::string dir = testing::MakeTempDir("stevi-keepalive");
+  const std::string config = dir + "/server.textproto";
+  std::ofstream(config) << "keepalive_time_s: 1\nkeepalive_timeout_s: 1\n";
+  testing::ServerProcess quick;
+  ASSERT_NO_FATAL_FAILURE(quick.Start({"--fps", "5", "--config", config}));
+  const std::optional<double> quick_s = closed_after(quick.address(), std::chrono::seconds(10));
+  testing::ServerProcess defaults;
+  ASSERT_NO_FATAL_FAILURE(defaults.Start({"--fps", "5"}));
+  const std::optional<double> default_s = closed_after(defaults.address(), std::chrono::seconds(5));
+  ASSERT_TRUE(quick_s.has_value()) << "a silent peer was still connected after 10 s";
+  EXPECT_GE(*quick_s, 1.0) << "closed before any keepalive could have run";
+  EXPECT_FALSE(default_s.has_value()) << "closed after " << *default_s << " s with the defaults";
+  std::printf("keepalive: a silent peer closed after %.2f s with 1 s / 1 s; still open after 5 s "
+              "with the defaults\n", *quick_s);
+}
+
 // ---------------------------------------------------------------------------------------------
 // A corrupt calibration store on disk.
 // ---------------------------------------------------------------------------------------------
