@@ -102,6 +102,11 @@ class FaultTest : public ::testing::Test {
     v1::GetStatusResponse status;
     ASSERT_TRUE(client_->GetStatus(&status).ok());
     ASSERT_EQ(status.calibration_id(), "cal-000001");
+    // The faults are aimed at a running server: wait for its first frame (on a loaded machine the
+    // source can still be starting a second after the port opens).
+    grpc::Status streamed;
+    ASSERT_EQ(testing::ReceiveFrames(server_.address(), 1, 60s, &streamed).size(), 1u)
+        << "no first frame: " << streamed.error_message();
   }
 
   void SetUp() override { ASSERT_NO_FATAL_FAILURE(StartServer()); }
@@ -111,12 +116,6 @@ class FaultTest : public ::testing::Test {
     SCOPED_TRACE("after " + after);
     std::string why;
     ASSERT_TRUE(Alive(*server_.process(), &why)) << "the server died: " << why;
-    std::unique_ptr<client::Client> fresh = testing::MakeClient(server_.address());
-    v1::GetStatusResponse status;
-    const grpc::Status got = fresh->GetStatus(&status);
-    ASSERT_TRUE(got.ok()) << "GetStatus: " << got.error_message() << "; server stderr:\n"
-                          << server_.process()->DrainStderr();
-    EXPECT_EQ(status.source_state(), v1::SOURCE_STATE_RUNNING);
     grpc::Status streamed;
     const std::vector<v1::TrackFrame> frames =
         testing::ReceiveFrames(server_.address(), 3, 30s, &streamed);
@@ -124,6 +123,13 @@ class FaultTest : public ::testing::Test {
     for (size_t i = 1; i < frames.size(); ++i) {
       EXPECT_EQ(frames[i].frame_id(), frames[i - 1].frame_id() + 1);
     }
+    // Asked after the frames arrived, so "running" is the state to expect, not "starting".
+    std::unique_ptr<client::Client> fresh = testing::MakeClient(server_.address());
+    v1::GetStatusResponse status;
+    const grpc::Status got = fresh->GetStatus(&status);
+    ASSERT_TRUE(got.ok()) << "GetStatus: " << got.error_message() << "; server stderr:\n"
+                          << server_.process()->DrainStderr();
+    EXPECT_EQ(status.source_state(), v1::SOURCE_STATE_RUNNING);
     testing::ExpectSameState(baseline_, testing::ReadState(*fresh), after);
   }
 
