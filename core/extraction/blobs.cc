@@ -1,5 +1,7 @@
 #include "core/extraction/blobs.h"
 
+#include <algorithm>
+#include <cstdint>
 #include <cstdlib>
 #include <vector>
 
@@ -58,13 +60,30 @@ Shape BlobShape(const cv::Mat1i& labels, int label, const cv::Rect& bbox) {
   return shape;
 }
 
-// The root of pixel i's set, halving the path on the way.
-int Find(std::vector<int>& parent, int i) {
-  while (parent[i] != i) {
-    parent[i] = parent[parent[i]];
-    i = parent[i];
+// One run: pixels y, x0..x1 (inclusive) of the mask, each joining the next along the row.
+struct Run {
+  int y, x0, x1;
+};
+
+// The root of run r's set, halving the path on the way.
+int Find(std::vector<int>& parent, int r) {
+  while (parent[r] != r) {
+    parent[r] = parent[parent[r]];
+    r = parent[r];
   }
-  return i;
+  return r;
+}
+
+// Joins the sets of runs a and b; the smaller index stays the root (the run that comes first in
+// raster order, which holds the set's first pixel).
+void Unite(std::vector<int>& parent, int a, int b) {
+  a = Find(parent, a);
+  b = Find(parent, b);
+  if (a < b) {
+    parent[b] = a;
+  } else if (b < a) {
+    parent[a] = b;
+  }
 }
 
 }  // namespace
@@ -75,75 +94,84 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
   if (mask.empty()) return set;
   CV_Assert(disparity.size() == mask.size());
   const int w = mask.cols, h = mask.rows;
-  // Union-find over pixel indices. Only mask pixels are ever read, and each is set to itself when
-  // the raster scan reaches it, before any union with its (earlier) neighbours: the buffer needs
-  // no initialisation and is reused from call to call on this thread (no allocation per frame).
-  thread_local std::vector<int> parent_buffer;
-  const size_t pixels = static_cast<size_t>(w) * h;
-  if (parent_buffer.size() < pixels) parent_buffer.resize(pixels);
-  std::vector<int>& parent = parent_buffer;
   const auto joins = [&](int16_t a, int16_t b) { return std::abs(a - b) <= max_step; };
+  // Union-find over runs, not pixels: a run is a stretch of a row whose neighbouring pixels join,
+  // so the sets are few and the checks against the row above mostly meet a run already joined.
+  // The buffers are reused from call to call on this thread (no allocation per frame).
+  thread_local std::vector<Run> runs;
+  thread_local std::vector<int> parent;
+  thread_local std::vector<int> run_at;  // two rows: the run of each column, for this row and the last
+  runs.clear();
+  parent.clear();
+  run_at.resize(2 * static_cast<size_t>(w));
   for (int y = 0; y < h; ++y) {
     const uchar* m = mask[y];
     const int16_t* d = disparity[y];
     const uchar* m_up = y > 0 ? mask[y - 1] : nullptr;
     const int16_t* d_up = y > 0 ? disparity[y - 1] : nullptr;
-    for (int x = 0; x < w; ++x) {
-      if (m[x] == 0) continue;
-      const int i = y * w + x;
-      // `root`: the root of i's set so far (i alone, or its left neighbour's); each joining
-      // neighbour above merges its set in, the smaller index staying the root.
-      int root = i;
-      if (x > 0 && m[x - 1] != 0 && joins(d[x], d[x - 1])) root = Find(parent, i - 1);
-      if (m_up != nullptr) {
-        for (int dx = -1; dx <= 1; ++dx) {
-          const int xn = x + dx;
-          if (xn < 0 || xn >= w || m_up[xn] == 0 || !joins(d[x], d_up[xn])) continue;
-          const int other = Find(parent, i - w + dx);
-          if (other < root) {
-            if (root != i) parent[root] = other;
-            root = other;
-          } else if (other > root) {
-            parent[other] = root;
+    int* here = run_at.data() + (y & 1) * w;
+    const int* up = run_at.data() + ((y & 1) ^ 1) * w;
+    int x = 0;
+    while (x < w) {
+      if (m[x] == 0) {
+        ++x;
+        continue;
+      }
+      const int r = static_cast<int>(runs.size());
+      runs.push_back({y, x, x});
+      parent.push_back(r);
+      int joined_up = -1;  // the run above last joined to r: its other pixels need no check
+      while (true) {
+        here[x] = r;
+        if (m_up != nullptr) {
+          for (int xn = std::max(0, x - 1); xn <= std::min(w - 1, x + 1); ++xn) {
+            if (m_up[xn] == 0 || up[xn] == joined_up || !joins(d[x], d_up[xn])) continue;
+            Unite(parent, r, up[xn]);
+            joined_up = up[xn];
           }
         }
+        if (x + 1 < w && m[x + 1] != 0 && joins(d[x + 1], d[x])) {
+          ++x;
+          continue;
+        }
+        runs[r].x1 = x;
+        ++x;
+        break;
       }
-      parent[i] = root;
     }
   }
-  // Consecutive labels from 1, in raster order of each blob's first pixel, with the statistics of
-  // each. A union always makes the smaller index the root, so a pixel's parent comes before it in
-  // the scan and has already been pointed at its root: one step finds every root.
+  // Consecutive labels from 1, in raster order of each blob's first pixel (its root run comes
+  // first), with the statistics of each.
   set.labels = cv::Mat1i(h, w, 0);
   int* labels = set.labels.ptr<int>(0);  // continuous: index y * w + x
   struct Acc {
     int area = 0, x0 = 0, y0 = 0, x1 = 0, y1 = 0;
-    double sx = 0, sy = 0;
+    int64_t sx = 0, sy = 0;
   };
   std::vector<Acc> acc(1);
-  for (int y = 0; y < h; ++y) {
-    const uchar* m = mask[y];
-    for (int x = 0; x < w; ++x) {
-      if (m[x] == 0) continue;
-      const int i = y * w + x;
-      int label;
-      if (parent[i] == i) {
-        label = static_cast<int>(acc.size());
-        acc.push_back({0, x, y, x, y, 0, 0});
-      } else {
-        const int root = parent[parent[i]];
-        parent[i] = root;
-        label = labels[root];
-      }
-      labels[i] = label;
-      Acc& a = acc[label];
-      ++a.area;
-      a.x0 = std::min(a.x0, x);
-      a.x1 = std::max(a.x1, x);
-      a.y1 = y;
-      a.sx += x;
-      a.sy += y;
+  thread_local std::vector<int> run_label;
+  run_label.resize(runs.size());
+  for (int r = 0; r < static_cast<int>(runs.size()); ++r) {
+    const Run& run = runs[r];
+    const int root = Find(parent, r);
+    int label;
+    if (root == r) {
+      label = static_cast<int>(acc.size());
+      acc.push_back({0, run.x0, run.y, run.x1, run.y, 0, 0});
+    } else {
+      label = run_label[root];  // root < r: labelled already
     }
+    run_label[r] = label;
+    const int length = run.x1 - run.x0 + 1;
+    std::fill(labels + static_cast<size_t>(run.y) * w + run.x0,
+              labels + static_cast<size_t>(run.y) * w + run.x1 + 1, label);
+    Acc& a = acc[label];
+    a.area += length;
+    a.x0 = std::min(a.x0, run.x0);
+    a.x1 = std::max(a.x1, run.x1);
+    a.y1 = run.y;
+    a.sx += int64_t{run.x0 + run.x1} * length / 2;
+    a.sy += int64_t{run.y} * length;
   }
   for (int label = 1; label < static_cast<int>(acc.size()); ++label) {
     const Acc& a = acc[label];
@@ -151,7 +179,8 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
     Blob blob;
     blob.label = label;
     blob.bbox = cv::Rect(a.x0, a.y0, a.x1 - a.x0 + 1, a.y1 - a.y0 + 1);
-    blob.centroid_px = cv::Point2d(a.sx / a.area, a.sy / a.area);
+    blob.centroid_px = cv::Point2d(static_cast<double>(a.sx) / a.area,
+                                   static_cast<double>(a.sy) / a.area);
     blob.area_px = a.area;
     const Shape shape = BlobShape(set.labels, label, blob.bbox);
     blob.perimeter_px = shape.perimeter_px;
