@@ -317,7 +317,9 @@ int PrintStatus(Client& client, const std::vector<std::string>& args) {
             << "frames       " << s.frames_captured() << " captured, " << s.frames_processed()
             << " processed, " << s.frames_dropped_capture() << " dropped at capture, "
             << s.frames_failed() << " failed\n"
-            << "rate         " << s.fps_in() << " fps in, " << s.fps_out() << " fps out\n";
+            << "rate         " << s.fps_in() << " fps in, " << s.fps_out() << " fps out\n"
+            << "workers      " << s.pipeline_workers() << " (frames at once), OpenCV threads "
+            << s.opencv_threads() << "\n";
   std::cout << std::setprecision(2) << "timings      ";
   for (int i = 0; i < s.timings_size(); ++i) {
     std::cout << (i ? ", " : "") << s.timings(i).stage() << " " << s.timings(i).ms() << " ms";

@@ -364,6 +364,16 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
       (config.max_message_bytes() < (64u << 10) || config.max_message_bytes() > (1u << 30))) {
     problems.push_back("max_message_bytes: must be in 64 KiB..1 GiB");
   }
+  if (config.has_pipeline_workers() &&
+      (config.pipeline_workers() < 1 || config.pipeline_workers() > kMaxPipelineWorkers)) {
+    problems.push_back("pipeline_workers: must be in 1.." + std::to_string(kMaxPipelineWorkers) +
+                       " (got " + std::to_string(config.pipeline_workers()) + ")");
+  }
+  if (config.has_opencv_threads() &&
+      (config.opencv_threads() < 1 || config.opencv_threads() > kMaxOpenCvThreads)) {
+    problems.push_back("opencv_threads: must be in 1.." + std::to_string(kMaxOpenCvThreads) +
+                       " (got " + std::to_string(config.opencv_threads()) + ")");
+  }
   if (config.has_max_streams() && (config.max_streams() < 1 || config.max_streams() > 4096)) {
     problems.push_back("max_streams: must be in 1..4096");
   }

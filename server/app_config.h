@@ -23,6 +23,9 @@ inline constexpr char kDefaultListen[] = "127.0.0.1:50051";
 inline constexpr uint32_t kDefaultQueueFrames = 8;
 inline constexpr uint32_t kDefaultMaxMessageBytes = 16u << 20;
 inline constexpr uint32_t kDefaultMaxStreams = 64;
+// ServerConfig.pipeline_workers: the largest accepted (unset: Engine::kDefaultWorkers at most).
+inline constexpr uint32_t kMaxPipelineWorkers = 16;
+inline constexpr uint32_t kMaxOpenCvThreads = 64;
 inline constexpr double kDefaultFps = 10.0;
 // How long a stop waits for calls in progress (a Calibrate, a snapshot download) before
 // cancelling them; with the other steps a SIGTERM ends well within 5 s.

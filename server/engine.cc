@@ -6,6 +6,8 @@
 #include <chrono>
 #include <map>
 
+#include <opencv2/core/utility.hpp>
+
 namespace stevi::server {
 namespace {
 
@@ -14,8 +16,6 @@ constexpr size_t kRateWindow = 30;    // frames over which fps and mean timings 
 constexpr auto kRetryFirst = std::chrono::milliseconds(200);
 // Capped at 2 s so that a camera that comes back is streaming again within a few seconds.
 constexpr auto kRetryMax = std::chrono::seconds(2);
-// Pipeline workers: one per core, at most this many (each holds a frame's worth of buffers).
-constexpr size_t kMaxWorkers = 4;
 
 void PushBounded(std::deque<Clock::time_point>& times, Clock::time_point t) {
   times.push_back(t);
@@ -119,14 +119,23 @@ Result<StereoFrame> Engine::WaitForCapture(Clock::duration timeout) {
 
 Engine::~Engine() { Stop(); }
 
-void Engine::Start() {
+void Engine::Start(size_t workers, int opencv_threads) {
   std::lock_guard lock(mu_);
   if (started_threads_ || stopping_) return;
   started_threads_ = true;
   capture_thread_ = std::thread([this] { CaptureLoop(); });
-  // One worker per core (at least 1, at most kMaxWorkers): each keeps a frame's worth of buffers.
-  const size_t workers =
-      std::clamp<size_t>(std::thread::hardware_concurrency(), 1, kMaxWorkers);
+  // By default one worker per core (at least 1, at most kDefaultWorkers): each keeps a frame's
+  // worth of buffers.
+  if (workers == 0) {
+    workers = std::clamp<size_t>(std::thread::hardware_concurrency(), 1, kDefaultWorkers);
+  }
+  workers_ = workers;
+  // Set before the workers start, and only when it changes: cv::setNumThreads rebuilds OpenCV's
+  // thread pool, which must not be in use meanwhile.
+  if (opencv_threads > 0 && cv::getNumThreads() != opencv_threads) cv::setNumThreads(opencv_threads);
+  Log(LogLevel::kInfo, "engine_started",
+      {{"pipeline_workers", std::to_string(workers)},
+       {"opencv_threads", std::to_string(cv::getNumThreads())}});
   {
     std::lock_guard order(order_mu_);
     workers_running_ = workers;
@@ -323,6 +332,8 @@ EngineStatus Engine::Status() const {
   s.calibration_id = rig_ ? rig_->calibration_id() : "";
   s.source_state = source_state_;
   s.source_error = source_error_;
+  s.workers = workers_;
+  s.opencv_threads = cv::getNumThreads();
   s.fps_in = Rate(capture_times_);
   s.fps_out = Rate(process_times_);
   s.frames_captured = frames_captured_;

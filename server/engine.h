@@ -39,6 +39,8 @@ struct EngineStatus {
   std::string calibration_id;
   double uptime_s = 0;
   drivers::SourceCounters pairing;  // the source's pairing and reconnection counters
+  size_t workers = 0;               // pipeline workers (frames processed at once); 0 before Start
+  int opencv_threads = 0;           // threads an OpenCV call may use
 };
 
 // Thread-safe. Start() launches the threads; Stop() (also run by the destructor) joins them.
@@ -54,7 +56,12 @@ class Engine {
   Engine(const Engine&) = delete;
   Engine& operator=(const Engine&) = delete;
 
-  void Start();
+  // `workers`: frames processed at once, each on a thread of its own; 0: one per core, at most
+  // kDefaultWorkers. `opencv_threads`: threads one OpenCV call may use; 0 leaves OpenCV's setting
+  // (one per core) alone. OpenCV's thread count belongs to the process: set it only in a process
+  // that runs one engine at a time.
+  static constexpr size_t kDefaultWorkers = 4;
+  void Start(size_t workers = 0, int opencv_threads = 0);
   // Stops capture, lets the frame in progress finish, joins the threads. Idempotent.
   void Stop();
 
@@ -125,6 +132,7 @@ class Engine {
   std::condition_variable stop_cv_;
   bool stopping_ = false;
   bool started_threads_ = false;
+  size_t workers_ = 0;
   SourceState source_state_ = SourceState::kStarting;
   std::string source_error_;
   uint64_t frames_captured_ = 0;

@@ -144,7 +144,8 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
     health->SetServingStatus("stevi.v1.CalibrationService", false);
     health->SetServingStatus(false);
   }
-  server->engine_->Start();
+  server->engine_->Start(config.has_pipeline_workers() ? config.pipeline_workers() : 0,
+                         config.has_opencv_threads() ? static_cast<int>(config.opencv_threads()) : 0);
   server->health_thread_ = std::thread([raw = server.get()] { raw->HealthLoop(); });
   return server;
 }

@@ -1,5 +1,6 @@
 #include "server/service.h"
 
+#include <algorithm>
 #include <utility>
 
 #include "server/convert.h"
@@ -189,6 +190,8 @@ grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadca
   response->set_algorithm(ToProto(s.algorithm));
   response->set_calibration_id(s.calibration_id);
   response->set_uptime_s(s.uptime_s);
+  response->set_pipeline_workers(static_cast<uint32_t>(s.workers));
+  response->set_opencv_threads(static_cast<uint32_t>(std::max(0, s.opencv_threads)));
   v1::PairingStatus* pairing = response->mutable_pairing();
   pairing->set_pairs(s.pairing.pairs);
   pairing->set_unpaired_dropped(s.pairing.unpaired_dropped);

@@ -747,15 +747,23 @@ v1::SourceConfig SyntheticSourceAt(double fps, bool looped = true) {
   return source;
 }
 
+// The server's threads: pipeline_workers and opencv_threads (0: unset, the defaults).
+struct Threads {
+  uint32_t workers = 0;
+  uint32_t opencv = 0;
+};
+
 // Starts a server on 127.0.0.1:0 with `source` and waits for its first frames.
 std::unique_ptr<RunningServer> StartServer(const v1::PipelineConfig& pipeline_config,
-                                           const v1::SourceConfig& source) {
+                                           const v1::SourceConfig& source, Threads threads = {}) {
   auto running = std::make_unique<RunningServer>();
   v1::ServerConfig config;
   config.set_listen("127.0.0.1:0");
   *config.mutable_source() = source;
   config.set_data_dir(running->dir.path.empty() ? std::string("stevi-bench-data") : running->dir.path);
   *config.mutable_pipeline() = pipeline_config;
+  if (threads.workers > 0) config.set_pipeline_workers(threads.workers);
+  if (threads.opencv > 0) config.set_opencv_threads(threads.opencv);
   Result<std::unique_ptr<server::Server>> started = server::Server::Start(config);
   if (!started.ok()) {
     running->error = "server did not start: " + started.error().message;
@@ -792,6 +800,7 @@ struct ThroughputRun {
   std::string variant;
   stereo::MatcherKind matcher = stereo::MatcherKind::kBlockMatching;
   double source_fps = kNaN;    // the source's rate setting
+  Threads threads;             // asked for (the defaults are judged)
   double seconds = 0;
   uint64_t frames = 0;
   double fps = kNaN;           // frames_processed per second (GetStatus)
@@ -816,16 +825,17 @@ void WaitPastTheFirstLap(client::Client& control) {
 
 // `rendered`: the synthetic source renders every frame (else it plays its loop).
 ThroughputRun MeasureThroughput(const Variant& variant, stereo::MatcherKind kind, double seconds,
-                                double source_fps, bool rendered = false) {
+                                double source_fps, bool rendered = false, Threads threads = {}) {
   ThroughputRun run;
   run.source = rendered ? "rendered" : "looped";
   run.source_fps = source_fps;
+  run.threads = threads;
   run.variant = variant.name;
   run.matcher = kind;
   std::fprintf(stderr, "  server throughput: %s source, %s + %s at source.fps %.0f for %.1f s\n",
                run.source.c_str(), variant.name.c_str(), MatcherName(kind), source_fps, seconds);
   const v1::SourceConfig source = SyntheticSourceAt(source_fps, !rendered);
-  std::unique_ptr<RunningServer> s = StartServer(ProtoConfigFor(variant, kind), source);
+  std::unique_ptr<RunningServer> s = StartServer(ProtoConfigFor(variant, kind), source, threads);
   if (!s->error.empty()) {
     run.error = s->error;
     return run;
@@ -859,6 +869,8 @@ Json ThroughputJson(const ThroughputRun& run) {
       .Set("algorithm", run.variant)
       .Set("matcher", MatcherName(run.matcher))
       .Set("source_fps_setting", run.source_fps)
+      .Set("pipeline_workers", static_cast<uint64_t>(run.last.pipeline_workers()))
+      .Set("opencv_threads", static_cast<uint64_t>(run.last.opencv_threads()))
       .Set("seconds", run.seconds)
       .Set("frames_processed", run.frames)
       .Set("fps_processed", run.fps)
@@ -1251,6 +1263,16 @@ int main(int argc, char** argv) {
       throughput.push_back(MeasureThroughput(variant, kind, flags.seconds, flags.source_fps));
     }
   }
+  // For reference (not judged), against the defaults above (a worker per core, OpenCV calls on
+  // every core): one worker (parallelism inside a frame only), and OpenCV on one thread (across
+  // frames only). The last changes OpenCV's process-wide setting: reset after.
+  for (const Threads threads : {Threads{1, 0}, Threads{0, 1}}) {
+    for (const char* name : {"canonical", "stevie"}) {
+      throughput.push_back(MeasureThroughput(VariantNamed(name), stereo::MatcherKind::kBlockMatching,
+                                             flags.seconds, flags.source_fps, false, threads));
+    }
+  }
+  cv::setNumThreads(-1);
   // For reference (not judged): the synthetic source rendering every frame, block matching.
   for (const Variant& variant : Variants()) {
     throughput.push_back(
@@ -1281,7 +1303,8 @@ int main(int argc, char** argv) {
   // 7. Targets.
   const auto throughput_of = [&](const std::string& variant) {
     for (const ThroughputRun& run : throughput) {
-      if (run.source == "looped" && run.variant == variant &&
+      if (run.source == "looped" && run.variant == variant && run.threads.workers == 0 &&
+          run.threads.opencv == 0 &&
           run.matcher == stereo::MatcherKind::kBlockMatching) {
         return run.fps;
       }
@@ -1402,8 +1425,9 @@ int main(int argc, char** argv) {
                       "looped: the synthetic source plays %d frames rendered once, as a camera costs "
                       "nothing to read; rendered: it renders each pair on the capture thread; "
                       "offline cap = 1000 / table-1 total)\n", flags.source_fps, kLoopFrames);
-  std::fprintf(table, "%-9s %-13s %-5s %8s %8s %8s %9s %10s %8s  %s\n", "source", "algorithm", "match",
-               "fps out", "fps in", "dropped", "CPU ms/f", "CPU cores", "offl cap", "GetStatus mean stage ms");
+  std::fprintf(table, "%-9s %-13s %-5s %8s %8s %8s %9s %10s %8s %9s  %s\n", "source", "algorithm",
+               "match", "fps out", "fps in", "dropped", "CPU ms/f", "CPU cores", "offl cap",
+               "wrk/cv", "GetStatus mean stage ms");
   for (const ThroughputRun& run : throughput) {
     if (!run.error.empty()) {
       std::fprintf(table, "%-9s %-13s %-5s error: %s\n", run.source.c_str(), run.variant.c_str(),
@@ -1416,10 +1440,13 @@ int main(int argc, char** argv) {
     for (const v1::StageTiming& t : run.last.timings()) {
       stages.append(t.stage()).append(" ").append(Format("%.2f", t.ms())).append("  ");
     }
-    std::fprintf(table, "%-9s %-13s %-5s %8.1f %8.1f %8llu %9s %10s %8s  %s\n", run.source.c_str(),
-                 run.variant.c_str(), MatcherName(run.matcher), run.fps, run.fps_captured,
-                 static_cast<unsigned long long>(run.dropped_capture), Ms(run.cpu_ms_per_frame).c_str(),
-                 Ms(run.cpu_cores).c_str(), Ms(cap, "%.1f").c_str(), stages.c_str());
+    const std::string threads =
+        std::to_string(run.last.pipeline_workers()) + "/" + std::to_string(run.last.opencv_threads());
+    std::fprintf(table, "%-9s %-13s %-5s %8.1f %8.1f %8llu %9s %10s %8s %9s  %s\n",
+                 run.source.c_str(), run.variant.c_str(), MatcherName(run.matcher), run.fps,
+                 run.fps_captured, static_cast<unsigned long long>(run.dropped_capture),
+                 Ms(run.cpu_ms_per_frame).c_str(), Ms(run.cpu_cores).c_str(),
+                 Ms(cap, "%.1f").c_str(), threads.c_str(), stages.c_str());
   }
 
   std::fprintf(table, "\n6. Clients (%s + BM, source at %.1f fps; clients in a child process, one "

@@ -232,15 +232,25 @@ TEST(ValidateServerConfig, ListsEveryCrossFieldProblem) {
   config.set_max_streams(0);
   config.set_keepalive_time_s(0.1);
   config.set_keepalive_timeout_s(std::nan(""));
+  config.set_pipeline_workers(0);
+  config.set_opencv_threads(65);
   const std::vector<std::string> problems = ValidateServerConfig(config);
   const std::string all = ::testing::PrintToString(problems);
   EXPECT_THAT(all, AllOf(HasSubstr("listen"), HasSubstr("source.left"), HasSubstr("source.right"),
                          HasSubstr("source.calibration"), HasSubstr("max_streams"),
                          HasSubstr("keepalive_time_s: must be in [1, 86400] s (got 0.1)"),
-                         HasSubstr("keepalive_timeout_s")));
+                         HasSubstr("keepalive_timeout_s"),
+                         HasSubstr("pipeline_workers: must be in 1..16 (got 0)"),
+                         HasSubstr("opencv_threads: must be in 1..64 (got 65)")));
+  config.set_pipeline_workers(17);
+  EXPECT_THAT(::testing::PrintToString(ValidateServerConfig(config)),
+              HasSubstr("pipeline_workers: must be in 1..16 (got 17)"));
 
   v1::ServerConfig fine;
   fine.set_listen("127.0.0.1:0");
+  EXPECT_TRUE(ValidateServerConfig(fine).empty());
+  fine.set_pipeline_workers(16);
+  fine.set_opencv_threads(1);
   EXPECT_TRUE(ValidateServerConfig(fine).empty());
 }
 

@@ -4,6 +4,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include <algorithm>
@@ -196,6 +197,52 @@ TEST_F(ServerTest, StatusCountsSubscribersAndShutdownEndsStreams) {
   streaming.join();
   EXPECT_EQ(stream_status.error_code(), grpc::StatusCode::UNAVAILABLE);
   EXPECT_THAT(stream_status.error_message(), HasSubstr("shutting down"));
+}
+
+// pipeline_workers: with 1 the frames go through one at a time; with 3 (more than this machine may
+// have) three frames are worked on at once, here with OpenCV on one thread each (opencv_threads),
+// and the clients still get the frames in capture order.
+TEST(ServerWorkers, FramesComeInOrderWhateverTheNumberOfWorkers) {
+  for (const uint32_t workers : {1u, 3u}) {
+    SCOPED_TRACE("pipeline_workers " + std::to_string(workers));
+    v1::ServerConfig config = TestConfig();
+    config.set_pipeline_workers(workers);
+    if (workers > 1) config.set_opencv_threads(1);
+    config.mutable_source()->set_fps(60);
+    Result<std::unique_ptr<Server>> server = Server::Start(config);
+    ASSERT_TRUE(server.ok()) << server.error().message;
+    client::ClientOptions options;
+    options.address = "127.0.0.1:" + std::to_string((*server)->port());
+    options.timeout = std::chrono::seconds(30);
+    client::Client client(options);
+    std::vector<v1::TrackFrame> frames;
+    client::StreamOptions stream;
+    stream.max_frames = 40;
+    const grpc::Status streamed = client.StreamTracks(
+        [&](const v1::TrackFrame& frame) {
+          frames.push_back(frame);
+          return true;
+        },
+        stream);
+    ASSERT_TRUE(streamed.ok()) << streamed.error_message();
+    ASSERT_EQ(frames.size(), 40u);
+    for (size_t i = 1; i < frames.size(); ++i) {
+      // Consecutive ids; capture times increase (the frames were not reordered); a frame the
+      // mailbox replaced before a worker took it is skipped whole, never repeated.
+      EXPECT_EQ(frames[i].frame_id(), frames[i - 1].frame_id() + 1);
+      EXPECT_GT(frames[i].capture_time_ns(), frames[i - 1].capture_time_ns());
+    }
+    v1::GetStatusResponse status;
+    ASSERT_TRUE(client.GetStatus(&status).ok());
+    EXPECT_EQ(status.pipeline_workers(), workers);
+    if (workers > 1) {
+      EXPECT_EQ(status.opencv_threads(), 1u);
+    } else {
+      EXPECT_EQ(status.opencv_threads(), static_cast<uint32_t>(cv::getNumThreads()));  // untouched
+    }
+    (*server)->Shutdown();
+  }
+  cv::setNumThreads(-1);  // OpenCV's default again, for the tests after this one
 }
 
 // max_streams bounds the concurrent StreamTracks: one more is RESOURCE_EXHAUSTED naming the

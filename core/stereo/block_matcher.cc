@@ -1,0 +1,504 @@
+#include "core/stereo/block_matcher.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+
+#include <opencv2/calib3d.hpp>
+
+#include "core/common/error.h"
+
+// What cv::StereoBM (OpenCV 4.6, modules/calib3d/src/stereobm.cpp) computes, as implemented here:
+//
+// - Pre-filter (x-Sobel): out = clamp(dx(y-1) + 2 dx(y) + dx(y+1) + cap, 0, 2 cap) with
+//   dx(r) = img[r][x+1] - img[r][x-1]; rows mirror at the top and bottom (row -1 is row 1, row h
+//   is row h-2); the first and last columns are `cap`; and, when the height is odd, so is the
+//   whole last row (OpenCV filters rows in pairs and fills the unpaired last row with `cap`).
+// - Cost of disparity index k (disparity max_disp - k, max_disp = min_disparity + nd - 1) at
+//   (x, y): the sum over the block of |L[r][lcol(j)] - R[r][rcol(j) + k]|, with
+//   lcol(j) = clamp(j, 0, w-1) and rcol(j) = clamp(j - max_disp, 0, w - nd). Inside the valid
+//   area below neither clamp is ever active for min_disparity >= 0.
+// - Only the valid rectangle is matched: rows [h/2.. , h - b/2), columns
+//   [max(max_disp, 0) + b/2, w - b/2) (cv::getValidDisparityROI) and within the columns OpenCV
+//   matches at all ([lofs, lofs + width1)). Everything else is the unmatched marker.
+// - Best index: the first (smallest k, i.e. largest disparity) minimum of the cost.
+// - Texture: the block sum of |L_prefiltered - cap| must reach texture_threshold.
+// - Uniqueness: thresh = min + min * ratio / 100 (integers); unmatched if any index outside
+//   [best - 1, best + 1] has cost <= thresh.
+// - Sub-pixel: p = cost[best + 1], n = cost[best - 1], den = p + n - 2 cost[best] + |p - n|,
+//   d16 = ((max_disp - best) * 256 + (den ? (p - n) * 256 / den : 0) + 15) >> 4, with no
+//   interpolation at the first and last index.
+// - Quirk reproduced: with min_disparity > 0, OpenCV's column loop runs min_disparity columns past
+//   the row end, so the last matched row's results for columns w .. w + min_disparity - 1 (costs
+//   with clamped columns) land in the first min_disparity pixels of the next row, which is the
+//   first row of the bottom border and is not reset afterwards.
+// - Then cv::filterSpeckles, as StereoBM calls it.
+
+namespace stevi::stereo {
+namespace {
+
+std::atomic<bool> g_force_portable{false};
+
+bool CpuHasAvx2() {
+#if defined(__x86_64__) || defined(__i386__)
+  return __builtin_cpu_supports("avx2");
+#else
+  return false;
+#endif
+}
+
+void PrefilterXSobel(const cv::Mat& src, cv::Mat& dst, int cap) {
+  const int w = src.cols;
+  const int h = src.rows;
+  dst.create(src.size(), CV_8UC1);
+  const uint8_t edge = static_cast<uint8_t>(cap);
+  for (int y = 0; y < h; ++y) {
+    uint8_t* out = dst.ptr<uint8_t>(y);
+    if (h % 2 == 1 && y == h - 1) {
+      std::memset(out, edge, static_cast<size_t>(w));
+      continue;
+    }
+    const uint8_t* up = src.ptr<uint8_t>(y > 0 ? y - 1 : 1);
+    const uint8_t* mid = src.ptr<uint8_t>(y);
+    const uint8_t* down = src.ptr<uint8_t>(y + 1 < h ? y + 1 : y - 1);
+    out[0] = edge;
+    out[w - 1] = edge;
+    for (int x = 1; x < w - 1; ++x) {
+      const int v = (up[x + 1] - up[x - 1]) + 2 * (mid[x + 1] - mid[x - 1]) +
+                    (down[x + 1] - down[x - 1]) + cap;
+      out[x] = static_cast<uint8_t>(std::clamp(v, 0, 2 * cap));
+    }
+  }
+}
+
+// OpenCV's fixed-point disparity of the best index with its interpolation and rounding.
+template <typename T>
+[[gnu::always_inline]] inline int16_t Interpolated(const T* sad, int best, int nd, int max_disp) {
+  const int base = (max_disp - best) * 256;
+  if (best <= 0 || best >= nd - 1) return static_cast<int16_t>((base + 15) >> 4);
+  const int p = sad[best + 1];
+  const int n = sad[best - 1];
+  const int den = p + n - 2 * static_cast<int>(sad[best]) + std::abs(p - n);
+  return static_cast<int16_t>((base + (den != 0 ? (p - n) * 256 / den : 0) + 15) >> 4);
+}
+
+// 32-byte vectors: 16 lanes of 16-bit costs, or 8 lanes of 32-bit costs, with the bytes of one
+// vector's worth of right-image pixels.
+template <typename T>
+struct Lanes;
+template <>
+struct Lanes<int16_t> {
+  static constexpr int kCount = 16;
+  typedef int16_t V __attribute__((vector_size(32)));
+  typedef uint8_t Bytes __attribute__((vector_size(16)));
+};
+template <>
+struct Lanes<int32_t> {
+  static constexpr int kCount = 8;
+  typedef int32_t V __attribute__((vector_size(32)));
+  typedef uint8_t Bytes __attribute__((vector_size(8)));
+};
+using V16 = Lanes<int16_t>::V;
+using V8 = Lanes<int32_t>::V;
+
+// Unaligned loads and stores (vector arguments by reference: no ABI questions without AVX).
+template <typename V>
+[[gnu::always_inline]] inline void Load(V& v, const void* p) {
+  std::memcpy(&v, p, sizeof v);
+}
+template <typename V>
+[[gnu::always_inline]] inline void Store(void* p, const V& v) {
+  std::memcpy(p, &v, sizeof v);
+}
+
+[[gnu::always_inline]] inline int HorizontalMin(const V16& v) {
+  V16 a = v;
+  V16 b = __builtin_shufflevector(a, a, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7);
+  a = b < a ? b : a;
+  b = __builtin_shufflevector(a, a, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3);
+  a = b < a ? b : a;
+  b = __builtin_shufflevector(a, a, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1);
+  a = b < a ? b : a;
+  b = __builtin_shufflevector(a, a, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0);
+  a = b < a ? b : a;
+  return a[0];
+}
+[[gnu::always_inline]] inline int HorizontalMin(const V8& v) {
+  V8 a = v;
+  V8 b = __builtin_shufflevector(a, a, 4, 5, 6, 7, 0, 1, 2, 3);
+  a = b < a ? b : a;
+  b = __builtin_shufflevector(a, a, 2, 3, 0, 1, 2, 3, 0, 1);
+  a = b < a ? b : a;
+  b = __builtin_shufflevector(a, a, 1, 0, 1, 0, 1, 0, 1, 0);
+  a = b < a ? b : a;
+  return a[0];
+}
+[[gnu::always_inline]] inline int HorizontalSum(const V16& v) {
+  V16 a = v;
+  a += __builtin_shufflevector(a, a, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7);
+  a += __builtin_shufflevector(a, a, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3);
+  a += __builtin_shufflevector(a, a, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1);
+  a += __builtin_shufflevector(a, a, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0);
+  return a[0];
+}
+[[gnu::always_inline]] inline int HorizontalSum(const V8& v) {
+  V8 a = v;
+  a += __builtin_shufflevector(a, a, 4, 5, 6, 7, 0, 1, 2, 3);
+  a += __builtin_shufflevector(a, a, 2, 3, 0, 1, 2, 3, 0, 1);
+  a += __builtin_shufflevector(a, a, 1, 0, 1, 0, 1, 0, 1, 0);
+  return a[0];
+}
+
+// One call of the vector kernel: the valid rectangle of one image pair.
+struct Job {
+  const uint8_t* left;  // pre-filtered
+  const uint8_t* right;
+  size_t left_step, right_step;  // bytes
+  int16_t* disp;
+  size_t disp_step;  // elements
+  int y0, y1, x0, x1;  // rows and columns matched
+  int half;            // block_size / 2
+  int nd, max_disp;
+  int cap, texture_threshold, uniqueness_ratio;
+  int16_t filtered;
+  // Window column jj is image column x0 - half + jj: its clamped left column and the right column
+  // of index 0.
+  const int* left_col;
+  const int* right_col;
+  int* texture_col;  // 1 + window columns: a zero column, then the columns' texture sums
+  void* cost;        // T[nd] SADs of the current pixel, T[nd] zeros, then T[nd] per window column
+};
+
+// Moves window column jj's cost sums down one row: adds row `add`, drops row `sub`.
+template <typename T>
+[[gnu::always_inline]] inline void SlideColumn(const Job& job, int jj, const uint8_t* left_add,
+                                               const uint8_t* left_sub, const uint8_t* right_add,
+                                               const uint8_t* right_sub, T* column,
+                                               int* texture) {
+  using V = typename Lanes<T>::V;
+  using Bytes = typename Lanes<T>::Bytes;
+  constexpr int kLanes = Lanes<T>::kCount;
+  const int lc = job.left_col[jj];
+  const int a = left_add[lc];
+  const int b = left_sub[lc];
+  const V av = V{} + static_cast<T>(a);
+  const V bv = V{} + static_cast<T>(b);
+  const uint8_t* ra = right_add + job.right_col[jj];
+  const uint8_t* rs = right_sub + job.right_col[jj];
+  for (int k = 0; k < job.nd; k += kLanes) {
+    Bytes rab, rsb;
+    Load(rab, ra + k);
+    Load(rsb, rs + k);
+    V da = av - __builtin_convertvector(rab, V);
+    V db = bv - __builtin_convertvector(rsb, V);
+    da = da < V{} ? -da : da;
+    db = db < V{} ? -db : db;
+    V acc;
+    Load(acc, column + k);
+    acc += da - db;
+    Store(column + k, acc);
+  }
+  *texture += std::abs(a - job.cap) - std::abs(b - job.cap);
+}
+
+// Column sums updated row by row, running sums along x: the cost of a pixel is O(nd), whatever
+// the block size. T holds every block sum exactly (16 bits when block^2 * 2 * cap < 32767).
+template <typename T>
+[[gnu::always_inline]] inline void MatchKernel(const Job& job) {
+  using V = typename Lanes<T>::V;
+  using Bytes = typename Lanes<T>::Bytes;
+  constexpr int kLanes = Lanes<T>::kCount;
+  const int nd = job.nd;
+  const int half = job.half;
+  const int span = 2 * half;
+  const int ncols = job.x1 - job.x0 + span;
+  T* const sad = static_cast<T*>(job.cost);
+  T* const cols = sad + 2 * nd;  // window column jj at cols + jj * nd; cols - nd: zeros
+  int* const tex = job.texture_col + 1;
+
+  // The first row's window: rows y0 - half .. y0 + half (all inside the image).
+  std::fill(cols - nd, cols + static_cast<size_t>(ncols) * nd, T{0});
+  std::fill(tex - 1, tex + ncols, 0);
+  for (int r = job.y0 - half; r <= job.y0 + half; ++r) {
+    const uint8_t* lrow = job.left + r * job.left_step;
+    const uint8_t* rrow = job.right + r * job.right_step;
+    for (int jj = 0; jj < ncols; ++jj) {
+      const int lv = lrow[job.left_col[jj]];
+      const V lvv = V{} + static_cast<T>(lv);
+      const uint8_t* rp = rrow + job.right_col[jj];
+      T* column = cols + static_cast<size_t>(jj) * nd;
+      for (int k = 0; k < nd; k += kLanes) {
+        Bytes rb;
+        Load(rb, rp + k);
+        V diff = lvv - __builtin_convertvector(rb, V);
+        diff = diff < V{} ? -diff : diff;
+        V acc;
+        Load(acc, column + k);
+        acc += diff;
+        Store(column + k, acc);
+      }
+      tex[jj] += std::abs(lv - job.cap);
+    }
+  }
+
+  V lane;
+  for (int i = 0; i < kLanes; ++i) lane[i] = static_cast<T>(i);
+  const V big = V{} + std::numeric_limits<T>::max();
+
+  for (int y = job.y0; y < job.y1; ++y) {
+    const bool slide = y > job.y0;
+    // Rows entering and leaving the window when moving down from y - 1 (used when `slide`).
+    const uint8_t* left_add = job.left + (y + half) * job.left_step;
+    const uint8_t* right_add = job.right + (y + half) * job.right_step;
+    const int sub_row = slide ? y - half - 1 : y;
+    const uint8_t* left_sub = job.left + sub_row * job.left_step;
+    const uint8_t* right_sub = job.right + sub_row * job.right_step;
+    if (slide) {
+      for (int jj = 0; jj < span; ++jj) {
+        SlideColumn<T>(job, jj, left_add, left_sub, right_add, right_sub,
+                       cols + static_cast<size_t>(jj) * nd, tex + jj);
+      }
+    }
+    // SADs of the window minus its last column, which the first pixel adds.
+    std::fill(sad, sad + nd, T{0});
+    int tsum = 0;
+    for (int jj = 0; jj < span; ++jj) {
+      const T* column = cols + static_cast<size_t>(jj) * nd;
+      for (int k = 0; k < nd; k += kLanes) {
+        V s, c;
+        Load(s, sad + k);
+        Load(c, column + k);
+        s += c;
+        Store(sad + k, s);
+      }
+      tsum += tex[jj];
+    }
+
+    int16_t* out = job.disp + y * job.disp_step;
+    for (int x = job.x0; x < job.x1; ++x) {
+      const int jadd = x - job.x0 + span;
+      const int jsub = jadd - span - 1;  // -1 (the zero column) at the first pixel
+      T* const add_col = cols + static_cast<ptrdiff_t>(jadd) * nd;
+      const T* const sub_col = cols + static_cast<ptrdiff_t>(jsub) * nd;
+      if (slide) {
+        SlideColumn<T>(job, jadd, left_add, left_sub, right_add, right_sub, add_col, tex + jadd);
+      }
+      tsum += tex[jadd] - tex[jsub];
+
+      // SADs, and per lane the minimum and the first block reaching it.
+      V vmin = big;
+      V vblock = V{};
+      for (int k = 0; k < nd; k += kLanes) {
+        V s, a, b;
+        Load(s, sad + k);
+        Load(a, add_col + k);
+        Load(b, sub_col + k);
+        s += a - b;
+        Store(sad + k, s);
+        const V lower = s < vmin;
+        vmin = lower ? s : vmin;
+        vblock = lower ? V{} + static_cast<T>(k) : vblock;
+      }
+      if (tsum < job.texture_threshold) {
+        out[x] = job.filtered;
+        continue;
+      }
+      const int min_sad = HorizontalMin(vmin);
+      const V candidates = vmin == V{} + static_cast<T>(min_sad) ? vblock + lane : big;
+      const int best = HorizontalMin(candidates);
+
+      if (job.uniqueness_ratio > 0) {
+        const int thresh = std::min(min_sad + min_sad * job.uniqueness_ratio / 100,
+                                    static_cast<int>(std::numeric_limits<T>::max()));
+        const V tv = V{} + static_cast<T>(thresh);
+        V count = V{};
+        for (int k = 0; k < nd; k += kLanes) {
+          V s;
+          Load(s, sad + k);
+          count += s <= tv;  // -1 per lane at or below the threshold
+        }
+        int close = -HorizontalSum(count);
+        for (int k = std::max(best - 1, 0); k <= std::min(best + 1, nd - 1); ++k) {
+          close -= sad[k] <= thresh;
+        }
+        if (close > 0) {
+          out[x] = job.filtered;
+          continue;
+        }
+      }
+      out[x] = Interpolated(sad, best, nd, job.max_disp);
+    }
+  }
+}
+
+void MatchPortable16(const Job& job) { MatchKernel<int16_t>(job); }
+void MatchPortable32(const Job& job) { MatchKernel<int32_t>(job); }
+#if defined(__x86_64__) || defined(__i386__)
+__attribute__((target("avx2"))) void MatchAvx2_16(const Job& job) { MatchKernel<int16_t>(job); }
+__attribute__((target("avx2"))) void MatchAvx2_32(const Job& job) { MatchKernel<int32_t>(job); }
+#endif
+
+}  // namespace
+
+std::vector<std::string> SadBlockMatcherParams::Validate() const {
+  std::vector<std::string> problems;
+  if (num_disparities < 16 || num_disparities > 1024 || num_disparities % 16 != 0) {
+    problems.push_back("num_disparities: must be a multiple of 16 in 16..1024" +
+                       Got(num_disparities));
+  }
+  if (min_disparity < -1024 || min_disparity > 1024) {
+    problems.push_back("min_disparity: must be in -1024..1024" + Got(min_disparity));
+  }
+  if (block_size < 5 || block_size > 255 || block_size % 2 == 0) {
+    problems.push_back("block_size: must be odd, in 5..255" + Got(block_size));
+  }
+  if (prefilter_cap < 1 || prefilter_cap > 63) {
+    problems.push_back("prefilter_cap: must be in 1..63" + Got(prefilter_cap));
+  }
+  if (texture_threshold < 0) {
+    problems.push_back("texture_threshold: must be >= 0" + Got(texture_threshold));
+  }
+  if (uniqueness_ratio < 0 || uniqueness_ratio > 100) {
+    problems.push_back("uniqueness_ratio: must be in 0..100" + Got(uniqueness_ratio));
+  }
+  if (speckle_window_size < 0) {
+    problems.push_back("speckle_window_size: must be >= 0" + Got(speckle_window_size));
+  }
+  if (speckle_range < 0) problems.push_back("speckle_range: must be >= 0" + Got(speckle_range));
+  return problems;
+}
+
+SadBlockMatcher::SadBlockMatcher(SadBlockMatcherParams p) : p_(p) {
+  const std::vector<std::string> problems = p_.Validate();
+  if (!problems.empty()) CV_Error(cv::Error::StsOutOfRange, Error::Invalid(problems).message);
+}
+
+void SadBlockMatcher::ForcePortable(bool force) { g_force_portable.store(force); }
+
+bool SadBlockMatcher::UsesAvx2() { return !g_force_portable.load() && CpuHasAvx2(); }
+
+void SadBlockMatcher::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat& disparity) {
+  CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1);
+  CV_Assert(left.size() == right.size());
+  const int w = left.cols;
+  const int h = left.rows;
+  const int nd = p_.num_disparities;
+  const int half = p_.block_size / 2;
+  const int cap = p_.prefilter_cap;
+  const int max_disp = p_.min_disparity + nd - 1;
+  const int16_t filtered = static_cast<int16_t>((p_.min_disparity - 1) * 16);
+
+  disparity.create(left.size(), CV_16SC1);
+  disparity.setTo(filtered);
+  // cv::StereoBM throws here; it leaves its output uninitialised when the valid area is empty.
+  if (p_.block_size >= std::min(w, h)) return;
+  const int lofs = std::max(max_disp, 0);
+  const int rofs = std::max(-max_disp, 0);
+  const int width1 = w - rofs - nd + 1;  // columns OpenCV matches, from lofs
+  if (lofs >= w || rofs >= w || width1 < 1) return;
+  const int valid_x0 = lofs + half;
+  const int valid_x1 = w - half;
+  const int y0 = half;
+  const int y1 = h - half;
+  if (valid_x1 <= valid_x0 || y1 <= y0) return;
+  const int x0 = std::max(valid_x0, lofs);
+  const int x1 = std::min(valid_x1, lofs + width1);
+
+  PrefilterXSobel(left, left_filtered_, cap);
+  PrefilterXSobel(right, right_filtered_, cap);
+
+  if (x1 > x0) {
+    const int ncols = x1 - x0 + 2 * half;
+    left_col_.resize(static_cast<size_t>(ncols));
+    right_col_.resize(static_cast<size_t>(ncols));
+    texture_col_.resize(static_cast<size_t>(ncols) + 1);
+    for (int jj = 0; jj < ncols; ++jj) {
+      const int j = x0 - half + jj;
+      left_col_[jj] = std::clamp(j, 0, w - 1);
+      right_col_[jj] = std::clamp(j - max_disp, 0, w - nd);
+    }
+    Job job{};
+    job.left = left_filtered_.ptr<uint8_t>();
+    job.right = right_filtered_.ptr<uint8_t>();
+    job.left_step = left_filtered_.step[0];
+    job.right_step = right_filtered_.step[0];
+    job.disp = disparity.ptr<int16_t>();
+    job.disp_step = disparity.step1();
+    job.y0 = y0;
+    job.y1 = y1;
+    job.x0 = x0;
+    job.x1 = x1;
+    job.half = half;
+    job.nd = nd;
+    job.max_disp = max_disp;
+    job.cap = cap;
+    job.texture_threshold = p_.texture_threshold;
+    job.uniqueness_ratio = p_.uniqueness_ratio;
+    job.filtered = filtered;
+    job.left_col = left_col_.data();
+    job.right_col = right_col_.data();
+    job.texture_col = texture_col_.data();
+    const size_t cost_size = static_cast<size_t>(ncols + 2) * nd;
+    const bool avx2 = UsesAvx2();
+    if (p_.block_size * p_.block_size * 2 * cap < std::numeric_limits<int16_t>::max()) {
+      if (cost16_.size() < cost_size) cost16_.resize(cost_size);
+      job.cost = cost16_.data();
+#if defined(__x86_64__) || defined(__i386__)
+      if (avx2) {
+        MatchAvx2_16(job);
+      } else {
+        MatchPortable16(job);
+      }
+#else
+      MatchPortable16(job);
+#endif
+    } else {
+      if (cost32_.size() < cost_size) cost32_.resize(cost_size);
+      job.cost = cost32_.data();
+#if defined(__x86_64__) || defined(__i386__)
+      if (avx2) {
+        MatchAvx2_32(job);
+      } else {
+        MatchPortable32(job);
+      }
+#else
+      MatchPortable32(job);
+#endif
+    }
+  }
+
+  // OpenCV's overrun past the row end (see the top of this file): pixels computed one by one.
+  for (int x = w; x < lofs + width1; ++x) {
+    const int y = y1 - 1;
+    sad_scalar_.assign(static_cast<size_t>(nd), 0);
+    int tsum = 0;
+    for (int r = y - half; r <= y + half; ++r) {
+      const uint8_t* lrow = left_filtered_.ptr<uint8_t>(r);
+      const uint8_t* rrow = right_filtered_.ptr<uint8_t>(r);
+      for (int j = x - half; j <= x + half; ++j) {
+        const int lv = lrow[std::clamp(j, 0, w - 1)];
+        const uint8_t* rp = rrow + std::clamp(j - max_disp, 0, w - nd);
+        for (int k = 0; k < nd; ++k) sad_scalar_[k] += std::abs(lv - rp[k]);
+        tsum += std::abs(lv - cap);
+      }
+    }
+    const int* sad = sad_scalar_.data();
+    const int best = static_cast<int>(std::min_element(sad, sad + nd) - sad);
+    const int thresh = sad[best] + sad[best] * p_.uniqueness_ratio / 100;
+    bool unique = true;
+    for (int k = 0; k < nd && p_.uniqueness_ratio > 0; ++k) {
+      if ((k < best - 1 || k > best + 1) && sad[k] <= thresh) unique = false;
+    }
+    int16_t& out = disparity.at<int16_t>(y + 1, x - w);
+    out = tsum < p_.texture_threshold || !unique ? filtered : Interpolated(sad, best, nd, max_disp);
+  }
+
+  if (p_.speckle_window_size > 0) {
+    cv::filterSpeckles(disparity, filtered, p_.speckle_window_size, p_.speckle_range,
+                       speckle_buf_);
+  }
+}
+
+}  // namespace stevi::stereo
