@@ -5,6 +5,7 @@
 #include <set>
 #include <string>
 
+#include "core/common/allocator.h"
 #include "core/pipeline/pipeline.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/app_config.h"
@@ -45,6 +46,7 @@ int Fail(const std::string& message, int code = 2) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  stevi::KeepFrameMemory();  // first: before any thread starts
   using namespace stevi;
   const std::set<std::string> known = {"source", "left", "right", "calibration", "fps", "algorithm",
                                        "config", "frames", "out", "truth", "replay"};

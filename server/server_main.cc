@@ -6,6 +6,7 @@
 #include <set>
 #include <string>
 
+#include "core/common/allocator.h"
 #include "server/app_config.h"
 #include "server/log.h"
 #include "server/server.h"
@@ -56,6 +57,7 @@ With no flags: the built-in synthetic rig, the canonical algorithm, listening on
 }  // namespace
 
 int main(int argc, char** argv) {
+  stevi::KeepFrameMemory();  // first: before any thread starts
   using namespace stevi;
   const std::set<std::string> known = {
       "listen", "config", "source",  "left",        "right",   "calibration", "fps",    "algorithm",

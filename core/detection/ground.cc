@@ -3,6 +3,7 @@
 #include "core/common/error.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -47,21 +48,18 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
   // The mode of each row (1 px bins), kept when it dominates the row.
   std::vector<RowMode> modes;
   std::vector<int> bins(max_bin);
-  std::vector<double> sums(max_bin);
+  std::vector<int64_t> sums(max_bin);  // of fixed-point values: exact
   std::vector<int> first_x(max_bin), last_x(max_bin);
   for (int y = 0; y < fixed.rows; ++y) {
     std::fill(bins.begin(), bins.end(), 0);
-    std::fill(sums.begin(), sums.end(), 0.0);
-    std::fill(first_x.begin(), first_x.end(), fixed.cols);
-    std::fill(last_x.begin(), last_x.end(), -1);
+    std::fill(sums.begin(), sums.end(), 0);
     const int16_t* row = fixed[y];
     int matched = 0;
     for (int x = 0; x < fixed.cols; ++x) {
       if (row[x] < stereo::DisparityMap::kScale) continue;  // unmatched, or below 1 px
       const int bin = std::min(max_bin - 1, row[x] / stereo::DisparityMap::kScale);
-      ++bins[bin];
+      if (bins[bin]++ == 0) first_x[bin] = x;  // x only grows: the first is the smallest
       sums[bin] += row[x];
-      first_x[bin] = std::min(first_x[bin], x);
       last_x[bin] = x;
       ++matched;
     }
@@ -69,7 +67,7 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
     const int bin = static_cast<int>(best - bins.begin());
     if (*best >= options.min_row_pixels && *best >= options.min_row_fraction * matched &&
         last_x[bin] - first_x[bin] >= options.min_row_spread * fixed.cols) {
-      const double mode_px = sums[bin] / *best / stereo::DisparityMap::kScale;
+      const double mode_px = static_cast<double>(sums[bin]) / *best / stereo::DisparityMap::kScale;
       if (mode_px >= options.min_mode_px) modes.push_back({static_cast<double>(y), mode_px, *best});
     }
   }

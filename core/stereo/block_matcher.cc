@@ -33,7 +33,9 @@
 // - Quirk reproduced: with min_disparity > 0, OpenCV's column loop runs min_disparity columns past
 //   the row end, so the last matched row's results for columns w .. w + min_disparity - 1 (costs
 //   with clamped columns) land in the first min_disparity pixels of the next row, which is the
-//   first row of the bottom border and is not reset afterwards.
+//   first row of the bottom border and is not reset afterwards. (With several threads OpenCV
+//   splits the rows into stripes and each stripe's overrun into the next stripe's first row races
+//   with that stripe's own border reset; with one thread there is a single stripe.)
 // - Then cv::filterSpeckles, as StereoBM calls it.
 
 namespace stevi::stereo {
@@ -81,27 +83,25 @@ template <typename T>
   const int p = sad[best + 1];
   const int n = sad[best - 1];
   const int den = p + n - 2 * static_cast<int>(sad[best]) + std::abs(p - n);
-  return static_cast<int16_t>((base + (den != 0 ? (p - n) * 256 / den : 0) + 15) >> 4);
+  // (p - n) * 256 / den truncated, as C's integer division (the double quotient is exact enough:
+  // |quotient| <= 128 and its fraction is at least 1 / den away from the next integer).
+  const int frac = den != 0 ? static_cast<int>(static_cast<double>((p - n) * 256) / den) : 0;
+  return static_cast<int16_t>((base + frac + 15) >> 4);
 }
 
-// 32-byte vectors: 16 lanes of 16-bit costs, or 8 lanes of 32-bit costs, with the bytes of one
-// vector's worth of right-image pixels.
-template <typename T>
-struct Lanes;
-template <>
-struct Lanes<int16_t> {
-  static constexpr int kCount = 16;
-  typedef int16_t V __attribute__((vector_size(32)));
-  typedef uint8_t Bytes __attribute__((vector_size(16)));
+// Vectors of kBytes bytes (32 for AVX2, 16 for the portable path: SSE2, NEON) of 16-bit costs
+// (block^2 * 2 * cap < 32767) or 32-bit ones, and the right-image bytes of one such vector.
+template <typename T, int kBytes>
+struct Lanes {
+  static constexpr int kCount = kBytes / static_cast<int>(sizeof(T));
+  typedef T V __attribute__((vector_size(kBytes)));
+  typedef uint8_t Bytes __attribute__((vector_size(kCount)));
 };
-template <>
-struct Lanes<int32_t> {
-  static constexpr int kCount = 8;
-  typedef int32_t V __attribute__((vector_size(32)));
-  typedef uint8_t Bytes __attribute__((vector_size(8)));
-};
-using V16 = Lanes<int16_t>::V;
-using V8 = Lanes<int32_t>::V;
+using V16x16 = Lanes<int16_t, 32>::V;
+using V32x8 = Lanes<int32_t, 32>::V;
+using V16x8 = Lanes<int16_t, 16>::V;
+using V32x4 = Lanes<int32_t, 16>::V;
+typedef uint64_t Words __attribute__((vector_size(16)));
 
 // Unaligned loads and stores (vector arguments by reference: no ABI questions without AVX).
 template <typename V>
@@ -113,21 +113,22 @@ template <typename V>
   std::memcpy(p, &v, sizeof v);
 }
 
-[[gnu::always_inline]] inline int HorizontalMin(const V16& v) {
-  V16 a = v;
-  V16 b = __builtin_shufflevector(a, a, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7);
-  a = b < a ? b : a;
-  b = __builtin_shufflevector(a, a, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3);
-  a = b < a ? b : a;
-  b = __builtin_shufflevector(a, a, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1);
-  a = b < a ? b : a;
-  b = __builtin_shufflevector(a, a, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0);
-  a = b < a ? b : a;
-  return a[0];
+// Loads one vector of right-image pixels: stored at the cost's width (no conversion) or as bytes.
+template <typename V, typename Bytes, typename P>
+[[gnu::always_inline]] inline void LoadPixels(V& v, const P* p) {
+  if constexpr (sizeof(P) == sizeof(v[0])) {
+    Load(v, p);
+  } else {
+    Bytes b;
+    Load(b, p);
+    v = __builtin_convertvector(b, V);
+  }
 }
-[[gnu::always_inline]] inline int HorizontalMin(const V8& v) {
-  V8 a = v;
-  V8 b = __builtin_shufflevector(a, a, 4, 5, 6, 7, 0, 1, 2, 3);
+
+// Horizontal minima, within 128 bits after the first fold (cheap shuffles everywhere).
+[[gnu::always_inline]] inline int HorizontalMin(const V16x8& v) {
+  V16x8 a = v;
+  V16x8 b = __builtin_shufflevector(a, a, 4, 5, 6, 7, 0, 1, 2, 3);
   a = b < a ? b : a;
   b = __builtin_shufflevector(a, a, 2, 3, 0, 1, 2, 3, 0, 1);
   a = b < a ? b : a;
@@ -135,27 +136,43 @@ template <typename V>
   a = b < a ? b : a;
   return a[0];
 }
-[[gnu::always_inline]] inline int HorizontalSum(const V16& v) {
-  V16 a = v;
-  a += __builtin_shufflevector(a, a, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7);
-  a += __builtin_shufflevector(a, a, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3);
-  a += __builtin_shufflevector(a, a, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1);
-  a += __builtin_shufflevector(a, a, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0);
+[[gnu::always_inline]] inline int HorizontalMin(const V32x4& v) {
+  V32x4 a = v;
+  V32x4 b = __builtin_shufflevector(a, a, 2, 3, 0, 1);
+  a = b < a ? b : a;
+  b = __builtin_shufflevector(a, a, 1, 0, 1, 0);
+  a = b < a ? b : a;
   return a[0];
 }
-[[gnu::always_inline]] inline int HorizontalSum(const V8& v) {
-  V8 a = v;
-  a += __builtin_shufflevector(a, a, 4, 5, 6, 7, 0, 1, 2, 3);
-  a += __builtin_shufflevector(a, a, 2, 3, 0, 1, 2, 3, 0, 1);
-  a += __builtin_shufflevector(a, a, 1, 0, 1, 0, 1, 0, 1, 0);
-  return a[0];
+[[gnu::always_inline]] inline int HorizontalMin(const V16x16& v) {
+  const V16x8 lo = __builtin_shufflevector(v, v, 0, 1, 2, 3, 4, 5, 6, 7);
+  const V16x8 hi = __builtin_shufflevector(v, v, 8, 9, 10, 11, 12, 13, 14, 15);
+  return HorizontalMin(lo < hi ? lo : hi);
+}
+[[gnu::always_inline]] inline int HorizontalMin(const V32x8& v) {
+  const V32x4 lo = __builtin_shufflevector(v, v, 0, 1, 2, 3);
+  const V32x4 hi = __builtin_shufflevector(v, v, 4, 5, 6, 7);
+  return HorizontalMin(lo < hi ? lo : hi);
+}
+
+// Whether any lane of a comparison result is set.
+template <typename V>
+[[gnu::always_inline]] inline bool Any(const V& mask) {
+  Words w;
+  std::memcpy(&w, &mask, sizeof w);
+  if constexpr (sizeof(V) == 32) {
+    Words hi;
+    std::memcpy(&hi, reinterpret_cast<const char*>(&mask) + sizeof w, sizeof hi);
+    w |= hi;
+  }
+  return (w[0] | w[1]) != 0;
 }
 
 // One call of the vector kernel: the valid rectangle of one image pair.
 struct Job {
   const uint8_t* left;  // pre-filtered
-  const uint8_t* right;
-  size_t left_step, right_step;  // bytes
+  const void* right;  // P: int16_t (pre-widened, for 16-bit costs) or uint8_t
+  size_t left_step, right_step;  // elements
   int16_t* disp;
   size_t disp_step;  // elements
   int y0, y1, x0, x1;  // rows and columns matched
@@ -172,27 +189,26 @@ struct Job {
 };
 
 // Moves window column jj's cost sums down one row: adds row `add`, drops row `sub`.
-template <typename T>
+template <typename T, int kBytes, typename P>
 [[gnu::always_inline]] inline void SlideColumn(const Job& job, int jj, const uint8_t* left_add,
-                                               const uint8_t* left_sub, const uint8_t* right_add,
-                                               const uint8_t* right_sub, T* column,
-                                               int* texture) {
-  using V = typename Lanes<T>::V;
-  using Bytes = typename Lanes<T>::Bytes;
-  constexpr int kLanes = Lanes<T>::kCount;
+                                               const uint8_t* left_sub, const P* right_add,
+                                               const P* right_sub, T* column, int* texture) {
+  using V = typename Lanes<T, kBytes>::V;
+  using Bytes = typename Lanes<T, kBytes>::Bytes;
+  constexpr int kLanes = Lanes<T, kBytes>::kCount;
   const int lc = job.left_col[jj];
   const int a = left_add[lc];
   const int b = left_sub[lc];
   const V av = V{} + static_cast<T>(a);
   const V bv = V{} + static_cast<T>(b);
-  const uint8_t* ra = right_add + job.right_col[jj];
-  const uint8_t* rs = right_sub + job.right_col[jj];
+  const P* ra = right_add + job.right_col[jj];
+  const P* rs = right_sub + job.right_col[jj];
   for (int k = 0; k < job.nd; k += kLanes) {
-    Bytes rab, rsb;
-    Load(rab, ra + k);
-    Load(rsb, rs + k);
-    V da = av - __builtin_convertvector(rab, V);
-    V db = bv - __builtin_convertvector(rsb, V);
+    V rav, rsv;
+    LoadPixels<V, Bytes>(rav, ra + k);
+    LoadPixels<V, Bytes>(rsv, rs + k);
+    V da = av - rav;
+    V db = bv - rsv;
     da = da < V{} ? -da : da;
     db = db < V{} ? -db : db;
     V acc;
@@ -205,15 +221,16 @@ template <typename T>
 
 // Column sums updated row by row, running sums along x: the cost of a pixel is O(nd), whatever
 // the block size. T holds every block sum exactly (16 bits when block^2 * 2 * cap < 32767).
-template <typename T>
+template <typename T, int kBytes, typename P>
 [[gnu::always_inline]] inline void MatchKernel(const Job& job) {
-  using V = typename Lanes<T>::V;
-  using Bytes = typename Lanes<T>::Bytes;
-  constexpr int kLanes = Lanes<T>::kCount;
+  using V = typename Lanes<T, kBytes>::V;
+  using Bytes = typename Lanes<T, kBytes>::Bytes;
+  constexpr int kLanes = Lanes<T, kBytes>::kCount;
   const int nd = job.nd;
   const int half = job.half;
   const int span = 2 * half;
   const int ncols = job.x1 - job.x0 + span;
+  const P* const right = static_cast<const P*>(job.right);
   T* const sad = static_cast<T*>(job.cost);
   T* const cols = sad + 2 * nd;  // window column jj at cols + jj * nd; cols - nd: zeros
   int* const tex = job.texture_col + 1;
@@ -223,16 +240,16 @@ template <typename T>
   std::fill(tex - 1, tex + ncols, 0);
   for (int r = job.y0 - half; r <= job.y0 + half; ++r) {
     const uint8_t* lrow = job.left + r * job.left_step;
-    const uint8_t* rrow = job.right + r * job.right_step;
+    const P* rrow = right + r * job.right_step;
     for (int jj = 0; jj < ncols; ++jj) {
       const int lv = lrow[job.left_col[jj]];
       const V lvv = V{} + static_cast<T>(lv);
-      const uint8_t* rp = rrow + job.right_col[jj];
+      const P* rp = rrow + job.right_col[jj];
       T* column = cols + static_cast<size_t>(jj) * nd;
       for (int k = 0; k < nd; k += kLanes) {
-        Bytes rb;
-        Load(rb, rp + k);
-        V diff = lvv - __builtin_convertvector(rb, V);
+        V rv;
+        LoadPixels<V, Bytes>(rv, rp + k);
+        V diff = lvv - rv;
         diff = diff < V{} ? -diff : diff;
         V acc;
         Load(acc, column + k);
@@ -251,13 +268,13 @@ template <typename T>
     const bool slide = y > job.y0;
     // Rows entering and leaving the window when moving down from y - 1 (used when `slide`).
     const uint8_t* left_add = job.left + (y + half) * job.left_step;
-    const uint8_t* right_add = job.right + (y + half) * job.right_step;
+    const P* right_add = right + (y + half) * job.right_step;
     const int sub_row = slide ? y - half - 1 : y;
     const uint8_t* left_sub = job.left + sub_row * job.left_step;
-    const uint8_t* right_sub = job.right + sub_row * job.right_step;
+    const P* right_sub = right + sub_row * job.right_step;
     if (slide) {
       for (int jj = 0; jj < span; ++jj) {
-        SlideColumn<T>(job, jj, left_add, left_sub, right_add, right_sub,
+        SlideColumn<T, kBytes, P>(job, jj, left_add, left_sub, right_add, right_sub,
                        cols + static_cast<size_t>(jj) * nd, tex + jj);
       }
     }
@@ -283,7 +300,8 @@ template <typename T>
       T* const add_col = cols + static_cast<ptrdiff_t>(jadd) * nd;
       const T* const sub_col = cols + static_cast<ptrdiff_t>(jsub) * nd;
       if (slide) {
-        SlideColumn<T>(job, jadd, left_add, left_sub, right_add, right_sub, add_col, tex + jadd);
+        SlideColumn<T, kBytes, P>(job, jadd, left_add, left_sub, right_add, right_sub, add_col,
+                                  tex + jadd);
       }
       tsum += tex[jadd] - tex[jsub];
 
@@ -313,17 +331,17 @@ template <typename T>
         const int thresh = std::min(min_sad + min_sad * job.uniqueness_ratio / 100,
                                     static_cast<int>(std::numeric_limits<T>::max()));
         const V tv = V{} + static_cast<T>(thresh);
-        V count = V{};
+        const V first_exempt = V{} + static_cast<T>(best - 1);
+        const V last_exempt = V{} + static_cast<T>(best + 1);
+        V index = lane;
+        V rival = V{};
         for (int k = 0; k < nd; k += kLanes) {
           V s;
           Load(s, sad + k);
-          count += s <= tv;  // -1 per lane at or below the threshold
+          rival |= (s <= tv) & ((index < first_exempt) | (index > last_exempt));
+          index += static_cast<T>(kLanes);
         }
-        int close = -HorizontalSum(count);
-        for (int k = std::max(best - 1, 0); k <= std::min(best + 1, nd - 1); ++k) {
-          close -= sad[k] <= thresh;
-        }
-        if (close > 0) {
+        if (Any(rival)) {
           out[x] = job.filtered;
           continue;
         }
@@ -333,11 +351,17 @@ template <typename T>
   }
 }
 
-void MatchPortable16(const Job& job) { MatchKernel<int16_t>(job); }
-void MatchPortable32(const Job& job) { MatchKernel<int32_t>(job); }
+// 16-bit costs read a pre-widened right image (GCC 12 widens bytes to a 32-byte vector in four
+// instructions); 32-bit costs read bytes.
+void MatchPortable16(const Job& job) { MatchKernel<int16_t, 16, int16_t>(job); }
+void MatchPortable32(const Job& job) { MatchKernel<int32_t, 16, uint8_t>(job); }
 #if defined(__x86_64__) || defined(__i386__)
-__attribute__((target("avx2"))) void MatchAvx2_16(const Job& job) { MatchKernel<int16_t>(job); }
-__attribute__((target("avx2"))) void MatchAvx2_32(const Job& job) { MatchKernel<int32_t>(job); }
+__attribute__((target("avx2"))) void MatchAvx2_16(const Job& job) {
+  MatchKernel<int16_t, 32, int16_t>(job);
+}
+__attribute__((target("avx2"))) void MatchAvx2_32(const Job& job) {
+  MatchKernel<int32_t, 32, uint8_t>(job);
+}
 #endif
 
 }  // namespace
@@ -421,9 +445,7 @@ void SadBlockMatcher::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat
     }
     Job job{};
     job.left = left_filtered_.ptr<uint8_t>();
-    job.right = right_filtered_.ptr<uint8_t>();
     job.left_step = left_filtered_.step[0];
-    job.right_step = right_filtered_.step[0];
     job.disp = disparity.ptr<int16_t>();
     job.disp_step = disparity.step1();
     job.y0 = y0;
@@ -445,6 +467,9 @@ void SadBlockMatcher::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat
     if (p_.block_size * p_.block_size * 2 * cap < std::numeric_limits<int16_t>::max()) {
       if (cost16_.size() < cost_size) cost16_.resize(cost_size);
       job.cost = cost16_.data();
+      right_filtered_.convertTo(right_wide_, CV_16SC1);
+      job.right = right_wide_.ptr<int16_t>();
+      job.right_step = right_wide_.step1();
 #if defined(__x86_64__) || defined(__i386__)
       if (avx2) {
         MatchAvx2_16(job);
@@ -457,6 +482,8 @@ void SadBlockMatcher::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat
     } else {
       if (cost32_.size() < cost_size) cost32_.resize(cost_size);
       job.cost = cost32_.data();
+      job.right = right_filtered_.ptr<uint8_t>();
+      job.right_step = right_filtered_.step1();
 #if defined(__x86_64__) || defined(__i386__)
       if (avx2) {
         MatchAvx2_32(job);

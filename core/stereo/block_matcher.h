@@ -48,6 +48,7 @@ class SadBlockMatcher {
  private:
   SadBlockMatcherParams p_;
   cv::Mat left_filtered_, right_filtered_;  // CV_8UC1 pre-filtered images
+  cv::Mat right_wide_;                      // CV_16SC1 copy of right_filtered_ (16-bit kernel)
   std::vector<int> left_col_, right_col_;   // per window column: clamped image columns
   std::vector<int> texture_col_;            // per window column: texture column sums
   std::vector<int16_t> cost16_;             // column sums then the row's SADs, 16-bit kernel

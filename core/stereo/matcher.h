@@ -12,7 +12,8 @@
 
 namespace stevi::stereo {
 
-// SAD block matching (cv::StereoBM) with every parameter the thesis tunes.
+// SAD block matching with every parameter the thesis tunes: cv::StereoBM's output, computed by
+// SadBlockMatcher (block_matcher.h) for the x-Sobel pre-filter and by cv::StereoBM otherwise.
 struct BlockMatchingOptions {
   // Pre-filter applied to both images before the SAD. The x-Sobel pre-filter is the default: on
   // the Middlebury pairs (tsukuba, venus, teddy, cones; block 9, padded) it gives 7.6 % bad pixels

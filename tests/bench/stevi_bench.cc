@@ -55,6 +55,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "client/client.h"
+#include "core/common/allocator.h"
 #include "core/extraction/saliency.h"
 #include "core/extraction/segmentation.h"
 #include "core/geometry/calibration_io.h"
@@ -1184,6 +1185,7 @@ struct Target {
 }  // namespace
 
 int main(int argc, char** argv) {
+  stevi::KeepFrameMemory();  // first: before any thread starts
   if (argc >= 2 && std::string(argv[1]) == "--client-worker") {
     if (argc != 5) {
       std::fprintf(stderr, "usage: stevi-bench --client-worker ADDRESS CLIENTS SECONDS\n");

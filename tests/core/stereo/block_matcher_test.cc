@@ -39,10 +39,10 @@ std::string Describe(const SadBlockMatcherParams& p) {
   return s.str();
 }
 
-// cv::StereoBM with `p` on one thread (with several, its stripes race, see the report in
-// block_matcher.cc). The output is preset to the unmatched marker: cv::StereoBM leaves it
-// untouched when no column is valid. nullopt when cv::StereoBM rejects the input (block not
-// smaller than the image).
+// cv::StereoBM with `p` on one thread (with several, its row stripes race at their boundaries:
+// see the top of block_matcher.cc). The output is preset to the unmatched marker: cv::StereoBM
+// leaves it untouched when no column is valid. nullopt when cv::StereoBM rejects the input (block
+// not smaller than the image).
 std::optional<cv::Mat> Reference(const cv::Mat& left, const cv::Mat& right,
                                  const SadBlockMatcherParams& p) {
   cv::setNumThreads(1);
@@ -184,10 +184,10 @@ TEST(SadBlockMatcherTest, SyntheticFramesDefaultParams) {
   for (const int index : {0, 7, 23}) {
     const Pair pair = SyntheticPair(index);
     ASSERT_EQ(pair.left.type(), CV_8UC1);
-    // Not a vacuous comparison: most of the frame is matched.
+    // Not a vacuous comparison: a good part of the frame is matched (the sky is not).
     cv::Mat disparity;
     SadBlockMatcher(p).Compute(pair.left, pair.right, disparity);
-    EXPECT_GT(cv::countNonZero(disparity != Unmatched(p)), disparity.total() / 2) << index;
+    EXPECT_GT(cv::countNonZero(disparity != Unmatched(p)), disparity.total() / 5) << index;
     ExpectSameBothPaths(pair.left, pair.right, p, "synthetic " + std::to_string(index));
     ExpectSameBothPaths(PadLeft(pair.left, kPad), PadLeft(pair.right, kPad), p,
                         "padded synthetic " + std::to_string(index));
@@ -319,7 +319,8 @@ TEST(SadBlockMatcherTest, Middlebury) {
   const std::optional<std::string> data = testing::DataDir();
   if (!data) GTEST_SKIP() << "reference data folder not found: " << testing::DataDirWanted();
   const std::vector<std::pair<std::string, std::string>> pairs = {
-      {"middlebury2001/tsukuba/scene1.row3.col3.ppm", "middlebury2001/tsukuba/scene1.row3.col4.ppm"},
+      {"middlebury2001/tsukuba/scene1.row3.col3.ppm",
+       "middlebury2001/tsukuba/scene1.row3.col4.ppm"},
       {"middlebury2001/venus/im2.ppm", "middlebury2001/venus/im6.ppm"},
       {"middlebury2003/teddy/im2.png", "middlebury2003/teddy/im6.png"},
       {"middlebury2003/cones/im2.png", "middlebury2003/cones/im6.png"},
