@@ -132,6 +132,7 @@ void Engine::Start(size_t workers, int opencv_threads) {
   workers_ = workers;
   // Set before the workers start, and only when it changes: cv::setNumThreads rebuilds OpenCV's
   // thread pool, which must not be in use meanwhile.
+  if (opencv_threads == 0 && workers > 1) opencv_threads = 1;
   if (opencv_threads > 0 && cv::getNumThreads() != opencv_threads) cv::setNumThreads(opencv_threads);
   Log(LogLevel::kInfo, "engine_started",
       {{"pipeline_workers", std::to_string(workers)},

@@ -57,9 +57,10 @@ class Engine {
   Engine& operator=(const Engine&) = delete;
 
   // `workers`: frames processed at once, each on a thread of its own; 0: one per core, at most
-  // kDefaultWorkers. `opencv_threads`: threads one OpenCV call may use; 0 leaves OpenCV's setting
-  // (one per core) alone. OpenCV's thread count belongs to the process: set it only in a process
-  // that runs one engine at a time.
+  // kDefaultWorkers. `opencv_threads`: threads one OpenCV call may use; 0: 1 with two or more
+  // workers (the cores are already busy with a frame each, and OpenCV's thread pool only adds
+  // synchronisation: stevi-bench measures it), OpenCV's own setting (one per core) with one.
+  // OpenCV's thread count belongs to the process: only one engine at a time should set it.
   static constexpr size_t kDefaultWorkers = 4;
   void Start(size_t workers = 0, int opencv_threads = 0);
   // Stops capture, lets the frame in progress finish, joins the threads. Idempotent.

@@ -1265,16 +1265,16 @@ int main(int argc, char** argv) {
       throughput.push_back(MeasureThroughput(variant, kind, flags.seconds, flags.source_fps));
     }
   }
-  // For reference (not judged), against the defaults above (a worker per core, OpenCV calls on
-  // every core): one worker (parallelism inside a frame only), and OpenCV on one thread (across
-  // frames only). The last changes OpenCV's process-wide setting: reset after.
-  for (const Threads threads : {Threads{1, 0}, Threads{0, 1}}) {
+  // For reference (not judged), against the defaults above (a worker per core, OpenCV on one thread
+  // in each): one worker whose OpenCV calls use every core (parallelism inside a frame only), and
+  // a worker per core whose OpenCV calls use every core too (both).
+  const uint32_t cores = static_cast<uint32_t>(std::max(1, cv::getNumberOfCPUs()));
+  for (const Threads threads : {Threads{1, cores}, Threads{0, cores}}) {
     for (const char* name : {"canonical", "stevie"}) {
       throughput.push_back(MeasureThroughput(VariantNamed(name), stereo::MatcherKind::kBlockMatching,
                                              flags.seconds, flags.source_fps, false, threads));
     }
   }
-  cv::setNumThreads(-1);
   // For reference (not judged): the synthetic source rendering every frame, block matching.
   for (const Variant& variant : Variants()) {
     throughput.push_back(

@@ -199,15 +199,14 @@ TEST_F(ServerTest, StatusCountsSubscribersAndShutdownEndsStreams) {
   EXPECT_THAT(stream_status.error_message(), HasSubstr("shutting down"));
 }
 
-// pipeline_workers: with 1 the frames go through one at a time; with 3 (more than this machine may
-// have) three frames are worked on at once, here with OpenCV on one thread each (opencv_threads),
-// and the clients still get the frames in capture order.
+// pipeline_workers: with 1 the frames go through one at a time, OpenCV's setting untouched; with 3
+// (more than this machine may have) three frames are worked on at once, OpenCV on one thread in
+// each by default, and the clients still get the frames in capture order.
 TEST(ServerWorkers, FramesComeInOrderWhateverTheNumberOfWorkers) {
   for (const uint32_t workers : {1u, 3u}) {
     SCOPED_TRACE("pipeline_workers " + std::to_string(workers));
     v1::ServerConfig config = TestConfig();
     config.set_pipeline_workers(workers);
-    if (workers > 1) config.set_opencv_threads(1);
     config.mutable_source()->set_fps(60);
     Result<std::unique_ptr<Server>> server = Server::Start(config);
     ASSERT_TRUE(server.ok()) << server.error().message;
