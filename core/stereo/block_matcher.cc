@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <thread>
 
 #include <opencv2/calib3d.hpp>
 
@@ -391,6 +392,7 @@ std::vector<std::string> SadBlockMatcherParams::Validate() const {
     problems.push_back("speckle_window_size: must be >= 0" + Got(speckle_window_size));
   }
   if (speckle_range < 0) problems.push_back("speckle_range: must be >= 0" + Got(speckle_range));
+  if (stripes < 1 || stripes > 8) problems.push_back("stripes: must be in 1..8" + Got(stripes));
   return problems;
 }
 
@@ -435,9 +437,12 @@ void SadBlockMatcher::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat
 
   if (x1 > x0) {
     const int ncols = x1 - x0 + 2 * half;
+    // Stripes of at least four blocks' height: below that the window set-up dominates.
+    const int stripes = std::clamp((y1 - y0) / (4 * p_.block_size), 1, p_.stripes);
+    const size_t texture_size = static_cast<size_t>(ncols) + 1;
     left_col_.resize(static_cast<size_t>(ncols));
     right_col_.resize(static_cast<size_t>(ncols));
-    texture_col_.resize(static_cast<size_t>(ncols) + 1);
+    texture_col_.resize(texture_size * stripes);
     for (int jj = 0; jj < ncols; ++jj) {
       const int j = x0 - half + jj;
       left_col_[jj] = std::clamp(j, 0, w - 1);
@@ -464,36 +469,41 @@ void SadBlockMatcher::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat
     job.texture_col = texture_col_.data();
     const size_t cost_size = static_cast<size_t>(ncols + 2) * nd;
     const bool avx2 = UsesAvx2();
-    if (p_.block_size * p_.block_size * 2 * cap < std::numeric_limits<int16_t>::max()) {
-      if (cost16_.size() < cost_size) cost16_.resize(cost_size);
-      job.cost = cost16_.data();
+    void (*kernel)(const Job&) = nullptr;
+    const bool costs16 = p_.block_size * p_.block_size * 2 * cap < std::numeric_limits<int16_t>::max();
+    if (costs16) {
+      if (cost16_.size() < cost_size * stripes) cost16_.resize(cost_size * stripes);
       right_filtered_.convertTo(right_wide_, CV_16SC1);
       job.right = right_wide_.ptr<int16_t>();
       job.right_step = right_wide_.step1();
+      kernel = MatchPortable16;
 #if defined(__x86_64__) || defined(__i386__)
-      if (avx2) {
-        MatchAvx2_16(job);
-      } else {
-        MatchPortable16(job);
-      }
-#else
-      MatchPortable16(job);
+      if (avx2) kernel = MatchAvx2_16;
 #endif
     } else {
-      if (cost32_.size() < cost_size) cost32_.resize(cost_size);
-      job.cost = cost32_.data();
+      if (cost32_.size() < cost_size * stripes) cost32_.resize(cost_size * stripes);
       job.right = right_filtered_.ptr<uint8_t>();
       job.right_step = right_filtered_.step1();
+      kernel = MatchPortable32;
 #if defined(__x86_64__) || defined(__i386__)
-      if (avx2) {
-        MatchAvx2_32(job);
-      } else {
-        MatchPortable32(job);
-      }
-#else
-      MatchPortable32(job);
+      if (avx2) kernel = MatchAvx2_32;
 #endif
     }
+    // Each stripe starts its window afresh (its own cost and texture buffers): the sums are exact
+    // integers, so the output is the same as one pass over all rows.
+    std::vector<Job> jobs(static_cast<size_t>(stripes), job);
+    for (int s = 0; s < stripes; ++s) {
+      Job& stripe = jobs[static_cast<size_t>(s)];
+      stripe.y0 = y0 + (y1 - y0) * s / stripes;
+      stripe.y1 = y0 + (y1 - y0) * (s + 1) / stripes;
+      stripe.texture_col = texture_col_.data() + texture_size * s;
+      stripe.cost = costs16 ? static_cast<void*>(cost16_.data() + cost_size * s)
+                            : static_cast<void*>(cost32_.data() + cost_size * s);
+    }
+    std::vector<std::thread> helpers;
+    for (int s = 1; s < stripes; ++s) helpers.emplace_back(kernel, std::cref(jobs[s]));
+    kernel(jobs[0]);
+    for (std::thread& helper : helpers) helper.join();
   }
 
   // OpenCV's overrun past the row end (see the top of this file): pixels computed one by one.

@@ -19,12 +19,16 @@ struct SadBlockMatcherParams {
   int uniqueness_ratio = 15;  // percent, 0..100; 0 disables the test
   int speckle_window_size = 100;  // pixels, >= 0; 0 disables the speckle filter
   int speckle_range = 32;     // 1/16 px, as cv::StereoBM::setSpeckleRange takes it; >= 0
+  // Horizontal stripes matched at once, each on a thread of its own (the caller's and
+  // stripes - 1 more), 1..8; fewer when the image is short. The output does not depend on it.
+  int stripes = 1;
 
   // Problems as "field: must be ... (got v)"; empty when valid.
   std::vector<std::string> Validate() const;
 };
 
-// Thread-compatible: one instance per thread. Single-threaded (no cv::parallel_for_).
+// Thread-compatible: one instance per thread. Runs on the caller's thread, plus stripes - 1
+// threads of its own during Compute (no cv::parallel_for_).
 class SadBlockMatcher {
  public:
   // Invalid params (see Validate()) are a programming error: throws cv::Exception.
@@ -50,8 +54,8 @@ class SadBlockMatcher {
   cv::Mat left_filtered_, right_filtered_;  // CV_8UC1 pre-filtered images
   cv::Mat right_wide_;                      // CV_16SC1 copy of right_filtered_ (16-bit kernel)
   std::vector<int> left_col_, right_col_;   // per window column: clamped image columns
-  std::vector<int> texture_col_;            // per window column: texture column sums
-  std::vector<int16_t> cost16_;             // column sums then the row's SADs, 16-bit kernel
+  std::vector<int> texture_col_;            // per stripe and window column: texture column sums
+  std::vector<int16_t> cost16_;             // per stripe: column sums then the row's SADs, 16-bit
   std::vector<int32_t> cost32_;             // the same, 32-bit kernel (large blocks and caps)
   std::vector<int> sad_scalar_;             // SADs of the few pixels computed one by one
   cv::Mat speckle_buf_;

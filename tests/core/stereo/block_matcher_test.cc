@@ -100,14 +100,18 @@ void ExpectSame(SadBlockMatcher& matcher, const cv::Mat& left, const cv::Mat& ri
                           << " " << path << ":" << FirstDifferences(ours, *expected);
 }
 
-// Both paths, each with a fresh matcher.
+// Both paths, each with a fresh matcher, in one stripe and in three (each on a thread).
 void ExpectSameBothPaths(const cv::Mat& left, const cv::Mat& right, const SadBlockMatcherParams& p,
                          const std::string& what) {
   const std::optional<cv::Mat> expected = Reference(left, right, p);
   for (const bool portable : {false, true}) {
-    SadBlockMatcher::ForcePortable(portable);
-    SadBlockMatcher matcher(p);
-    ExpectSame(matcher, left, right, expected, what);
+    for (const int stripes : {1, 3}) {
+      SadBlockMatcher::ForcePortable(portable);
+      SadBlockMatcherParams striped = p;
+      striped.stripes = stripes;
+      SadBlockMatcher matcher(striped);
+      ExpectSame(matcher, left, right, expected, what + ", stripes " + std::to_string(stripes));
+    }
   }
   SadBlockMatcher::ForcePortable(false);
 }
