@@ -320,6 +320,15 @@ int PrintStatus(Client& client, const std::vector<std::string>& args) {
             << "rate         " << s.fps_in() << " fps in, " << s.fps_out() << " fps out\n"
             << "workers      " << s.pipeline_workers() << " (frames at once), OpenCV threads "
             << s.opencv_threads() << "\n";
+  if (s.image_width() > 0) {
+    std::cout << "images       " << s.image_width() << "x" << s.image_height();
+    if (s.binning() > 1) {
+      std::cout << ", processed at " << s.processed_width() << "x" << s.processed_height()
+                << " (binned " << s.binning() << "x" << s.binning()
+                << ": pipeline.max_width_px; boxes are in these pixels)";
+    }
+    std::cout << "\n";
+  }
   std::cout << std::setprecision(2) << "timings      ";
   for (int i = 0; i < s.timings_size(); ++i) {
     std::cout << (i ? ", " : "") << s.timings(i).stage() << " " << s.timings(i).ms() << " ms";

@@ -291,6 +291,7 @@ void MergeMount(const v1::MountConfig& p, geo::MountOptions& o) {
 v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
   v1::PipelineConfig p;
   p.set_algorithm(ToProto(c.algorithm));
+  p.set_max_width_px(c.max_width_px);
 
   v1::MatcherConfig* m = p.mutable_matcher();
   m->set_kind(c.matcher.kind == MatcherKind::kBlockMatching ? v1::MATCHER_KIND_BLOCK_MATCHING
@@ -355,6 +356,7 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
     default:
       problems.push_back("algorithm: unknown value " + std::to_string(u.algorithm()));
   }
+  STEVI_MERGE(u, max_width_px, c.max_width_px);
 
   const v1::MatcherConfig& m = u.matcher();
   switch (m.kind()) {
@@ -513,7 +515,12 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
   f.set_source_index(result.source_index);
   f.set_pair_skew_ns(result.pair_skew_ns);
   f.set_algorithm(ToProto(result.algorithm));
-  if (result.rig) f.set_calibration_id(result.rig->calibration_id());
+  if (result.rig) {
+    f.set_calibration_id(result.rig->calibration_id());
+    f.set_image_width(result.rig->image_size().width);
+    f.set_image_height(result.rig->image_size().height);
+  }
+  f.set_binning(result.binning);
   ToProto(result.timings, f.mutable_timings());
   for (size_t i = 0; i < result.tracks.size(); ++i) {
     const tracking::Track& track = result.tracks[i];
@@ -579,6 +586,7 @@ Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result, bo
   s.set_capture_time_ns(result.capture_time_ns);
   s.set_width(result.disparity.fixed.cols);
   s.set_height(result.disparity.fixed.rows);
+  s.set_binning(result.binning);
   s.set_disparity_scale(stereo::DisparityMap::kScale);
   s.set_min_disparity(result.disparity.min_disparity);
   s.set_num_disparities(result.disparity.num_disparities);

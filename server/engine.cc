@@ -331,6 +331,11 @@ EngineStatus Engine::Status() const {
   s.uptime_s = std::chrono::duration<double>(Clock::now() - started_).count();
   std::lock_guard lock(mu_);
   s.calibration_id = rig_ ? rig_->calibration_id() : "";
+  if (rig_) s.image_size = rig_->image_size();
+  if (latest_ && latest_->rig) {
+    s.processed_size = latest_->rig->image_size();
+    s.binning = latest_->binning;
+  }
   s.source_state = source_state_;
   s.source_error = source_error_;
   s.workers = workers_;

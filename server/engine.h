@@ -41,6 +41,11 @@ struct EngineStatus {
   drivers::SourceCounters pairing;  // the source's pairing and reconnection counters
   size_t workers = 0;               // pipeline workers (frames processed at once); 0 before Start
   int opencv_threads = 0;           // threads an OpenCV call may use
+  cv::Size image_size;              // the camera's images (the active rig's); empty without one
+  // The images the last frame was processed at, and their binning (PipelineConfig::max_width_px);
+  // empty and 0 before the first frame.
+  cv::Size processed_size;
+  int binning = 0;
 };
 
 // Thread-safe. Start() launches the threads; Stop() (also run by the destructor) joins them.

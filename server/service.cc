@@ -192,6 +192,11 @@ grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadca
   response->set_uptime_s(s.uptime_s);
   response->set_pipeline_workers(static_cast<uint32_t>(s.workers));
   response->set_opencv_threads(static_cast<uint32_t>(std::max(0, s.opencv_threads)));
+  response->set_image_width(s.image_size.width);
+  response->set_image_height(s.image_size.height);
+  response->set_processed_width(s.processed_size.width);
+  response->set_processed_height(s.processed_size.height);
+  response->set_binning(s.binning);
   v1::PairingStatus* pairing = response->mutable_pairing();
   pairing->set_pairs(s.pairing.pairs);
   pairing->set_unpaired_dropped(s.pairing.unpaired_dropped);

@@ -197,6 +197,29 @@ StereoRig StereoRig::Ideal(cv::Size image_size, double f_px, double baseline_m, 
   return rig;
 }
 
+StereoRig StereoRig::Binned(int factor) const {
+  const double k = factor;
+  const double shift = (k - 1) / 2;
+  return Ideal(cv::Size(image_size_.width / factor, image_size_.height / factor), f_px_ / k,
+               baseline_m_, (cx_ - shift) / k, (cy_ - shift) / k, calibration_id_);
+}
+
+int BinningFactor(int width, int max_width) {
+  if (max_width <= 0 || width <= max_width) return 1;
+  return (width + max_width - 1) / max_width;
+}
+
+void BinImage(const cv::Mat& in, int factor, cv::Mat& out) {
+  if (factor <= 1) {
+    in.copyTo(out);
+    return;
+  }
+  const cv::Size binned(in.cols / factor, in.rows / factor);
+  // Whole blocks only, so that cv::resize averages exactly factor x factor pixels per output pixel.
+  const cv::Mat whole = in(cv::Rect(0, 0, binned.width * factor, binned.height * factor));
+  cv::resize(whole, out, binned, 0, 0, cv::INTER_AREA);
+}
+
 Status StereoRig::Rectify(const cv::Mat& raw_left, const cv::Mat& raw_right, cv::Mat& rect_left,
                           cv::Mat& rect_right) const {
   if (Status s = CheckImage(raw_left, "left image", image_size_); !s) return s;

@@ -32,6 +32,12 @@ class StereoRig {
   static StereoRig Ideal(cv::Size image_size, double f_px, double baseline_m, double cx, double cy,
                          std::string calibration_id = "ideal");
 
+  // The rig of this rig's rectified images binned by `factor` (BinImage): an ideal rectified rig
+  // of image_size() / factor (rounded down), focal length f / factor, principal point moved to
+  // the binned grid ((c - (factor - 1) / 2) / factor), the same baseline and calibration id.
+  // factor >= 1; 1 gives an ideal copy of the rectified geometry.
+  StereoRig Binned(int factor) const;
+
   // Rectified focal length (pixels), baseline (metres, > 0), principal point (pixels).
   double f_px() const { return f_px_; }
   double baseline_m() const { return baseline_m_; }
@@ -64,5 +70,16 @@ class StereoRig {
   cv::Matx44d Q_ = cv::Matx44d::eye();
   std::shared_ptr<const Maps> maps_;
 };
+
+// The smallest whole binning factor that brings `width` to at most `max_width` pixels (1 when
+// max_width <= 0: never bin).
+int BinningFactor(int width, int max_width);
+
+// Averages each factor x factor block of the 8-bit grey image `in` into one pixel of `out`
+// (rounded to nearest): out is in.cols / factor by in.rows / factor; the last columns and rows that
+// do not fill a block are dropped. Pixel (j, i) of out covers in's pixels factor*j ..
+// factor*j + factor - 1, so its centre lies at factor*j + (factor - 1) / 2 of in. factor 1 copies.
+// `out` is reused when it already has the size and type.
+void BinImage(const cv::Mat& in, int factor, cv::Mat& out);
 
 }  // namespace stevi::geometry

@@ -53,6 +53,10 @@ std::vector<std::string> PipelineConfig::Validate() const {
     default:
       problems.push_back("algorithm: unknown value " + std::to_string(static_cast<int>(algorithm)));
   }
+  if (max_width_px != 0 && (max_width_px < 64 || max_width_px > 16384)) {
+    problems.push_back("max_width_px: must be 0 (never bin) or in 64..16384, got " +
+                       std::to_string(max_width_px));
+  }
   AppendPrefixed(problems, "matcher.", matcher.Validate());
   AppendPrefixed(problems, "range.", range.Validate());
   AppendPrefixed(problems, "canonical.", canonical.Validate());

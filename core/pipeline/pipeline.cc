@@ -52,6 +52,12 @@ struct FrontEnd::State {
   // Rectified right image: only read during Prepare(), so its buffer is reused frame to frame.
   // (The rectified left image is published in the FrameResult and gets a fresh buffer.)
   cv::Mat rect_right;
+  // Binning (PipelineConfig::max_width_px): the binned right image, and the binned rig of the
+  // snapshot rig `binned_from` by `binned_factor` (rebuilt when either changes).
+  cv::Mat binned_right;
+  std::shared_ptr<const geometry::StereoRig> binned_from;
+  int binned_factor = 1;
+  std::shared_ptr<const geometry::StereoRig> binned_rig;
 };
 
 FrontEnd::FrontEnd() : state_(std::make_unique<State>()) {}
@@ -126,6 +132,23 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
     if (!status.ok()) return status.error();
     rect_right = state_->rect_right;
   }
+  // Binning: from here on the frame is the binned one, with its own rig.
+  const int factor = geometry::BinningFactor(want.width, config.max_width_px);
+  if (factor > 1) {
+    if (state_->binned_from != snapshot.rig || state_->binned_factor != factor) {
+      state_->binned_rig = std::make_shared<const geometry::StereoRig>(rig.Binned(factor));
+      state_->binned_from = snapshot.rig;
+      state_->binned_factor = factor;
+    }
+    cv::Mat binned_left;
+    geometry::BinImage(rect_left, factor, binned_left);
+    rect_left = std::move(binned_left);
+    geometry::BinImage(rect_right, factor, state_->binned_right);
+    rect_right = state_->binned_right;
+    result.rig = state_->binned_rig;
+    result.binning = factor;
+  }
+  const geometry::StereoRig& work_rig = *result.rig;
   result.timings.push_back({"rectify", MsSince(t)});
 
   // Stage: disparity.
@@ -148,15 +171,17 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
   switch (config.algorithm) {
     case Algorithm::kCanonical:
       result.detections =
-          detection::DetectCanonical(result.disparity, rig, config.range, config.canonical);
+          detection::DetectCanonical(result.disparity, work_rig, config.range, config.canonical);
       break;
     case Algorithm::kSteViE:
       result.detections =
-          detection::DetectSteViE(rect_left, result.disparity, rig, config.range, config.stevie);
+          detection::DetectSteViE(rect_left, result.disparity, work_rig, config.range,
+                                  config.stevie);
       break;
     case Algorithm::kSteViS:
       result.detections =
-          detection::DetectSteViS(rect_left, result.disparity, rig, config.range, config.stevis);
+          detection::DetectSteViS(rect_left, result.disparity, work_rig, config.range,
+                                  config.stevis);
       break;
   }
   result.timings.push_back({"extract", MsSince(t)});
@@ -170,8 +195,9 @@ Result<FrameResult> Pipeline::Finish(PreparedFrame prepared, const Snapshot& sna
   if (snapshot.config == nullptr) return Invalid("snapshot.config: is null");
   if (snapshot.rig == nullptr) return Invalid("snapshot.rig: is null (no calibration)");
   const PipelineConfig& config = *snapshot.config;
-  const geometry::StereoRig& rig = *snapshot.rig;
   FrameResult result = std::move(prepared.result);
+  // The rig the frame was processed with: the binned one when the frame was binned.
+  const geometry::StereoRig& rig = result.rig ? *result.rig : *snapshot.rig;
 
   // Stage: track.
   Clock::time_point t = Clock::now();

@@ -44,10 +44,14 @@ struct FrameResult {
   // (absent when the pose was not found or the track could not be georeferenced).
   std::optional<geo::PoseLookup> pose;
   std::vector<std::optional<geo::GeoPoint>> track_geo;
+  // The disparity, the rectified left image, the detections' boxes and the tracks' boxes are all
+  // in the images the frame was processed at: binned (PipelineConfig::max_width_px) when the
+  // camera is wider than that, and `rig` is then the binned rig (StereoRig::Binned).
   stereo::DisparityMap disparity;
   cv::Mat rectified_left;         // 8-bit grey
   std::vector<StageTiming> timings;
   std::shared_ptr<const geometry::StereoRig> rig;  // the rig the frame was processed with
+  int binning = 1;  // the binning factor of the processed images (1 = the camera's own)
 };
 
 // What one frame is processed with: an immutable config and rig.

@@ -1,6 +1,7 @@
 // The flags the evaluation tools (stevi-eval, stevi-eval-tracking) share.
 #pragma once
 
+#include <cstdio>
 #include <exception>
 #include <optional>
 #include <string>
@@ -12,19 +13,26 @@ struct EvalFlags {
   std::string scenario;        // --scenario NAME (empty = all)
   std::string algorithm;       // --algorithm NAME (empty = all)
   bool trace = false;          // --trace (only where allow_trace)
+  // --size WxH: render every scenario at this size instead of its own, with the focal length scaled
+  // by the width so the horizontal field of view stays (0 x 0 = each scenario's own size).
+  int width = 0, height = 0;
+  // --max-width N: PipelineConfig::max_width_px (frames wider are binned; 0 = never). Unset: the
+  // default.
+  std::optional<int> max_width_px;
 };
 
 // Parses argv into `flags`; returns the problem ("--frames: expected ...", "unknown flag --x")
 // when there is one.
 inline std::optional<std::string> ParseEvalFlags(int argc, char** argv, bool allow_trace,
-                                                 EvalFlags& flags) {
+                                                 bool allow_size, EvalFlags& flags) {
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (allow_trace && flag == "--trace") {
       flags.trace = true;
       continue;
     }
-    if (flag != "--frames" && flag != "--scenario" && flag != "--algorithm") {
+    if (flag != "--frames" && flag != "--scenario" && flag != "--algorithm" &&
+        ((flag != "--size" && flag != "--max-width") || !allow_size)) {
       return "unknown flag " + flag;
     }
     if (i + 1 >= argc) return flag + " needs a value";
@@ -39,6 +47,27 @@ inline std::optional<std::string> ParseEvalFlags(int argc, char** argv, bool all
       if (used != value.size() || flags.max_frames < 1) {
         return "--frames: expected a whole number >= 1, got '" + value + "'";
       }
+    } else if (flag == "--size") {
+      int w = 0, h = 0;
+      char end = 0;
+      if (std::sscanf(value.c_str(), "%dx%d%c", &w, &h, &end) != 2 || w < 64 || h < 64 ||
+          w > 4096 || h > 4096) {
+        return "--size: expected WxH with each side in 64..4096, got '" + value + "'";
+      }
+      flags.width = w;
+      flags.height = h;
+    } else if (flag == "--max-width") {
+      size_t used = 0;
+      int max_width = -1;
+      try {
+        max_width = std::stoi(value, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used != value.size() || max_width < 0) {
+        return "--max-width: expected a whole number >= 0, got '" + value + "'";
+      }
+      flags.max_width_px = max_width;
     } else if (flag == "--scenario") {
       flags.scenario = value;
     } else {

@@ -6,8 +6,13 @@
 // (the smallest scenario aircraft shows about 160: the rule drops to 100 px there, see kMinVisible)
 // and its truth disparity is at least 8 px. Unmatched detections count against precision.
 //
-// Usage: stevi-eval [--frames N] [--scenario NAME] [--algorithm NAME]
+// Usage: stevi-eval [--frames N] [--scenario NAME] [--algorithm NAME] [--size WxH]
 //   --frames caps the frames per scenario (default: each scenario's own length; the demo scene 200)
+//   --size renders the scenarios at WxH with the focal length scaled by W / (the scenario's width),
+//   so the horizontal field of view stays; the expectation rule scales with it (visible pixels by
+//   the square of the scale, disparity by the scale), so the same obstacles are expected.
+//   --max-width sets PipelineConfig::max_width_px (frames wider are binned; 0 = never bin), to
+//   compare binned and unbinned at --size.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -52,13 +57,19 @@ struct Totals {
   double precision() const { return detections ? 100.0 * matched / detections : 100.0; }
 };
 
+// `scale`: the rendering's focal length over the scenario's own (1 at the scenario's size);
+// `camera_width`: the rendering's width.
 void Evaluate(const pipeline::FrameResult& result, const drivers::FrameTruth& truth, double fB,
-              Totals& totals) {
+              double scale, int camera_width, Totals& totals) {
   std::vector<cv::Rect> boxes, truth_boxes;
   std::vector<const drivers::ObstacleTruth*> expected;
-  for (const detection::Detection& d : result.detections) boxes.push_back(d.bbox);
+  // Boxes in the camera's pixels (the pipeline bins frames wider than max_width_px).
+  const int bin = camera_width / result.rig->image_size().width;
+  for (const detection::Detection& d : result.detections) {
+    boxes.emplace_back(d.bbox.x * bin, d.bbox.y * bin, d.bbox.width * bin, d.bbox.height * bin);
+  }
   for (const drivers::ObstacleTruth& o : truth.obstacles) {
-    if (o.visible_px < kMinVisible || fB / o.depth_m < 8.0) continue;
+    if (o.visible_px < kMinVisible * scale * scale || fB / o.depth_m < 8.0 * scale) continue;
     expected.push_back(&o);
     truth_boxes.push_back(o.bbox);
   }
@@ -113,11 +124,12 @@ int main(int argc, char** argv) {
   std::string only_scenario, only_algorithm;
   const auto usage = [](const std::string& problem) {
     std::fprintf(stderr, "stevi-eval: %s\nusage: stevi-eval [--frames N] [--scenario NAME] "
-                 "[--algorithm canonical|stevie|stevis|stevis-graph]\n", problem.c_str());
+                 "[--algorithm canonical|stevie|stevis|stevis-graph] [--size WxH] [--max-width N]\n",
+                 problem.c_str());
     return 2;
   };
   bench::EvalFlags flags;
-  if (std::optional<std::string> problem = bench::ParseEvalFlags(argc, argv, false, flags)) {
+  if (std::optional<std::string> problem = bench::ParseEvalFlags(argc, argv, false, true, flags)) {
     return usage(*problem);
   }
   max_frames = flags.max_frames;
@@ -145,15 +157,31 @@ int main(int argc, char** argv) {
   }
 
   std::printf("rule: IoU >= 0.3 one-to-one; expected = visible >= %d px and disparity >= 8 px; "
-              "matcher BM (default)\n\n", kMinVisible);
+              "matcher BM (default)\n", kMinVisible);
+  if (flags.width > 0) {
+    std::printf("size: %dx%d, focal length scaled by width / 640 (the rule's pixels with it)\n",
+                flags.width, flags.height);
+  }
+  const int max_width_px = flags.max_width_px.value_or(pipeline::PipelineConfig{}.max_width_px);
+  std::printf("max_width_px: %d (frames wider are binned%s)\n", max_width_px,
+              max_width_px == 0 ? "; 0 = never" : "");
+  std::printf("\n");
   std::printf("%-16s %-13s %7s %9s %7s %10s %9s %9s %9s\n", "scenario", "algorithm", "frames",
               "expected", "recall", "precision", "depth rms", "depth max", "extract");
   std::map<std::string, Totals> overall;
   for (const drivers::Scenario& scenario : scenarios) {
     if (!only_scenario.empty() && scenario.name != only_scenario) continue;
-    drivers::SyntheticRenderer renderer(scenario.options);
+    drivers::SyntheticOptions options = scenario.options;
+    double scale = 1.0;
+    if (flags.width > 0) {
+      scale = static_cast<double>(flags.width) / options.width;
+      options.width = flags.width;
+      options.height = flags.height;
+      options.f_px *= scale;
+    }
+    drivers::SyntheticRenderer renderer(options);
     const auto rig = std::make_shared<const geometry::StereoRig>(renderer.Rig());
-    const double fB = scenario.options.f_px * scenario.options.baseline_m;
+    const double fB = options.f_px * options.baseline_m;
     const int frames = max_frames > 0 ? std::min(max_frames, scenario.frames) : scenario.frames;
     std::vector<StereoFrame> rendered;
     std::vector<drivers::FrameTruth> truths(frames);
@@ -161,8 +189,10 @@ int main(int argc, char** argv) {
     for (const Variant& variant : variants) {
       if (!only_algorithm.empty() && variant.name != only_algorithm) continue;
       pipeline::Pipeline pipe;
-      const pipeline::Snapshot snapshot{
-          std::make_shared<const pipeline::PipelineConfig>(variant.config), rig};
+      pipeline::PipelineConfig config = variant.config;
+      config.max_width_px = max_width_px;
+      const pipeline::Snapshot snapshot{std::make_shared<const pipeline::PipelineConfig>(config),
+                                        rig};
       Totals totals;
       for (int k = 0; k < frames; ++k) {
         Result<pipeline::FrameResult> result = pipe.Process(rendered[k], snapshot);
@@ -171,7 +201,7 @@ int main(int argc, char** argv) {
                        result.error().message.c_str());
           return 1;
         }
-        Evaluate(*result, truths[k], fB, totals);
+        Evaluate(*result, truths[k], fB, scale, options.width, totals);
       }
       std::vector<double> all;
       for (const Band& b : totals.bands) all.insert(all.end(), b.errors_pct.begin(), b.errors_pct.end());

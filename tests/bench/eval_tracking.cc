@@ -165,7 +165,7 @@ int main(int argc, char** argv) {
     return 2;
   };
   bench::EvalFlags flags;
-  if (std::optional<std::string> problem = bench::ParseEvalFlags(argc, argv, true, flags)) {
+  if (std::optional<std::string> problem = bench::ParseEvalFlags(argc, argv, true, false, flags)) {
     return usage(*problem);
   }
   max_frames = flags.max_frames;

@@ -78,6 +78,9 @@ pipeline::PipelineConfig ConfigFor(int64_t alg, int64_t matcher, int num_dispari
       matcher == 0 ? stereo::MatcherKind::kBlockMatching : stereo::MatcherKind::kSemiGlobal;
   config.matcher.block_matching.num_disparities = num_disparities;
   config.matcher.semi_global.num_disparities = num_disparities;
+  // Every size at its own resolution: these cases measure what the pixels cost (the server's
+  // default, max_width_px 800, would bin 1280x1024 to 640x512).
+  config.max_width_px = 0;
   return config;
 }
 

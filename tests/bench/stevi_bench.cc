@@ -59,6 +59,7 @@
 #include "core/extraction/saliency.h"
 #include "core/extraction/segmentation.h"
 #include "core/geometry/calibration_io.h"
+#include "core/geometry/stereo_rig.h"
 #include "core/pipeline/pipeline.h"
 #include "core/stereo/matcher.h"
 #include "core/tracking/tracker.h"
@@ -338,9 +339,11 @@ const char* MatcherName(stereo::MatcherKind kind) {
   return kind == stereo::MatcherKind::kBlockMatching ? "bm" : "sgbm";
 }
 
+// max_width_px: PipelineConfig::max_width_px (0: each size at its own resolution).
 pipeline::PipelineConfig ConfigFor(const Variant& variant, stereo::MatcherKind kind,
-                                   int disparities) {
+                                   int disparities, int max_width_px = 0) {
   pipeline::PipelineConfig config;
+  config.max_width_px = max_width_px;
   config.algorithm = variant.algorithm;
   config.stevis.segmentation = variant.segmentation;
   config.matcher.kind = kind;
@@ -394,6 +397,7 @@ struct OfflineRun {
   stereo::MatcherKind matcher = stereo::MatcherKind::kBlockMatching;
   cv::Size size;
   int disparities = 64;
+  int max_width_px = 0;  // PipelineConfig::max_width_px: 0 = unbinned
   int frames = 0;
   Stats render;  // the synthetic renderer, outside the pipeline
   double detections_per_frame = 0;
@@ -409,18 +413,25 @@ struct OfflineRun {
   }
 };
 
+// The size column of a run: "1280x1024", or "1280x1024/2" when the pipeline bins it by 2.
+std::string RunSizeName(cv::Size size, int max_width_px) {
+  const int factor = geometry::BinningFactor(size.width, max_width_px);
+  return bench::SizeName(size) + (factor > 1 ? "/" + std::to_string(factor) : "");
+}
+
 OfflineRun MeasureOffline(const Variant& variant, stereo::MatcherKind kind, cv::Size size,
-                          int disparities, double seconds) {
+                          int disparities, double seconds, int max_width_px = 0) {
   OfflineRun run;
   run.variant = variant.name;
   run.matcher = kind;
   run.size = size;
   run.disparities = disparities;
+  run.max_width_px = max_width_px;
   std::fprintf(stderr, "  stages: %s + %s, %s, %d disparities\n", variant.name.c_str(),
-               MatcherName(kind), bench::SizeName(size).c_str(), disparities);
+               MatcherName(kind), RunSizeName(size, max_width_px).c_str(), disparities);
 
   const drivers::SyntheticRenderer renderer(bench::SyntheticAt(size));
-  const pipeline::PipelineConfig config = ConfigFor(variant, kind, disparities);
+  const pipeline::PipelineConfig config = ConfigFor(variant, kind, disparities, max_width_px);
   const std::vector<std::string> problems = config.Validate();
   if (!problems.empty()) {
     run.error = "invalid config: " + problems.front();
@@ -479,6 +490,8 @@ Json OfflineJson(const OfflineRun& run) {
       .Set("width", run.size.width)
       .Set("height", run.size.height)
       .Set("disparities", run.disparities)
+      .Set("max_width_px", run.max_width_px)
+      .Set("binning", geometry::BinningFactor(run.size.width, run.max_width_px))
       .Set("frames", run.frames)
       .Set("detections_per_frame", run.detections_per_frame)
       .Set("tracks_per_frame", run.tracks_per_frame)
@@ -1235,6 +1248,12 @@ int main(int argc, char** argv) {
       }
     }
   }
+  // 1280x1024 as the server runs it by default: binned by 2 (max_width_px 800).
+  const int default_max_width = pipeline::PipelineConfig{}.max_width_px;
+  for (const Variant& variant : Variants()) {
+    offline.push_back(MeasureOffline(variant, stereo::MatcherKind::kBlockMatching, {1280, 1024}, 64,
+                                     flags.seconds, default_max_width));
+  }
   std::vector<OfflineRun> disparity_runs;
   for (stereo::MatcherKind kind : matchers) {
     for (int d : disparity_counts) {
@@ -1243,10 +1262,11 @@ int main(int argc, char** argv) {
     }
   }
   const auto find_offline = [&](const std::string& variant, stereo::MatcherKind kind, cv::Size size,
-                                int d) -> const OfflineRun* {
+                                int d, int max_width_px = 0) -> const OfflineRun* {
     for (const std::vector<OfflineRun>* runs : {&offline, &disparity_runs}) {
       for (const OfflineRun& run : *runs) {
-        if (run.variant == variant && run.matcher == kind && run.size == size && run.disparities == d) {
+        if (run.variant == variant && run.matcher == kind && run.size == size &&
+            run.disparities == d && run.max_width_px == max_width_px) {
           return &run;
         }
       }
@@ -1363,17 +1383,19 @@ int main(int argc, char** argv) {
 
   std::fprintf(table, "\n1. Stages (ms, mean; total also p99), synthetic demo scene, 64 disparities, "
                       "rectified input (rectify = copy)\n");
-  std::fprintf(table, "%-10s %-13s %-5s %7s %8s %8s %7s %7s %8s %8s %6s %6s %7s\n", "size", "algorithm",
+  std::fprintf(table, "%-11s %-13s %-5s %7s %8s %8s %7s %7s %8s %8s %6s %6s %7s\n", "size", "algorithm",
                "match", "rectify", "disparity", "extract", "track", "total", "p50", "p99", "frames",
                "dets", "render");
   for (const OfflineRun& run : offline) {
     if (!run.error.empty()) {
-      std::fprintf(table, "%-10s %-13s %-5s error: %s\n", bench::SizeName(run.size).c_str(),
+      std::fprintf(table, "%-11s %-13s %-5s error: %s\n",
+                   RunSizeName(run.size, run.max_width_px).c_str(),
                    run.variant.c_str(), MatcherName(run.matcher), run.error.c_str());
       continue;
     }
-    std::fprintf(table, "%-10s %-13s %-5s %7s %8s %8s %7s %7s %8s %8s %6d %6.1f %7s\n",
-                 bench::SizeName(run.size).c_str(), run.variant.c_str(), MatcherName(run.matcher),
+    std::fprintf(table, "%-11s %-13s %-5s %7s %8s %8s %7s %7s %8s %8s %6d %6.1f %7s\n",
+                 RunSizeName(run.size, run.max_width_px).c_str(), run.variant.c_str(),
+                 MatcherName(run.matcher),
                  Ms(run.Stage("rectify").mean).c_str(), Ms(run.Stage("disparity").mean).c_str(),
                  Ms(run.Stage("extract").mean).c_str(), Ms(run.Stage("track").mean, "%.3f").c_str(),
                  Ms(run.Stage("total").mean).c_str(), Ms(run.Stage("total").p50).c_str(),
@@ -1381,15 +1403,21 @@ int main(int argc, char** argv) {
                  Ms(run.render.mean).c_str());
   }
 
-  std::fprintf(table, "\n2a. Cost against resolution (total ms, mean; 1280x1024 has 4.27x the pixels)\n");
-  std::fprintf(table, "%-13s %-5s %9s %10s %7s\n", "algorithm", "match", "640x480", "1280x1024", "ratio");
+  std::fprintf(table, "\n2a. Cost against resolution (total ms, mean; 1280x1024 has 4.27x the pixels;"
+                      " /2 = binned to 640x512, the default)\n");
+  std::fprintf(table, "%-13s %-5s %9s %10s %7s %12s %7s\n", "algorithm", "match", "640x480",
+               "1280x1024", "ratio", "1280x1024/2", "ratio");
   for (const Variant& variant : Variants()) {
     for (stereo::MatcherKind kind : matchers) {
       const OfflineRun* lo = find_offline(variant.name, kind, {640, 480}, 64);
       const OfflineRun* hi = find_offline(variant.name, kind, {1280, 1024}, 64);
+      const OfflineRun* binned =
+          find_offline(variant.name, kind, {1280, 1024}, 64, default_max_width);
       const double a = lo ? lo->Stage("total").mean : kNaN, c = hi ? hi->Stage("total").mean : kNaN;
-      std::fprintf(table, "%-13s %-5s %9s %10s %7s\n", variant.name.c_str(), MatcherName(kind),
-                   Ms(a).c_str(), Ms(c).c_str(), Ms(c / a, "%.2fx").c_str());
+      const double b = binned ? binned->Stage("total").mean : kNaN;
+      std::fprintf(table, "%-13s %-5s %9s %10s %7s %12s %7s\n", variant.name.c_str(),
+                   MatcherName(kind), Ms(a).c_str(), Ms(c).c_str(), Ms(c / a, "%.2fx").c_str(),
+                   Ms(b).c_str(), Ms(b / a, "%.2fx").c_str());
     }
   }
   std::fprintf(table, "\n2b. Cost against the disparity count (SteViE, 640x480; ms, mean)\n");

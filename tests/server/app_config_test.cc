@@ -74,12 +74,15 @@ TEST(BuildPipelineConfig, NamesEveryBadField) {
   config.mutable_matcher()->mutable_block_matching()->set_num_disparities(50);
   config.mutable_canonical()->set_threshold_range_m(-1);
   config.mutable_range()->set_min_disparity_px(0);
+  config.set_max_width_px(-640);
   Result<pipeline::PipelineConfig> built = BuildPipelineConfig(config);
   ASSERT_FALSE(built.ok());
   EXPECT_THAT(built.error().message,
               AllOf(HasSubstr("pipeline.matcher.block_matching.num_disparities"),
                     HasSubstr("pipeline.canonical.threshold_range_m"),
-                    HasSubstr("pipeline.range.min_disparity_px")));
+                    HasSubstr("pipeline.range.min_disparity_px"),
+                    HasSubstr("pipeline.max_width_px: must be 0 (never bin) or in 64..16384, "
+                              "got -640")));
 }
 
 TEST(BuildPipelineConfig, ReadsStevieAndStevisFromTextFormat) {

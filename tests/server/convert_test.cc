@@ -47,6 +47,7 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryField) {
   original.range.max_range_m = 250;
   original.canonical.threshold_range_m = 42;
   original.canonical.open_size_px = 5;
+  original.max_width_px = 0;
 
   pipeline::PipelineConfig copy;  // defaults, then everything from the proto
   EXPECT_THAT(MergeFromProto(ToProto(original), copy), ::testing::IsEmpty());
@@ -54,6 +55,7 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryField) {
   EXPECT_EQ(copy.matcher.kind, stereo::MatcherKind::kSemiGlobal);
   EXPECT_EQ(copy.matcher.semi_global.mode, stereo::SemiGlobalOptions::Mode::kHH4);
   EXPECT_EQ(copy.canonical.threshold_range_m, 42);
+  EXPECT_EQ(copy.max_width_px, 0);  // set to 0 is not "unset"
 }
 
 TEST(MergeFromProto, UnsetFieldsKeepTheirValues) {
@@ -277,6 +279,26 @@ TEST(ToTrackFrame, CopiesEveryTrackWithItsStateAndKinematics) {
   EXPECT_FALSE(b.has_closest_approach_m());
   ASSERT_EQ(f.timings_size(), 2);
   EXPECT_EQ(f.timings(1).stage(), "total");
+}
+
+// The boxes' image: the processed one, with the camera's binning.
+TEST(ToTrackFrame, NamesTheImageTheBoxesAreIn) {
+  pipeline::FrameResult result;
+  const geometry::StereoRig camera =
+      geometry::StereoRig::Ideal({1280, 1024}, 1400, 0.6, 640, 512, "wide");
+  result.rig = std::make_shared<const geometry::StereoRig>(camera.Binned(2));
+  result.binning = 2;
+  v1::TrackFrame f = ToTrackFrame(result);
+  EXPECT_EQ(f.image_width(), 640);
+  EXPECT_EQ(f.image_height(), 512);
+  EXPECT_EQ(f.binning(), 2);
+  EXPECT_EQ(f.calibration_id(), "wide");
+
+  result.rig = std::make_shared<const geometry::StereoRig>(camera);
+  result.binning = 1;
+  f = ToTrackFrame(result);
+  EXPECT_EQ(f.image_width(), 1280);
+  EXPECT_EQ(f.binning(), 1);
 }
 
 TEST(ToJsonLine, UsesProtoFieldNamesOnOneLine) {

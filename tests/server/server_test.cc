@@ -244,6 +244,69 @@ TEST(ServerWorkers, FramesComeInOrderWhateverTheNumberOfWorkers) {
   cv::setNumThreads(-1);  // OpenCV's default again, for the tests after this one
 }
 
+// A 1280x960 camera is processed binned by 2 (the default max_width_px 800), and every output
+// says so: the frames' image size and binning, the boxes inside it, the snapshot's images and
+// rig, the status. max_width_px 0 set while running processes the full frames from then on; a
+// bad value is refused and changes nothing.
+TEST(ServerBinning, AWideCameraIsBinnedAndEveryOutputSaysSo) {
+  v1::ServerConfig config = TestConfig();
+  config.mutable_source()->mutable_synthetic()->set_width(1280);
+  config.mutable_source()->mutable_synthetic()->set_height(960);
+  config.mutable_source()->mutable_synthetic()->set_f_px(1400);
+  config.mutable_pipeline()->set_algorithm(v1::ALGORITHM_STEVIE);
+  Result<std::unique_ptr<Server>> server = Server::Start(config);
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  client::ClientOptions options;
+  options.address = "127.0.0.1:" + std::to_string((*server)->port());
+  options.timeout = std::chrono::seconds(30);
+  client::Client client(options);
+
+  int boxes = 0;
+  for (const v1::TrackFrame& f : CollectFrames(client, 8)) {
+    EXPECT_EQ(f.image_width(), 640);
+    EXPECT_EQ(f.image_height(), 480);
+    EXPECT_EQ(f.binning(), 2);
+    for (const v1::Track& t : f.tracks()) {
+      if (t.state() == v1::TRACK_STATE_COASTING) continue;
+      EXPECT_LE(t.bbox().x() + t.bbox().width(), 640);
+      EXPECT_LE(t.bbox().y() + t.bbox().height(), 480);
+      ++boxes;
+    }
+  }
+  EXPECT_GT(boxes, 0);
+  v1::GetStatusResponse status;
+  ASSERT_TRUE(client.GetStatus(&status).ok());
+  EXPECT_EQ(status.image_width(), 1280);
+  EXPECT_EQ(status.image_height(), 960);
+  EXPECT_EQ(status.processed_width(), 640);
+  EXPECT_EQ(status.processed_height(), 480);
+  EXPECT_EQ(status.binning(), 2);
+  v1::DisparitySnapshot snapshot;
+  ASSERT_TRUE(client.GetDisparitySnapshot(&snapshot).ok());
+  EXPECT_EQ(snapshot.width(), 640);
+  EXPECT_EQ(snapshot.binning(), 2);
+  EXPECT_DOUBLE_EQ(snapshot.f_px(), 700);
+  EXPECT_DOUBLE_EQ(snapshot.baseline_m(), 0.6);
+
+  v1::PipelineConfig bad, active;
+  bad.set_max_width_px(32);
+  const grpc::Status refused = client.SetPipelineConfig(bad, &active);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(refused.error_message(), HasSubstr("max_width_px"));
+  ASSERT_TRUE(client.GetPipelineConfig(&active).ok());
+  EXPECT_EQ(active.max_width_px(), 800);
+
+  v1::PipelineConfig full;
+  full.set_max_width_px(0);
+  ASSERT_TRUE(client.SetPipelineConfig(full, &active).ok());
+  EXPECT_EQ(active.max_width_px(), 0);
+  // The frames after the change (the first few may have been taken before it).
+  const std::vector<v1::TrackFrame> after = CollectFrames(client, 12);
+  EXPECT_EQ(after.back().image_width(), 1280);
+  EXPECT_EQ(after.back().binning(), 1);
+  (*server)->Shutdown();
+}
+
 // max_streams bounds the concurrent StreamTracks: one more is RESOURCE_EXHAUSTED naming the
 // setting, the open ones go on, and a place freed is taken again.
 TEST(ServerLimits, StreamsBeyondMaxStreamsAreRefusedAndAFreedPlaceIsReused) {

@@ -478,6 +478,69 @@ TEST(StereoRigFromCalibration, RawRigRectifiesPointsToEqualRowsAndTrueDepth) {
   EXPECT_GT(checked, static_cast<int>(points.size()) / 2);
 }
 
+TEST(BinningFactor, IsTheSmallestWholeFactorThatFitsTheWidth) {
+  EXPECT_EQ(BinningFactor(640, 800), 1);
+  EXPECT_EQ(BinningFactor(800, 800), 1);
+  EXPECT_EQ(BinningFactor(801, 800), 2);
+  EXPECT_EQ(BinningFactor(1280, 800), 2);
+  EXPECT_EQ(BinningFactor(1920, 800), 3);
+  EXPECT_EQ(BinningFactor(4096, 800), 6);
+  EXPECT_EQ(BinningFactor(4096, 0), 1);  // 0: never bin
+}
+
+// BinImage against a plain average of each block, rounded to nearest, on noise whose size is not a
+// multiple of the factor (the incomplete last columns and rows are dropped).
+TEST(BinImage, AveragesEachWholeBlockLikeAPlainLoop) {
+  cv::Mat1b in(77, 131);
+  cv::randu(in, 0, 256);
+  for (int factor : {1, 2, 3, 4}) {
+    cv::Mat out;
+    BinImage(in, factor, out);
+    ASSERT_EQ(out.type(), CV_8UC1);
+    ASSERT_EQ(out.size(), cv::Size(131 / factor, 77 / factor)) << "factor " << factor;
+    int worst = 0;
+    for (int y = 0; y < out.rows; ++y) {
+      for (int x = 0; x < out.cols; ++x) {
+        int sum = 0;
+        for (int dy = 0; dy < factor; ++dy) {
+          for (int dx = 0; dx < factor; ++dx) sum += in(y * factor + dy, x * factor + dx);
+        }
+        const int n = factor * factor;
+        const int expected = (2 * sum + n) / (2 * n);  // rounded to nearest, halves up
+        worst = std::max(worst, std::abs(out.at<uchar>(y, x) - expected));
+      }
+    }
+    // OpenCV's area resampling rounds its fixed-point mean: a half may go either way.
+    EXPECT_LE(worst, 1) << "factor " << factor;
+  }
+}
+
+// A point seen by the full rig at (u, v) with disparity d is seen by the rig binned by k at the
+// binned pixel whose centre is there: ((u - (k - 1) / 2) / k, ...) with disparity d / k; the
+// range from the binned rig is the same.
+TEST(StereoRigBinned, ProjectsPointsOntoTheBinnedGrid) {
+  const StereoRig full = StereoRig::Ideal({1280, 1024}, 1400.0, 0.6, 641.3, 509.7, "big");
+  for (int k : {2, 3}) {
+    const StereoRig binned = full.Binned(k);
+    EXPECT_EQ(binned.image_size(), cv::Size(1280 / k, 1024 / k));
+    EXPECT_EQ(binned.calibration_id(), "big");
+    EXPECT_FALSE(binned.needs_remap());
+    EXPECT_DOUBLE_EQ(binned.baseline_m(), 0.6);
+    for (const cv::Vec3d& p : {cv::Vec3d(1.5, -2.0, 12.0), cv::Vec3d(-7.0, 3.0, 45.0)}) {
+      const double u = full.f_px() * p[0] / p[2] + full.cx();
+      const double v = full.f_px() * p[1] / p[2] + full.cy();
+      const double d = full.f_px() * full.baseline_m() / p[2];
+      const double ub = binned.f_px() * p[0] / p[2] + binned.cx();
+      const double vb = binned.f_px() * p[1] / p[2] + binned.cy();
+      EXPECT_NEAR(ub, (u - (k - 1) / 2.0) / k, 1e-9);
+      EXPECT_NEAR(vb, (v - (k - 1) / 2.0) / k, 1e-9);
+      const std::optional<cv::Vec3d> back = PointFromDisparity(ub, vb, d / k, binned.Q());
+      ASSERT_TRUE(back.has_value());
+      EXPECT_LT(cv::norm(*back - p), 1e-9 * p[2]);
+    }
+  }
+}
+
 // Renders Gaussian dots at known raw positions, rectifies the image and finds each dot where the
 // rectification of its raw position predicts.
 TEST(StereoRigRectify, MovesRawDotsToTheirPredictedRectifiedPositions) {

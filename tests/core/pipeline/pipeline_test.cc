@@ -209,6 +209,86 @@ TEST(PipelineProcess, WrongSizeIsInvalidArgument) {
   EXPECT_EQ(result.error().code, ErrorCode::kInvalidArgument);
 }
 
+// A 1280x960 camera with the field of view of the default 640x480 one (f 1400 px): by default
+// (max_width_px 800) the pipeline bins it by 2 and finds the obstacles as well as at 640x480; the
+// boxes, tracks, images and rig it publishes are the binned ones. max_width_px 0 processes the
+// full frames.
+TEST(PipelineProcess, WideFramesAreBinnedAndKeepTheirQuality) {
+  drivers::SyntheticOptions options;
+  options.width = 1280;
+  options.height = 960;
+  options.f_px = 1400;
+  const drivers::SyntheticRenderer renderer(options);
+  const auto rig = std::make_shared<const geometry::StereoRig>(renderer.Rig());
+  const double fb = options.f_px * options.baseline_m;
+
+  struct Score {
+    int expected = 0, matched = 0, detections = 0, depths = 0;
+  };
+  const auto run = [&](int max_width_px, Score& score) {
+    PipelineConfig config;
+    config.algorithm = Algorithm::kSteViE;
+    config.max_width_px = max_width_px;
+    const Snapshot snapshot{std::make_shared<const PipelineConfig>(config), rig};
+    const int k = max_width_px == 0 ? 1 : 2;
+    Pipeline pipeline;
+    for (int64_t index = 0; index < 60; index += 6) {
+      drivers::FrameTruth truth;
+      Result<FrameResult> result = pipeline.Process(renderer.Render(index, &truth), snapshot);
+      ASSERT_TRUE(result.ok()) << result.error().message;
+      const cv::Size processed(1280 / k, 960 / k);
+      EXPECT_EQ(result->binning, k);
+      ASSERT_NE(result->rig, nullptr);
+      EXPECT_EQ(result->rig->image_size(), processed);
+      EXPECT_DOUBLE_EQ(result->rig->f_px(), 1400.0 / k);
+      EXPECT_EQ(result->rig->calibration_id(), rig->calibration_id());
+      EXPECT_EQ(result->rectified_left.size(), processed);
+      EXPECT_EQ(result->disparity.fixed.size(), processed);
+      if (k == 1) {
+        EXPECT_EQ(result->rig, rig);
+      }
+      // The tracks measured this frame carry their detection's box, in the processed pixels.
+      for (const tracking::Track& track : result->tracks) {
+        if (track.state == tracking::TrackState::kCoasting) continue;
+        EXPECT_EQ(track.detection.bbox & cv::Rect(cv::Point(), processed), track.detection.bbox);
+      }
+      // Boxes in the camera's pixels, scored as stevi-eval does at this size.
+      std::vector<cv::Rect> boxes, truth_boxes;
+      std::vector<const drivers::ObstacleTruth*> expected;
+      for (const detection::Detection& d : result->detections) {
+        boxes.emplace_back(d.bbox.x * k, d.bbox.y * k, d.bbox.width * k, d.bbox.height * k);
+      }
+      for (const drivers::ObstacleTruth& o : truth.obstacles) {
+        if (o.visible_px < 400 || fb / o.depth_m < 16.0) continue;
+        expected.push_back(&o);
+        truth_boxes.push_back(o.bbox);
+      }
+      score.expected += static_cast<int>(expected.size());
+      score.detections += static_cast<int>(boxes.size());
+      for (const auto& [d, t] : testing::MatchByIoU(boxes, truth_boxes, 0.3)) {
+        ++score.matched;
+        if (k == 2) {
+          EXPECT_NEAR(result->detections[d].depth_m, expected[t]->depth_m,
+                      0.03 * expected[t]->depth_m)
+              << "frame " << index << " " << expected[t]->name;
+          ++score.depths;
+        }
+      }
+    }
+  };
+  Score binned, full;
+  run(PipelineConfig{}.max_width_px, binned);
+  run(0, full);
+  std::printf("1280x960 SteViE: binned by 2 (default) %d/%d expected found, %d detections; "
+              "unbinned %d/%d found, %d detections\n",
+              binned.matched, binned.expected, binned.detections, full.matched, full.expected,
+              full.detections);
+  ASSERT_GT(binned.expected, 20);
+  EXPECT_GE(binned.matched, 0.9 * binned.expected);     // recall
+  EXPECT_GE(binned.matched, 0.9 * binned.detections);   // precision
+  EXPECT_EQ(binned.depths, binned.matched);
+}
+
 TEST(ConfigStoreSet, RejectsABadConfigNamingEveryFieldAndKeepsTheActiveOne) {
   PipelineConfig initial;
   initial.canonical.threshold_range_m = 55.0;
@@ -219,11 +299,12 @@ TEST(ConfigStoreSet, RejectsABadConfigNamingEveryFieldAndKeepsTheActiveOne) {
   bad.matcher.block_matching.num_disparities = 50;  // not a multiple of 16
   bad.canonical.open_size_px = 2;                   // even
   bad.range.min_disparity_px = -1;
+  bad.max_width_px = 10;                            // neither 0 nor 64..16384
   Result<std::shared_ptr<const PipelineConfig>> set = store.Set(bad);
   ASSERT_FALSE(set.ok());
   EXPECT_EQ(set.error().code, ErrorCode::kInvalidArgument);
   for (const char* field : {"matcher.block_matching.num_disparities", "canonical.open_size_px",
-                            "range.min_disparity_px"}) {
+                            "range.min_disparity_px", "max_width_px"}) {
     EXPECT_NE(set.error().message.find(field), std::string::npos)
         << field << " not in: " << set.error().message;
   }
