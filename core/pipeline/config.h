@@ -32,7 +32,8 @@ struct PipelineConfig {
   // detection, tracking and the published images, boxes and rig are then those of the binned
   // images. The detectors' pixel parameters (areas, kernels, row counts, the disparity range) are
   // tuned for images about 640 pixels across: at 1280x1024 unbinned, SteViE's precision falls from
-  // 98 % to 18 % (stevi-eval --size 1280x1024). 0 = never bin (then retune those parameters).
+  // 98 % to 15 % (stevi-eval --size 1280x1024 --max-width 0). 0 = never bin (then retune those
+  // parameters).
   int max_width_px = 800;
   stereo::MatcherOptions matcher;
   geometry::RangeOptions range;

@@ -36,6 +36,14 @@ v1::ServerConfig TestConfig() {
   return config;
 }
 
+// Options for a client of `server` on loopback.
+client::ClientOptions LoopbackOptions(const Server& server, std::chrono::seconds timeout) {
+  client::ClientOptions options;
+  options.address = "127.0.0.1:" + std::to_string(server.port());
+  options.timeout = timeout;
+  return options;
+}
+
 // The next n frames of a stream (fails the test when the stream fails).
 std::vector<v1::TrackFrame> CollectFrames(client::Client& c, uint64_t n) {
   std::vector<v1::TrackFrame> frames;
@@ -210,9 +218,7 @@ TEST(ServerWorkers, FramesComeInOrderWhateverTheNumberOfWorkers) {
     config.mutable_source()->set_fps(60);
     Result<std::unique_ptr<Server>> server = Server::Start(config);
     ASSERT_TRUE(server.ok()) << server.error().message;
-    client::ClientOptions options;
-    options.address = "127.0.0.1:" + std::to_string((*server)->port());
-    options.timeout = std::chrono::seconds(30);
+    const client::ClientOptions options = LoopbackOptions(**server, std::chrono::seconds(30));
     client::Client client(options);
     std::vector<v1::TrackFrame> frames;
     client::StreamOptions stream;
@@ -256,9 +262,7 @@ TEST(ServerBinning, AWideCameraIsBinnedAndEveryOutputSaysSo) {
   config.mutable_pipeline()->set_algorithm(v1::ALGORITHM_STEVIE);
   Result<std::unique_ptr<Server>> server = Server::Start(config);
   ASSERT_TRUE(server.ok()) << server.error().message;
-  client::ClientOptions options;
-  options.address = "127.0.0.1:" + std::to_string((*server)->port());
-  options.timeout = std::chrono::seconds(30);
+  const client::ClientOptions options = LoopbackOptions(**server, std::chrono::seconds(30));
   client::Client client(options);
 
   int boxes = 0;
@@ -314,9 +318,7 @@ TEST(ServerLimits, StreamsBeyondMaxStreamsAreRefusedAndAFreedPlaceIsReused) {
   config.set_max_streams(2);
   Result<std::unique_ptr<Server>> server = Server::Start(config);
   ASSERT_TRUE(server.ok()) << server.error().message;
-  client::ClientOptions options;
-  options.address = "127.0.0.1:" + std::to_string((*server)->port());
-  options.timeout = std::chrono::seconds(20);
+  const client::ClientOptions options = LoopbackOptions(**server, std::chrono::seconds(20));
   std::vector<std::unique_ptr<client::Client>> holders;
   std::vector<std::thread> threads;
   std::mutex mu;
@@ -467,9 +469,7 @@ TEST(ServerFlight, AStandingTowerKeepsItsPlaceWhileTheRigFlies) {
   config.mutable_source()->mutable_synthetic()->set_scene("flight");
   Result<std::unique_ptr<Server>> server = Server::Start(config);
   ASSERT_TRUE(server.ok()) << server.error().message;
-  client::ClientOptions options;
-  options.address = "127.0.0.1:" + std::to_string((*server)->port());
-  options.timeout = std::chrono::seconds(20);
+  const client::ClientOptions options = LoopbackOptions(**server, std::chrono::seconds(20));
   client::Client client(options);
   const std::vector<v1::TrackFrame> frames = CollectFrames(client, 40);
   ASSERT_EQ(frames.size(), 40u);
@@ -521,9 +521,7 @@ TEST(ServerPublish, PublishedVehicleStatesGeoreferenceTheTracks) {
   config.mutable_geo()->set_max_age_s(30);
   Result<std::unique_ptr<Server>> server = Server::Start(config);
   ASSERT_TRUE(server.ok()) << server.error().message;
-  client::ClientOptions options;
-  options.address = "127.0.0.1:" + std::to_string((*server)->port());
-  options.timeout = std::chrono::seconds(20);
+  const client::ClientOptions options = LoopbackOptions(**server, std::chrono::seconds(20));
   client::Client client(options);
   const int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(
                           std::chrono::system_clock::now().time_since_epoch())
