@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <thread>
 #include <utility>
 
 #include <opencv2/calib3d.hpp>
@@ -298,9 +297,12 @@ std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options) {
     params.speckle_window_size = o.speckle_window_size;
     // Filtered on the fixed-point map: the range in 1/16 pixel.
     params.speckle_range = o.speckle_range * DisparityMap::kScale;
-    // Row stripes on a thread each: a frame's disparities sooner when a core is free (a camera
-    // at 30 fps leaves one), at about the same CPU when every core is busy.
-    params.stripes = static_cast<int>(std::clamp(std::thread::hardware_concurrency(), 1u, 4u));
+    // Row stripes on a thread each, as many as one OpenCV call may use (cv::getNumThreads(), at
+    // most 4), read when the matcher is built. The server sets that to 1 when its workers already
+    // keep every core busy with a frame each: stripes on top of them cost 3-16 % of the throughput
+    // and did not shorten the latency at 30 fps (stevi-bench, interleaved runs). With one worker,
+    // or offline, a frame's matching spreads over the cores (12.2 -> 8.8 ms on two).
+    params.stripes = std::clamp(cv::getNumThreads(), 1, 4);
     return std::make_unique<OpenCvMatcher>(options, std::make_unique<SadBlockMatcher>(params), pad,
                                            o.block_size, gate);
   }
