@@ -265,6 +265,24 @@ int MatcherOptions::min_disparity() const {
                                           : block_matching.min_disparity;
 }
 
+int BlockMatchingLeftPad(const BlockMatchingOptions& o) {
+  return o.pad_left ? o.min_disparity + o.num_disparities + o.block_size / 2 : 0;
+}
+
+SadBlockMatcherParams SadParamsFor(const BlockMatchingOptions& o) {
+  SadBlockMatcherParams params;
+  params.num_disparities = o.num_disparities;
+  params.min_disparity = o.min_disparity;
+  params.block_size = o.block_size;
+  params.prefilter_cap = o.prefilter_cap;
+  params.texture_threshold = o.texture_threshold;
+  params.uniqueness_ratio = o.uniqueness_ratio;
+  params.speckle_window_size = o.speckle_window_size;
+  // Filtered on the fixed-point map: the range in 1/16 pixel.
+  params.speckle_range = o.speckle_range * DisparityMap::kScale;
+  return params;
+}
+
 std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options) {
   CV_Assert(options.Validate().empty());
   if (options.kind == MatcherKind::kSemiGlobal) {
@@ -281,22 +299,12 @@ std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options) {
     return std::make_unique<OpenCvMatcher>(options, std::move(sgbm), pad, o.block_size, gate);
   }
   const BlockMatchingOptions& o = options.block_matching;
-  // StereoBM's first valid column is min + num - 1 + block / 2: pad that far (plus one).
-  const int pad = o.pad_left ? o.min_disparity + o.num_disparities + o.block_size / 2 : 0;
+  const int pad = BlockMatchingLeftPad(o);
   const TextureGate gate{o.local_texture_threshold, kMinTextureWindow};
   if (o.prefilter_type == BlockMatchingOptions::PreFilter::kXSobel) {
     // cv::StereoBM's output, bit for bit (block_matcher_test), in about 0.6 of its time: this
     // Debian OpenCV build runs StereoBM's SIMD code at its SSE2 baseline.
-    SadBlockMatcherParams params;
-    params.num_disparities = o.num_disparities;
-    params.min_disparity = o.min_disparity;
-    params.block_size = o.block_size;
-    params.prefilter_cap = o.prefilter_cap;
-    params.texture_threshold = o.texture_threshold;
-    params.uniqueness_ratio = o.uniqueness_ratio;
-    params.speckle_window_size = o.speckle_window_size;
-    // Filtered on the fixed-point map: the range in 1/16 pixel.
-    params.speckle_range = o.speckle_range * DisparityMap::kScale;
+    SadBlockMatcherParams params = SadParamsFor(o);
     // Row stripes on a thread each, as many as one OpenCV call may use (cv::getNumThreads(), at
     // most 4), read when the matcher is built. The server sets that to 1 when its workers already
     // keep every core busy with a frame each: stripes on top of them cost 3-16 % of the throughput

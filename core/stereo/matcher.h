@@ -8,6 +8,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/stereo/block_matcher.h"
 #include "core/stereo/disparity.h"
 
 namespace stevi::stereo {
@@ -122,5 +123,13 @@ class DisparityMatcher {
 
 // Builds the matcher for valid options (call Validate() first; invalid options are a bug).
 std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options);
+
+// The columns block matching pads on the left when options.pad_left: cv::StereoBM's first valid
+// column is min + num - 1 + block / 2, so that far plus one. 0 without padding.
+int BlockMatchingLeftPad(const BlockMatchingOptions& options);
+
+// What MakeMatcher gives the SAD matcher for these options (x-Sobel pre-filter), stripes aside
+// (1 here; MakeMatcher sets them from the thread count).
+SadBlockMatcherParams SadParamsFor(const BlockMatchingOptions& options);
 
 }  // namespace stevi::stereo

@@ -142,19 +142,11 @@ BENCHMARK(BM_Matcher)
 void BM_BlockMatchingCore(benchmark::State& state) {
   const Scene& scene = SceneAt(0);
   const stereo::BlockMatchingOptions o;
-  const int pad = o.min_disparity + o.num_disparities + o.block_size / 2;
+  const int pad = stereo::BlockMatchingLeftPad(o);
   cv::Mat left, right, out;
   cv::copyMakeBorder(scene.frame.left, left, 0, 0, pad, 0, cv::BORDER_REPLICATE);
   cv::copyMakeBorder(scene.frame.right, right, 0, 0, pad, 0, cv::BORDER_REPLICATE);
-  stereo::SadBlockMatcherParams p;
-  p.num_disparities = o.num_disparities;
-  p.min_disparity = o.min_disparity;
-  p.block_size = o.block_size;
-  p.prefilter_cap = o.prefilter_cap;
-  p.texture_threshold = o.texture_threshold;
-  p.uniqueness_ratio = o.uniqueness_ratio;
-  p.speckle_window_size = o.speckle_window_size;
-  p.speckle_range = o.speckle_range * stereo::DisparityMap::kScale;
+  stereo::SadBlockMatcherParams p = stereo::SadParamsFor(o);
   if (state.range(0) == 0) {
     bench::SingleThreadScope one_thread;
     cv::Ptr<cv::StereoBM> bm = cv::StereoBM::create(p.num_disparities, p.block_size);
