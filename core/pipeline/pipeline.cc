@@ -52,8 +52,10 @@ struct FrontEnd::State {
   // Rectified right image: only read during Prepare(), so its buffer is reused frame to frame.
   // (The rectified left image is published in the FrameResult and gets a fresh buffer.)
   cv::Mat rect_right;
-  // Binning (PipelineConfig::max_width_px): the binned right image, and the binned rig of the
-  // snapshot rig `binned_from` by `binned_factor` (rebuilt when either changes).
+  // Binning (PipelineConfig::max_width_px): the full-size rectified left image (only when it had
+  // to be made), the binned right image, and the binned rig of the snapshot rig `binned_from` by
+  // `binned_factor` (rebuilt when either changes).
+  cv::Mat full_left;
   cv::Mat binned_right;
   std::shared_ptr<const geometry::StereoRig> binned_from;
   int binned_factor = 1;
@@ -110,12 +112,21 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
   result.rig = snapshot.rig;
   result.timings.reserve(6);
 
-  // Stage: rectify. The left output is a fresh buffer (published with the result).
+  // Stage: rectify, then bin (PipelineConfig::max_width_px). The published left image is a fresh
+  // buffer; when binning, the full-size left is only read (the caller's grey image, or a buffer
+  // kept between frames) and the binned one is published.
   Clock::time_point t = Clock::now();
+  const int factor = geometry::BinningFactor(want.width, config.max_width_px);
   cv::Mat rect_left;
+  cv::Mat& full_out = factor > 1 ? state_->full_left : rect_left;
+  cv::Mat full_left;   // never written to from here
   cv::Mat rect_right;  // a view of frame.right or of state_->rect_right; never written to
   if (frame.rectified) {
-    if (!ToGrey(frame.left, rect_left)) {
+    if (factor > 1 && frame.left.type() == CV_8UC1) {
+      full_left = frame.left;  // only read: no copy needed
+    } else if (ToGrey(frame.left, full_out)) {
+      full_left = full_out;
+    } else {
       return Invalid("frame.left: unsupported image type " + cv::typeToString(frame.left.type()) +
                      " (want CV_8UC1 or CV_8UC3)");
     }
@@ -128,21 +139,19 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
                      " (want CV_8UC1 or CV_8UC3)");
     }
   } else {
-    Status status = rig.Rectify(frame.left, frame.right, rect_left, state_->rect_right);
+    Status status = rig.Rectify(frame.left, frame.right, full_out, state_->rect_right);
     if (!status.ok()) return status.error();
+    full_left = full_out;
     rect_right = state_->rect_right;
   }
-  // Binning: from here on the frame is the binned one, with its own rig.
-  const int factor = geometry::BinningFactor(want.width, config.max_width_px);
+  // From here on the frame is the binned one, with its own rig.
   if (factor > 1) {
     if (state_->binned_from != snapshot.rig || state_->binned_factor != factor) {
       state_->binned_rig = std::make_shared<const geometry::StereoRig>(rig.Binned(factor));
       state_->binned_from = snapshot.rig;
       state_->binned_factor = factor;
     }
-    cv::Mat binned_left;
-    geometry::BinImage(rect_left, factor, binned_left);
-    rect_left = std::move(binned_left);
+    geometry::BinImage(full_left, factor, rect_left);
     geometry::BinImage(rect_right, factor, state_->binned_right);
     rect_right = state_->binned_right;
     result.rig = state_->binned_rig;

@@ -232,10 +232,19 @@ TEST(PipelineProcess, WideFramesAreBinnedAndKeepTheirQuality) {
     const Snapshot snapshot{std::make_shared<const PipelineConfig>(config), rig};
     const int k = max_width_px == 0 ? 1 : 2;
     Pipeline pipeline;
+    cv::Mat previous_left;
     for (int64_t index = 0; index < 60; index += 6) {
       drivers::FrameTruth truth;
-      Result<FrameResult> result = pipeline.Process(renderer.Render(index, &truth), snapshot);
+      const StereoFrame frame = renderer.Render(index, &truth);
+      Result<FrameResult> result = pipeline.Process(frame, snapshot);
       ASSERT_TRUE(result.ok()) << result.error().message;
+      // The published left image is the camera's, binned, in a buffer of its own.
+      cv::Mat expected_left;
+      geometry::BinImage(frame.left, k, expected_left);
+      EXPECT_EQ(cv::norm(result->rectified_left, expected_left, cv::NORM_INF), 0.0);
+      EXPECT_NE(result->rectified_left.data, frame.left.data);
+      EXPECT_NE(result->rectified_left.data, previous_left.data);
+      previous_left = result->rectified_left;
       const cv::Size processed(1280 / k, 960 / k);
       EXPECT_EQ(result->binning, k);
       ASSERT_NE(result->rig, nullptr);
