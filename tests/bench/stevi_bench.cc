@@ -17,7 +17,8 @@
 //      StreamTracks clients (client::Client) in a child process: capture-to-receipt latency
 //      (TrackFrame.capture_unix_time_ns against the wall clock at receipt), p50 and p99, the frame
 //      rate sustained and the server's CPU per frame.
-//   7. Targets: PASS or MISS against the figures measured above.
+//   7. Targets: PASS or MISS against the figures measured above (N/A when the measurement failed).
+//      The exit status is 3 unless every target passes, so a script can gate on it.
 //
 // Usage: stevi-bench [--seconds N] [--json FILE|-] [--quick] [--latency-fps F]
 //                    [--latency-algorithm NAME]
@@ -1505,7 +1506,9 @@ int main(int argc, char** argv) {
 
   std::fprintf(table, "\n7. Targets\n");
   std::fprintf(table, "%-22s %-10s %10s  %-4s  %s\n", "target", "rule", "measured", "", "how");
+  bool missed = false;
   for (const Target& t : targets) {
+    missed = missed || t.Verdict() != "PASS";
     std::fprintf(table, "%-22s %-10s %10s  %-4s  %s\n", t.name.c_str(), t.rule.c_str(),
                  (Ms(t.measured, t.unit == "ms" && t.threshold < 1 ? "%.3f" : "%.1f") + " " + t.unit).c_str(),
                  t.Verdict().c_str(), t.note.c_str());
@@ -1571,6 +1574,10 @@ int main(int argc, char** argv) {
         return 1;
       }
     }
+  }
+  if (missed) {
+    std::fprintf(stderr, "stevi-bench: not every target passed (table 7)\n");
+    return 3;
   }
   return 0;
 }
