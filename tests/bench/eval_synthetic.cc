@@ -57,14 +57,13 @@ struct Totals {
   double precision() const { return detections ? 100.0 * matched / detections : 100.0; }
 };
 
-// `scale`: the rendering's focal length over the scenario's own (1 at the scenario's size);
-// `camera_width`: the rendering's width.
+// `scale`: the rendering's focal length over the scenario's own (1 at the scenario's size).
 void Evaluate(const pipeline::FrameResult& result, const drivers::FrameTruth& truth, double fB,
-              double scale, int camera_width, Totals& totals) {
+              double scale, Totals& totals) {
   std::vector<cv::Rect> boxes, truth_boxes;
   std::vector<const drivers::ObstacleTruth*> expected;
   // Boxes in the camera's pixels (the pipeline bins frames wider than max_width_px).
-  const int bin = camera_width / result.rig->image_size().width;
+  const int bin = result.binning;
   for (const detection::Detection& d : result.detections) {
     boxes.emplace_back(d.bbox.x * bin, d.bbox.y * bin, d.bbox.width * bin, d.bbox.height * bin);
   }
@@ -201,7 +200,7 @@ int main(int argc, char** argv) {
                        result.error().message.c_str());
           return 1;
         }
-        Evaluate(*result, truths[k], fB, scale, options.width, totals);
+        Evaluate(*result, truths[k], fB, scale, totals);
       }
       std::vector<double> all;
       for (const Band& b : totals.bands) all.insert(all.end(), b.errors_pct.begin(), b.errors_pct.end());
