@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "core/detection/detection.h"
+#include "core/detection/regions.h"
 #include "core/detection/stereo_blobs.h"
 #include "core/geometry/range.h"
 #include "core/geometry/stereo_rig.h"
@@ -13,9 +14,12 @@
 namespace stevi::detection {
 
 struct CanonicalOptions {
-  // Pixels nearer than this (metres) are obstacle candidates.
-  double threshold_range_m = 80.0;
-  // Morphological opening (square, pixels, odd; 1 disables) to cut thin bridges between blobs.
+  // Pixels nearer than this (metres) are obstacle candidates. 0: as far as the rig ranges to 5 %
+  // (a disparity of 20 times range.disparity_sigma_px; 84 m on the demo rig, 840 m on a
+  // telephoto of f B = 4200 px m).
+  double threshold_range_m = 0.0;
+  // Morphological opening (square, pixels at 640 px wide, odd; 1 disables) to cut thin bridges
+  // between blobs.
   int open_size_px = 3;
   // Blobs, their filters and their range.
   StereoBlobOptions blobs;
@@ -27,6 +31,7 @@ struct CanonicalOptions {
 std::vector<Detection> DetectCanonical(const stereo::DisparityMap& disparity,
                                        const geometry::StereoRig& rig,
                                        const geometry::RangeOptions& range,
-                                       const CanonicalOptions& options);
+                                       const CanonicalOptions& options,
+                                       const FullResolutionPair* full = nullptr);
 
 }  // namespace stevi::detection

@@ -63,12 +63,18 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
       last_x[bin] = x;
       ++matched;
     }
-    const auto best = std::max_element(bins.begin(), bins.end());
-    const int bin = static_cast<int>(best - bins.begin());
-    if (*best >= options.min_row_pixels && *best >= options.min_row_fraction * matched &&
-        last_x[bin] - first_x[bin] >= options.min_row_spread * fixed.cols) {
-      const double mode_px = static_cast<double>(sums[bin]) / *best / stereo::DisparityMap::kScale;
-      if (mode_px >= options.min_mode_px) modes.push_back({static_cast<double>(y), mode_px, *best});
+    // The row's three most common disparities may each be the ground's: an obstacle standing on
+    // the ground can hold more of a row's pixels than the ground does.
+    for (int rank = 0; rank < 3; ++rank) {
+      const auto best = std::max_element(bins.begin(), bins.end());
+      const int bin = static_cast<int>(best - bins.begin());
+      if (*best < options.min_row_pixels) break;
+      if (*best >= options.min_row_fraction * matched / (rank + 1) &&
+          last_x[bin] - first_x[bin] >= options.min_row_spread * fixed.cols) {
+        const double mode_px = static_cast<double>(sums[bin]) / *best / stereo::DisparityMap::kScale;
+        if (mode_px >= options.min_mode_px) modes.push_back({static_cast<double>(y), mode_px, *best});
+      }
+      *best = 0;
     }
   }
   if (static_cast<int>(modes.size()) < options.min_support_rows) return std::nullopt;
@@ -80,9 +86,11 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
   double best_slope = 0, best_horizon = 0, best_score = -1;
   const auto inliers_of = [&](double slope, double horizon, std::vector<const RowMode*>* out) {
     double score = 0;
+    double last_row = -1;
     for (const RowMode& m : modes) {
       if (std::abs(slope * (m.row - horizon) - m.disparity_px) <= options.inlier_px) {
-        score += 1;
+        if (m.row != last_row) score += 1;  // rows count once
+        last_row = m.row;
         if (out) out->push_back(&m);
       }
     }
@@ -106,8 +114,7 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
   }
   if (best_score < 0) return std::nullopt;
   std::vector<const RowMode*> inliers;
-  inliers_of(best_slope, best_horizon, &inliers);
-  if (static_cast<int>(inliers.size()) < options.min_support_rows) return std::nullopt;
+  if (inliers_of(best_slope, best_horizon, &inliers) < options.min_support_rows) return std::nullopt;
   double lo = inliers.front()->disparity_px, hi = lo;
   for (const RowMode* m : inliers) {
     lo = std::min(lo, m->disparity_px);
@@ -134,7 +141,7 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
   model.slope = slope;
   model.horizon_row = -intercept / slope;
   if (model.horizon_row < -fixed.rows || model.horizon_row > 2.0 * fixed.rows) return std::nullopt;
-  model.support_rows = static_cast<int>(inliers.size());
+  model.support_rows = static_cast<int>(best_score);
   return model;
 }
 

@@ -25,7 +25,7 @@ struct GroundOptions {
   double min_row_spread = 0.3;
   // Rows whose mode lies below this disparity (pixels) are far terrain or the horizon, not the
   // ground near enough to matter; they do not vote.
-  double min_mode_px = 2.0;
+  double min_mode_px = 1.0;
   // Rows that must support the fit for a model to be accepted.
   int min_support_rows = 20;
   // A row supports the line when its mode lies within this distance of it (pixels).
@@ -33,7 +33,7 @@ struct GroundOptions {
   // The supporting rows must span at least this much disparity (pixels): a fronto-parallel wall
   // filling many rows at one disparity is not ground, and ground that spans less lies beyond the
   // trusted range anyway.
-  double min_span_px = 3.0;
+  double min_span_px = 1.0;
   // A pixel stands out from the ground when its disparity exceeds the ground's on its row by more
   // than max(margin_px, margin_fraction * ground disparity).
   double margin_px = 1.0;

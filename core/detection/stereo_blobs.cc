@@ -131,6 +131,12 @@ std::vector<std::string> StereoBlobOptions::Validate() const {
   if (!(min_valid_fraction >= 0 && min_valid_fraction <= 1)) {
     problems.push_back("min_valid_fraction: must be in [0, 1]" + Got(min_valid_fraction));
   }
+  if (min_valid_px < 0 || min_valid_px > 100000) {
+    problems.push_back("min_valid_px: must be in 0..100000" + Got(min_valid_px));
+  }
+  if (!(join_gap_fraction >= 0 && join_gap_fraction <= 10)) {
+    problems.push_back("join_gap_fraction: must be in [0, 10]" + Got(join_gap_fraction));
+  }
   if (!(max_disparity_step_px >= 0 && max_disparity_step_px <= 1000)) {
     problems.push_back("max_disparity_step_px: must be in [0, 1000] pixels" +
                        Got(max_disparity_step_px));
@@ -169,7 +175,8 @@ void FillRange(Detection& d, const geometry::StereoRig& rig, const geometry::Ran
                                  (d.centroid_px.y - rig.cy()) * d.depth_m / f, d.depth_m);
   }
   d.range_m = geometry::RangeFromPoint(d.position_cam_m);
-  const double depth_sigma = geometry::DepthSigma(d.depth_m, f, b, range.disparity_sigma_px);
+  const double sigma_px = d.disparity_sigma_px > 0 ? d.disparity_sigma_px : range.disparity_sigma_px;
+  const double depth_sigma = geometry::DepthSigma(d.depth_m, f, b, sigma_px);
   d.range_sigma_m = d.depth_m > 0 ? depth_sigma * d.range_m / d.depth_m : depth_sigma;
 }
 

@@ -22,11 +22,18 @@ struct StereoBlobOptions {
   int min_area_px = 60;
   // Blobs wider than this fraction of the image width (the skyline, the ground) are dropped.
   double max_width_fraction = 0.8;
-  // Blobs whose mask has fewer trusted disparities than this fraction are dropped.
-  double min_valid_fraction = 0.3;
-  // Neighbouring pixels whose disparities differ by more than this (pixels) belong to different
-  // blobs, so that touching obstacles at different ranges separate. 0 joins every neighbour.
+  // Hypotheses whose mask has fewer trusted disparities at their range than this fraction are
+  // dropped. Low: a hypothesis is ranged even when few of its pixels have a disparity (a
+  // low-contrast object matches on its outline only).
+  double min_valid_fraction = 0.02;
+  // ... and fewer than this many.
+  int min_valid_px = 8;
+  // Depth modes: a region's trusted disparities that are separated by an empty gap of more than
+  // this (pixels) are different surfaces, and the region is split between them. 0 never splits.
   double max_disparity_step_px = 1.0;
+  // Pieces at one range join when the gap between their boxes is at most this fraction of the
+  // larger box's largest side (fragments of one low-contrast object). 0 never joins.
+  double join_gap_fraction = 0.5;
   // The blob's disparity is the median over its interior: the mask eroded by this many pixels
   // (0 = the whole mask), unless fewer than 30 interior pixels remain. Block matching spreads an
   // object's disparity a few pixels into its surroundings.

@@ -15,16 +15,19 @@ std::vector<std::string> SteViEOptions::Validate() const {
 std::vector<Detection> DetectSteViE(const cv::Mat1b& left, const stereo::DisparityMap& disparity,
                                     const geometry::StereoRig& rig,
                                     const geometry::RangeOptions& range,
-                                    const SteViEOptions& options) {
+                                    const SteViEOptions& options,
+                                    const FullResolutionPair* full) {
   if (left.empty() || disparity.empty() || left.size() != disparity.fixed.size()) return {};
+  // The morphology's sizes are given for a 640-pixel-wide image.
+  extraction::MorphologyOptions morphology = options.morphology;
+  morphology.close_size = ScaledKernel(morphology.close_size, left.cols);
+  morphology.open_size = ScaledKernel(morphology.open_size, left.cols);
   const cv::Mat1b regions =
-      extraction::CloseFillOpen(extraction::DetectEdges(left, options.edges), options.morphology);
+      extraction::CloseFillOpen(extraction::DetectEdges(left, options.edges), morphology);
   const std::optional<GroundModel> ground =
       options.ground.enabled ? FitGround(disparity, options.ground) : std::nullopt;
-  const cv::Mat1b candidates =
-      StereoCandidates(regions, disparity, rig, range, ground, options.ground);
-  std::vector<Detection> out = RangeBlobs(candidates, disparity, rig, range, options.blobs, "stevie", ground);
-  return out;
+  const cv::Mat1b classes = ClassifyPixels(disparity, rig, range, ground, options.ground);
+  return RangeRegions(regions, classes, disparity, rig, range, options.blobs, "stevie", ground, full);
 }
 
 }  // namespace stevi::detection

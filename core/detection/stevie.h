@@ -10,6 +10,7 @@
 
 #include "core/detection/detection.h"
 #include "core/detection/ground.h"
+#include "core/detection/regions.h"
 #include "core/detection/stereo_blobs.h"
 #include "core/extraction/edges.h"
 #include "core/extraction/morphology.h"
@@ -33,6 +34,7 @@ struct SteViEOptions {
 std::vector<Detection> DetectSteViE(const cv::Mat1b& left, const stereo::DisparityMap& disparity,
                                     const geometry::StereoRig& rig,
                                     const geometry::RangeOptions& range,
-                                    const SteViEOptions& options);
+                                    const SteViEOptions& options,
+                                    const FullResolutionPair* full = nullptr);
 
 }  // namespace stevi::detection

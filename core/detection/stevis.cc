@@ -31,7 +31,10 @@ cv::Mat1b SalientRegions(const cv::Mat1b& left, const SteViSOptions& options) {
   cv::Mat1b mask;
   if (options.segmentation == SteViSOptions::Segmentation::kThreshold) {
     cv::compare(saliency, options.saliency_threshold, mask, cv::CMP_GE);
-    return extraction::CloseFillOpen(mask, options.morphology);
+    extraction::MorphologyOptions morphology = options.morphology;
+    morphology.close_size = ScaledKernel(morphology.close_size, left.cols);
+    morphology.open_size = ScaledKernel(morphology.open_size, left.cols);
+    return extraction::CloseFillOpen(mask, morphology);
   }
   // Graph segments at reduced scale; a segment is salient when its mean saliency is.
   const double scale = 1.0 / (1 << options.graph_level);
@@ -67,13 +70,14 @@ cv::Mat1b SalientRegions(const cv::Mat1b& left, const SteViSOptions& options) {
 std::vector<Detection> DetectSteViS(const cv::Mat1b& left, const stereo::DisparityMap& disparity,
                                     const geometry::StereoRig& rig,
                                     const geometry::RangeOptions& range,
-                                    const SteViSOptions& options) {
+                                    const SteViSOptions& options,
+                                    const FullResolutionPair* full) {
   if (left.empty() || disparity.empty() || left.size() != disparity.fixed.size()) return {};
   const cv::Mat1b salient = SalientRegions(left, options);
   const std::optional<GroundModel> ground =
       options.ground.enabled ? FitGround(disparity, options.ground) : std::nullopt;
-  const cv::Mat1b candidates = StereoCandidates(salient, disparity, rig, range, ground, options.ground);
-  return RangeBlobs(candidates, disparity, rig, range, options.blobs, "stevis", ground);
+  const cv::Mat1b classes = ClassifyPixels(disparity, rig, range, ground, options.ground);
+  return RangeRegions(salient, classes, disparity, rig, range, options.blobs, "stevis", ground, full);
 }
 
 }  // namespace stevi::detection

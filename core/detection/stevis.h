@@ -11,6 +11,7 @@
 
 #include "core/detection/detection.h"
 #include "core/detection/ground.h"
+#include "core/detection/regions.h"
 #include "core/detection/stereo_blobs.h"
 #include "core/extraction/morphology.h"
 #include "core/extraction/saliency.h"
@@ -46,7 +47,8 @@ struct SteViSOptions {
 std::vector<Detection> DetectSteViS(const cv::Mat1b& left, const stereo::DisparityMap& disparity,
                                     const geometry::StereoRig& rig,
                                     const geometry::RangeOptions& range,
-                                    const SteViSOptions& options);
+                                    const SteViSOptions& options,
+                                    const FullResolutionPair* full = nullptr);
 
 // The appearance mask alone (255 where salient), at the size of `left`.
 cv::Mat1b SalientRegions(const cv::Mat1b& left, const SteViSOptions& options);

@@ -11,8 +11,10 @@ namespace stevi::geometry {
 
 // Which disparities and ranges are trusted.
 struct RangeOptions {
-  // Disparities below this floor (pixels) are not trusted (thesis: 5 px, 3 px on a long baseline).
-  double min_disparity_px = 5.0;
+  // Disparities below this floor (camera pixels, before any binning) are not trusted (thesis: 5 px,
+  // 3 px on a long baseline). Each hypothesis's disparity is fitted to a small fraction of a pixel
+  // on the camera's images (detection/regions.h), so 2.5 px still ranges to a few per cent.
+  double min_disparity_px = 2.5;
   // Ranges beyond this (metres) are not trusted. 0 means no limit other than the disparity floor.
   double max_range_m = 0.0;
   // 1-sigma disparity error used for range_sigma_m (pixels). Block matching with sub-pixel

@@ -204,9 +204,13 @@ StereoRig StereoRig::Binned(int factor) const {
                baseline_m_, (cx_ - shift) / k, (cy_ - shift) / k, calibration_id_);
 }
 
-int BinningFactor(int width, int max_width) {
+int BinningFactor(int width, int max_width, double floor_px) {
   if (max_width <= 0 || width <= max_width) return 1;
-  return (width + max_width - 1) / max_width;
+  int factor = (width + max_width - 1) / max_width;
+  if (floor_px > 0) {
+    while (factor > 1 && floor_px / factor < kMinBinnedDisparityPx) --factor;
+  }
+  return factor;
 }
 
 void BinImage(const cv::Mat& in, int factor, cv::Mat& out) {

@@ -71,9 +71,15 @@ class StereoRig {
   std::shared_ptr<const Maps> maps_;
 };
 
+// Binning divides every disparity by its factor: below about this many pixels a block matcher no
+// longer finds the rig's farthest trusted disparity.
+inline constexpr double kMinBinnedDisparityPx = 1.25;
+
 // The smallest whole binning factor that brings `width` to at most `max_width` pixels (1 when
-// max_width <= 0: never bin).
-int BinningFactor(int width, int max_width);
+// max_width <= 0: never bin), but no larger than keeps the disparity floor `floor_px` (camera
+// pixels; 0 = no limit) at kMinBinnedDisparityPx or more in the binned images: binning is chosen
+// for what it costs in range, not by width alone.
+int BinningFactor(int width, int max_width, double floor_px = 0);
 
 // Averages each factor x factor block of the 8-bit grey image `in` into one pixel of `out`
 // (rounded to nearest): out is in.cols / factor by in.rows / factor; the last columns and rows that

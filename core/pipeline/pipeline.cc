@@ -116,7 +116,8 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
   // buffer; when binning, the full-size left is only read (the caller's grey image, or a buffer
   // kept between frames) and the binned one is published.
   Clock::time_point t = Clock::now();
-  const int factor = geometry::BinningFactor(want.width, config.max_width_px);
+  const int factor =
+      geometry::BinningFactor(want.width, config.max_width_px, config.range.min_disparity_px);
   cv::Mat rect_left;
   cv::Mat& full_out = factor > 1 ? state_->full_left : rect_left;
   cv::Mat full_left;   // never written to from here
@@ -145,6 +146,7 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
     rect_right = state_->rect_right;
   }
   // From here on the frame is the binned one, with its own rig.
+  const cv::Mat rect_right_full = rect_right;
   if (factor > 1) {
     if (state_->binned_from != snapshot.rig || state_->binned_factor != factor) {
       state_->binned_rig = std::make_shared<const geometry::StereoRig>(rig.Binned(factor));
@@ -175,22 +177,34 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
   result.disparity = state_->matcher->Compute(rect_left, rect_right);
   result.timings.push_back({"disparity", MsSince(t)});
 
-  // Stage: extract.
+  // Stage: extract. The detectors work on the processed (binned) images, where the disparity
+  // floor (camera pixels) is divided by the binning; each hypothesis is then ranged on the
+  // camera's own images.
   t = Clock::now();
+  geometry::RangeOptions range = config.range;
+  range.min_disparity_px /= factor;
+  detection::FullResolutionPair full;
+  if (factor > 1) {
+    full.left = full_left;
+    full.right = rect_right_full;
+  } else {
+    full.left = rect_left;
+    full.right = rect_right;
+  }
+  full.binning = factor;
+  if (full.left.type() != CV_8UC1 || full.right.type() != CV_8UC1) full = {};
   switch (config.algorithm) {
     case Algorithm::kCanonical:
       result.detections =
-          detection::DetectCanonical(result.disparity, work_rig, config.range, config.canonical);
+          detection::DetectCanonical(result.disparity, work_rig, range, config.canonical, &full);
       break;
     case Algorithm::kSteViE:
       result.detections =
-          detection::DetectSteViE(rect_left, result.disparity, work_rig, config.range,
-                                  config.stevie);
+          detection::DetectSteViE(rect_left, result.disparity, work_rig, range, config.stevie, &full);
       break;
     case Algorithm::kSteViS:
       result.detections =
-          detection::DetectSteViS(rect_left, result.disparity, work_rig, config.range,
-                                  config.stevis);
+          detection::DetectSteViS(rect_left, result.disparity, work_rig, range, config.stevis, &full);
       break;
   }
   result.timings.push_back({"extract", MsSince(t)});

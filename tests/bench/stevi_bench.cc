@@ -416,7 +416,7 @@ struct OfflineRun {
 
 // The size column of a run: "1280x1024", or "1280x1024/2" when the pipeline bins it by 2.
 std::string RunSizeName(cv::Size size, int max_width_px) {
-  const int factor = geometry::BinningFactor(size.width, max_width_px);
+  const int factor = geometry::BinningFactor(size.width, max_width_px, geometry::RangeOptions{}.min_disparity_px);
   return bench::SizeName(size) + (factor > 1 ? "/" + std::to_string(factor) : "");
 }
 
@@ -492,7 +492,7 @@ Json OfflineJson(const OfflineRun& run) {
       .Set("height", run.size.height)
       .Set("disparities", run.disparities)
       .Set("max_width_px", run.max_width_px)
-      .Set("binning", geometry::BinningFactor(run.size.width, run.max_width_px))
+      .Set("binning", geometry::BinningFactor(run.size.width, run.max_width_px, geometry::RangeOptions{}.min_disparity_px))
       .Set("frames", run.frames)
       .Set("detections_per_frame", run.detections_per_frame)
       .Set("tracks_per_frame", run.tracks_per_frame)

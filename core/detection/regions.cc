@@ -1,0 +1,618 @@
+#include "core/detection/regions.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <limits>
+#include <numeric>
+#include <string>
+
+#include <opencv2/imgproc.hpp>
+
+#include "core/extraction/blobs.h"
+
+namespace stevi::detection {
+namespace {
+
+constexpr int kScale = stereo::DisparityMap::kScale;
+// Disparity histogram bins of the depth-mode search: a quarter pixel (fixed-point units).
+constexpr int kBinFixed = kScale / 4;
+// A region piece needs this many trusted disparities to be ranged at all (it may still join
+// others at its range to make a hypothesis).
+constexpr int kMinPieceDisparities = 3;
+// A depth mode smaller than this fraction of its region's trusted disparities is an outlier
+// (mismatches, a halo), not an object of its own.
+constexpr double kMinModeFraction = 0.1;
+// Blobs shorter than this (rows, at 640 px wide) are never given the slope test: too few rows.
+constexpr int kMinTerrainRows640 = 12;
+// At most this many pixels carry the sub-pixel fit (a regular subsample beyond).
+constexpr int kMaxRefinePixels = 1000;
+constexpr int kMinRefinePixels = 16;
+
+struct Piece {
+  cv::Rect box;
+  int area = 0;
+  double sum_x = 0, sum_y = 0;
+  std::vector<int16_t> disparities;  // fixed point, the mode's trusted disparities
+  int median = 0, lo = 0, hi = 0;    // fixed point: median, 10th and 90th percentiles
+};
+
+int Percentile(std::vector<int16_t>& v, double q) {
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+void Summarise(Piece& p) {
+  p.lo = Percentile(p.disparities, 0.1);
+  p.hi = Percentile(p.disparities, 0.9);
+  p.median = Percentile(p.disparities, 0.5);
+}
+
+// The depth modes of a region's trusted disparities: runs of the quarter-pixel histogram separated
+// by at least `gap_bins` empty bins. Returns, per mode, its [first, last] bin; modes holding less
+// than kMinModeFraction of the values are dropped.
+std::vector<std::pair<int, int>> DepthModes(const std::vector<int>& histogram, int n, int gap_bins) {
+  std::vector<std::pair<int, int>> modes;
+  int start = -1, last = -1, count = 0;
+  const auto close = [&]() {
+    if (start >= 0 && count >= std::max(kMinPieceDisparities, static_cast<int>(kMinModeFraction * n))) {
+      modes.emplace_back(start, last);
+    }
+  };
+  for (int b = 0; b < static_cast<int>(histogram.size()); ++b) {
+    if (histogram[b] == 0) continue;
+    if (start >= 0 && b - last > gap_bins) {
+      close();
+      start = -1;
+      count = 0;
+    }
+    if (start < 0) start = b;
+    last = b;
+    count += histogram[b];
+  }
+  close();
+  return modes;
+}
+
+int Find(std::vector<int>& parent, int i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  return i;
+}
+
+inline float Bilinear(const cv::Mat1b& image, double x, double y) {
+  const int x0 = static_cast<int>(std::floor(x));
+  const int y0 = static_cast<int>(std::floor(y));
+  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
+  const uchar* r0 = image[y0];
+  const uchar* r1 = image[y0 + 1];
+  const float top = r0[x0] + fx * (r0[x0 + 1] - r0[x0]);
+  const float bottom = r1[x0] + fx * (r1[x0 + 1] - r1[x0]);
+  return top + fy * (bottom - top);
+}
+
+// The fraction of trusted disparities in a ring around the label's mask that lie at its range
+// (see StereoBlobOptions::max_attached_fraction). -1 when the ring holds too few.
+double AttachedFraction(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
+                        const cv::Rect& box, double median_px, double min_disparity_px,
+                        int ring_in, int ring_out) {
+  constexpr int kMinRingPixels = 20;
+  const cv::Rect outer =
+      (box + cv::Point(-ring_out, -ring_out) + cv::Size(2 * ring_out, 2 * ring_out)) &
+      cv::Rect(0, 0, labels.cols, labels.rows);
+  const cv::Mat1b mask = (labels(outer) == label);
+  cv::Mat1b inner_disc, outer_disc;
+  cv::dilate(mask, inner_disc,
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * ring_in + 1, 2 * ring_in + 1)));
+  cv::dilate(mask, outer_disc,
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * ring_out + 1, 2 * ring_out + 1)));
+  const double band = std::max(1.0, 0.1 * median_px);
+  const double lo = std::max(median_px - band, min_disparity_px) * kScale;
+  const double hi = (median_px + band) * kScale;
+  int ring = 0, attached = 0;
+  for (int y = 0; y < outer.height; ++y) {
+    const int16_t* d = disparity.fixed[outer.y + y] + outer.x;
+    const uchar* in = inner_disc[y];
+    const uchar* out = outer_disc[y];
+    for (int x = 0; x < outer.width; ++x) {
+      if (!out[x] || in[x] || d[x] < min_disparity_px * kScale) continue;
+      ++ring;
+      if (d[x] >= lo && d[x] <= hi) ++attached;
+    }
+  }
+  return ring < kMinRingPixels ? -1.0 : static_cast<double>(attached) / ring;
+}
+
+// How far the surface under the label's pixels leans back, as dZ/dH (metres of depth per metre of
+// height; 0 for a vertical face, infinite for level ground). A plane n . P = D in the camera frame
+// has the disparity d(u, v) = (B / D) (n_x (u - cx) + n_y (v - cy) + n_z f): linear in (u, v) for
+// any plane, so the fit d = alpha u + beta v + gamma is well conditioned even for flat ground
+// (whose depth, not height, varies), and n_y / n_z = beta f / (gamma + alpha cx + beta cy). 0 when
+// the lean is not significant (beta within 3 standard errors of 0) or the label spans too few rows.
+double LeanBack(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
+                const cv::Rect& box, double median_px, const geometry::StereoRig& rig, int min_rows) {
+  if (box.height < min_rows) return 0;
+  const double lo = 0.7 * median_px * kScale;
+  const double hi = 1.3 * median_px * kScale;
+  cv::Matx33d ata = cv::Matx33d::zeros();
+  cv::Vec3d atd(0, 0, 0);
+  double dd = 0;
+  int n = 0;
+  const double u0 = box.x + 0.5 * box.width, v0 = box.y + 0.5 * box.height;
+  for (int y = box.y; y < box.y + box.height; ++y) {
+    const int* lab = labels[y];
+    const int16_t* d = disparity.fixed[y];
+    for (int x = box.x; x < box.x + box.width; ++x) {
+      if (lab[x] != label || d[x] < lo || d[x] > hi) continue;
+      const double value = static_cast<double>(d[x]) / kScale;
+      const cv::Vec3d row(x - u0, y - v0, 1.0);
+      ata += row * row.t();
+      atd += row * value;
+      dd += value * value;
+      ++n;
+    }
+  }
+  if (n < 30) return 0;
+  cv::Matx33d inverse;
+  if (cv::invert(ata, inverse, cv::DECOMP_CHOLESKY) == 0) return 0;
+  const cv::Vec3d p = inverse * atd;  // alpha, beta, disparity at the box centre
+  const double residual = std::max(0.0, dd - p.dot(atd));
+  const double sigma2 = std::max(residual / std::max(1, n - 3), 1e-4);
+  const double beta = p[1];
+  if (!(beta > 3.0 * std::sqrt(sigma2 * inverse(1, 1)))) return 0;
+  // gamma + alpha cx + beta cy with gamma the disparity at (0, 0): the plane's disparity at the
+  // principal point.
+  const double at_principal = p[2] + p[0] * (rig.cx() - u0) + beta * (rig.cy() - v0);
+  const double numerator = beta * rig.f_px();
+  if (at_principal <= 0) return std::numeric_limits<double>::infinity();
+  return numerator / at_principal;
+}
+
+}  // namespace
+
+int ScaledKernel(int size_at_640, int width_px) {
+  if (size_at_640 <= 1) return 1;
+  const int k = static_cast<int>(std::lround(size_at_640 * width_px / 640.0));
+  return std::max(1, k | 1);
+}
+
+cv::Mat1b ClassifyPixels(const stereo::DisparityMap& disparity, const geometry::StereoRig& rig,
+                         const geometry::RangeOptions& range,
+                         const std::optional<GroundModel>& ground,
+                         const GroundOptions& ground_options) {
+  const cv::Mat1s& fixed = disparity.fixed;
+  cv::Mat1b out(fixed.size(), uchar{kNoDisparity});
+  const double fb = rig.f_px() * rig.baseline_m();
+  double floor_px = range.min_disparity_px;
+  if (range.max_range_m > 0) floor_px = std::max(floor_px, fb / range.max_range_m);
+  const int floor_fixed = static_cast<int>(std::ceil(floor_px * kScale - 1e-9));
+  for (int y = 0; y < fixed.rows; ++y) {
+    const int16_t* d = fixed[y];
+    uchar* o = out[y];
+    const double ground_d = ground ? ground->DisparityAt(y) : 0.0;
+    const double above_fixed =
+        ground ? (ground_d + std::max(ground_options.margin_px, ground_options.margin_fraction * ground_d)) *
+                     kScale
+               : -1.0;
+    for (int x = 0; x < fixed.cols; ++x) {
+      if (d[x] < 0) continue;
+      if (d[x] < floor_fixed) {
+        o[x] = kFar;
+      } else {
+        o[x] = d[x] <= above_fixed ? kGround : kCandidate;
+      }
+    }
+  }
+  return out;
+}
+
+std::optional<RefinedDisparity> RefineDisparity(const cv::Mat1b& left, const cv::Mat1b& right,
+                                                const cv::Mat1b& mask, const cv::Rect& box,
+                                                double initial_px) {
+  if (left.empty() || right.empty() || left.size() != right.size() || !(initial_px > 0)) {
+    return std::nullopt;
+  }
+  // Samples: the mask's pixels whose right-image counterpart (within the search) stays inside the
+  // image, on a regular subsample beyond kMaxRefinePixels.
+  constexpr double kSearchPx = 1.5;
+  const int margin = 3;
+  // The pixels that carry the disparity are those with a horizontal gradient: keep the
+  // kMaxRefinePixels strongest (flat pixels only tell the gain).
+  std::vector<std::pair<int, cv::Point>> textured;
+  for (int y = 0; y < box.height; ++y) {
+    const int v = box.y + y;
+    if (v < margin || v >= left.rows - margin) continue;
+    const uchar* m = mask[y];
+    const uchar* row = left[v];
+    for (int x = 0; x < box.width; ++x) {
+      if (!m[x]) continue;
+      const int u = box.x + x;
+      const double ur = u - initial_px;
+      if (u < margin || u >= left.cols - margin || ur - kSearchPx < margin ||
+          ur + kSearchPx >= left.cols - margin) {
+        continue;
+      }
+      const int gx = std::abs(row[u + 1] - row[u - 1]);
+      if (gx > 0) textured.emplace_back(gx, cv::Point(u, v));
+    }
+  }
+  if (static_cast<int>(textured.size()) > kMaxRefinePixels) {
+    std::nth_element(textured.begin(), textured.begin() + kMaxRefinePixels, textured.end(),
+                     [](const auto& a, const auto& b) { return a.first > b.first; });
+    textured.resize(kMaxRefinePixels);
+  }
+  std::vector<cv::Point> samples;
+  samples.reserve(textured.size());
+  for (const auto& t : textured) samples.push_back(t.second);
+  const int n = static_cast<int>(samples.size());
+  if (n < kMinRefinePixels) return std::nullopt;
+  std::vector<float> l(n);
+  double l_mean = 0;
+  for (int i = 0; i < n; ++i) {
+    l[i] = left(samples[i].y, samples[i].x);
+    l_mean += l[i];
+  }
+  l_mean /= n;
+  double l_var = 0;
+  for (float v : l) l_var += (v - l_mean) * (v - l_mean);
+  if (l_var < 1e-6) return std::nullopt;
+
+  // 1. Coarse: normalised cross-correlation at quarter-pixel steps around the initial disparity.
+  std::vector<float> r(n);
+  double best_d = initial_px, best_score = -2;
+  for (double s = -kSearchPx; s <= kSearchPx + 1e-9; s += 0.25) {
+    const double d = initial_px + s;
+    if (d <= 0) continue;
+    double r_mean = 0;
+    for (int i = 0; i < n; ++i) {
+      r[i] = Bilinear(right, samples[i].x - d, samples[i].y);
+      r_mean += r[i];
+    }
+    r_mean /= n;
+    double cross = 0, r_var = 0;
+    for (int i = 0; i < n; ++i) {
+      cross += (l[i] - l_mean) * (r[i] - r_mean);
+      r_var += (r[i] - r_mean) * (r[i] - r_mean);
+    }
+    const double score = r_var > 1e-6 ? cross / std::sqrt(l_var * r_var) : -2;
+    if (score > best_score) {
+      best_score = score;
+      best_d = d;
+    }
+  }
+  if (best_score < 0.2) return std::nullopt;
+
+  // 2. Fine: robust Gauss-Newton on L(x, y) = a R(x - d, y + e) + b.
+  double d = best_d, e = 0, a = 1, b = 0;
+  std::vector<float> residual(n), abs_residual(n);
+  cv::Matx44d jtj;
+  double sigma_r = 0, weight_sum = 0;
+  for (int iteration = 0; iteration < 6; ++iteration) {
+    jtj = cv::Matx44d::zeros();
+    cv::Vec4d jtr(0, 0, 0, 0);
+    // Residuals and their robust scale.
+    for (int i = 0; i < n; ++i) {
+      const double x = samples[i].x - d, y = samples[i].y + e;
+      if (x < 1 || x >= right.cols - 2 || y < 1 || y >= right.rows - 2) {
+        residual[i] = 0;
+        abs_residual[i] = 0;
+        continue;
+      }
+      residual[i] = static_cast<float>(l[i] - (a * Bilinear(right, x, y) + b));
+      abs_residual[i] = std::abs(residual[i]);
+    }
+    std::vector<float> sorted = abs_residual;
+    std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
+    const double scale = std::max(0.5, 1.4826 * sorted[n / 2]);
+    const double huber = 1.345 * scale;
+    double wr2 = 0;
+    weight_sum = 0;
+    for (int i = 0; i < n; ++i) {
+      const double x = samples[i].x - d, y = samples[i].y + e;
+      if (x < 1 || x >= right.cols - 2 || y < 1 || y >= right.rows - 2) continue;
+      const double rx = 0.5 * (Bilinear(right, x + 1, y) - Bilinear(right, x - 1, y));
+      const double ry = 0.5 * (Bilinear(right, x, y + 1) - Bilinear(right, x, y - 1));
+      const double rv = Bilinear(right, x, y);
+      // r = L - (a R(x - d, y + e) + b): dr/dd = a Rx, dr/de = -a Ry, dr/da = -R, dr/db = -1.
+      const cv::Vec4d j(a * rx, -a * ry, -rv, -1.0);
+      const double w = abs_residual[i] <= huber ? 1.0 : huber / abs_residual[i];
+      jtj += w * j * j.t();
+      jtr += w * residual[i] * j;
+      wr2 += w * residual[i] * residual[i];
+      weight_sum += w;
+    }
+    if (weight_sum < kMinRefinePixels) return std::nullopt;
+    sigma_r = std::sqrt(wr2 / std::max(1.0, weight_sum - 4));
+    cv::Vec4d step;
+    if (!cv::solve(jtj, -jtr, step, cv::DECOMP_CHOLESKY)) return std::nullopt;
+    d += step[0];
+    e = std::clamp(e + step[1], -1.5, 1.5);
+    a = std::clamp(a + step[2], 0.5, 2.0);
+    b += step[3];
+    if (!std::isfinite(d) || std::abs(d - best_d) > kSearchPx) return std::nullopt;
+    if (std::abs(step[0]) < 1e-4 && std::abs(step[1]) < 1e-3) break;
+  }
+  cv::Matx44d covariance;
+  if (cv::invert(jtj, covariance, cv::DECOMP_CHOLESKY) == 0) return std::nullopt;
+  const double var_d = covariance(0, 0) * sigma_r * sigma_r;
+  if (!(var_d >= 0) || !std::isfinite(var_d)) return std::nullopt;
+  RefinedDisparity out;
+  out.disparity_px = d;
+  out.sigma_px = std::sqrt(var_d);
+  out.pixels = n;
+  return out;
+}
+
+std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b& classes,
+                                    const stereo::DisparityMap& disparity,
+                                    const geometry::StereoRig& rig,
+                                    const geometry::RangeOptions& range,
+                                    const StereoBlobOptions& options, std::string_view extractor,
+                                    const std::optional<GroundModel>& ground,
+                                    const FullResolutionPair* full) {
+  std::vector<Detection> out;
+  const cv::Mat1s& fixed = disparity.fixed;
+  if (fixed.empty() || appearance.size() != fixed.size() || classes.size() != fixed.size()) return out;
+  const int width = fixed.cols, height = fixed.rows;
+
+  // 1. Pieces: the appearance cue's pixels with a trusted disparity standing out from the ground,
+  //    joined as neighbours across disparity steps of at most max_disparity_step_px, then each
+  //    split where its disparities form separate depth modes (a bridge of a few pixels joins
+  //    surfaces that the histogram tells apart).
+  cv::Mat1b candidates(fixed.size());
+  for (int y = 0; y < height; ++y) {
+    const uchar* a = appearance[y];
+    const uchar* c = classes[y];
+    uchar* o = candidates[y];
+    for (int x = 0; x < width; ++x) o[x] = (a[x] && c[x] == kCandidate) ? 255 : 0;
+  }
+  const int step_fixed = std::max(1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale)));
+  const extraction::BlobSet blobs =
+      options.max_disparity_step_px > 0
+          ? extraction::ExtractDisparityBlobs(candidates, fixed, step_fixed, kMinPieceDisparities)
+          : extraction::ExtractBlobs(candidates, kMinPieceDisparities);
+  const int gap_bins = std::max(1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale / kBinFixed)));
+  cv::Mat1i piece_labels(fixed.size(), 0);
+  std::vector<Piece> pieces(1);  // piece 0 = nothing
+  std::vector<int> histogram;
+  std::vector<int> mode_of_bin;
+  for (const extraction::Blob& blob : blobs.blobs) {
+    const cv::Rect& box = blob.bbox;
+    int lo_fixed = INT16_MAX, hi_fixed = 0, n = 0;
+    for (int y = box.y; y < box.br().y; ++y) {
+      const int* lab = blobs.labels[y];
+      const int16_t* d = fixed[y];
+      for (int x = box.x; x < box.br().x; ++x) {
+        if (lab[x] != blob.label) continue;
+        lo_fixed = std::min<int>(lo_fixed, d[x]);
+        hi_fixed = std::max<int>(hi_fixed, d[x]);
+        ++n;
+      }
+    }
+    const int first_bin = lo_fixed / kBinFixed;
+    histogram.assign(hi_fixed / kBinFixed - first_bin + 1, 0);
+    for (int y = box.y; y < box.br().y; ++y) {
+      const int* lab = blobs.labels[y];
+      const int16_t* d = fixed[y];
+      for (int x = box.x; x < box.br().x; ++x) {
+        if (lab[x] == blob.label) ++histogram[d[x] / kBinFixed - first_bin];
+      }
+    }
+    // Bins holding fewer than 1 % of the piece's pixels are empty: a sparse bridge is no mode.
+    const int sparse = std::max(1, n / 100);
+    std::vector<int> dense = histogram;
+    for (int& b : dense) b = b >= sparse ? b : 0;
+    const std::vector<std::pair<int, int>> modes =
+        options.max_disparity_step_px > 0 ? DepthModes(dense, n, gap_bins)
+                                          : std::vector<std::pair<int, int>>{{0, static_cast<int>(histogram.size()) - 1}};
+    if (modes.empty()) continue;
+    mode_of_bin.assign(histogram.size(), 0);
+    for (size_t m = 0; m < modes.size(); ++m) {
+      for (int b = modes[m].first; b <= modes[m].second; ++b) mode_of_bin[b] = static_cast<int>(m) + 1;
+    }
+    const int base = static_cast<int>(pieces.size()) - 1;
+    for (size_t m = 0; m < modes.size(); ++m) pieces.emplace_back();
+    std::vector<cv::Point> lo(modes.size(), cv::Point(INT32_MAX, INT32_MAX));
+    std::vector<cv::Point> hi(modes.size(), cv::Point(-1, -1));
+    for (int y = box.y; y < box.br().y; ++y) {
+      const int* lab = blobs.labels[y];
+      const int16_t* d = fixed[y];
+      int* out_label = piece_labels[y];
+      for (int x = box.x; x < box.br().x; ++x) {
+        if (lab[x] != blob.label) continue;
+        const int m = mode_of_bin[d[x] / kBinFixed - first_bin];
+        if (m == 0) continue;
+        Piece& p = pieces[base + m];
+        out_label[x] = base + m;
+        ++p.area;
+        p.sum_x += x;
+        p.sum_y += y;
+        p.disparities.push_back(d[x]);
+        lo[m - 1].x = std::min(lo[m - 1].x, x);
+        lo[m - 1].y = std::min(lo[m - 1].y, y);
+        hi[m - 1].x = std::max(hi[m - 1].x, x);
+        hi[m - 1].y = std::max(hi[m - 1].y, y);
+      }
+    }
+    for (size_t m = 0; m < modes.size(); ++m) {
+      if (hi[m].x >= 0) {
+        pieces[base + 1 + m].box = cv::Rect(lo[m].x, lo[m].y, hi[m].x - lo[m].x + 1, hi[m].y - lo[m].y + 1);
+      }
+    }
+  }
+  const int piece_count = static_cast<int>(pieces.size());
+  for (int i = 1; i < piece_count; ++i) {
+    if (!pieces[i].disparities.empty()) Summarise(pieces[i]);
+  }
+
+  // 2. Pieces at one range join across gaps that scale with their size.
+  std::vector<int> parent(piece_count);
+  std::iota(parent.begin(), parent.end(), 0);
+  const int gap_fixed = static_cast<int>(std::lround(options.max_disparity_step_px * kScale));
+  const double join_fraction = getenv("JOIN") ? atof(getenv("JOIN")) : options.join_gap_fraction;
+  if (join_fraction > 0) {
+    for (int i = 1; i < piece_count; ++i) {
+      const Piece& a = pieces[i];
+      if (a.disparities.size() < static_cast<size_t>(kMinPieceDisparities)) continue;
+      for (int j = i + 1; j < piece_count; ++j) {
+        const Piece& b = pieces[j];
+        if (b.disparities.size() < static_cast<size_t>(kMinPieceDisparities)) continue;
+        // The same range: each median within the other's spread, or the medians within the mode
+        // gap (and a relative tolerance for near objects, whose faces span depth).
+        const int tolerance = std::max(gap_fixed, static_cast<int>(0.08 * std::max(a.median, b.median)));
+        const bool same_range = std::abs(a.median - b.median) <= tolerance ||
+                                (a.median >= b.lo && a.median <= b.hi && b.median >= a.lo && b.median <= a.hi);
+        if (!same_range) continue;
+        const int gap_x = std::max(0, std::max(a.box.x, b.box.x) - std::min(a.box.br().x, b.box.br().x));
+        const int gap_y = std::max(0, std::max(a.box.y, b.box.y) - std::min(a.box.br().y, b.box.br().y));
+        const int size = std::max({a.box.width, a.box.height, b.box.width, b.box.height});
+        if (std::max(gap_x, gap_y) > join_fraction * size) continue;
+        parent[Find(parent, i)] = Find(parent, j);
+      }
+    }
+  }
+  std::vector<int> group_of(piece_count, 0);
+  std::vector<int> roots;
+  for (int i = 1; i < piece_count; ++i) {
+    if (pieces[i].area == 0) continue;
+    const int root = Find(parent, i);
+    if (group_of[root] == 0) {
+      roots.push_back(root);
+      group_of[root] = static_cast<int>(roots.size());
+    }
+    group_of[i] = group_of[root];
+  }
+  const int group_count = static_cast<int>(roots.size());
+  std::vector<Piece> groups(group_count + 1);
+  for (int i = 1; i < piece_count; ++i) {
+    if (pieces[i].area == 0) continue;
+    Piece& g = groups[group_of[i]];
+    const Piece& p = pieces[i];
+    g.box = g.area == 0 ? p.box : (g.box | p.box);
+    g.area += p.area;
+    g.sum_x += p.sum_x;
+    g.sum_y += p.sum_y;
+    g.disparities.insert(g.disparities.end(), p.disparities.begin(), p.disparities.end());
+  }
+  cv::Mat1i labels(fixed.size(), 0);
+  for (int y = 0; y < height; ++y) {
+    const int* p = piece_labels[y];
+    int* g = labels[y];
+    for (int x = 0; x < width; ++x) g[x] = p[x] ? group_of[p[x]] : 0;
+  }
+
+  // 3. Filters and range.
+  const double max_width_px = options.max_width_fraction * width;
+  const int min_rows = std::max(3, ScaledKernel(kMinTerrainRows640, width));
+  const int ring_in = std::max(2, ScaledKernel(6, width) - 1);
+  const int ring_out = std::max(ring_in + 2, ScaledKernel(12, width));
+  const int interior = options.interior_erode_px > 0 ? ScaledKernel(2 * options.interior_erode_px + 1, width) : 1;
+  for (int g = 1; g <= group_count; ++g) {
+    Piece& group = groups[g];
+    const int n = static_cast<int>(group.disparities.size());
+    if (group.area < options.min_area_px || group.box.width > max_width_px) continue;
+    if (n < std::max(options.min_valid_px, kMinPieceDisparities)) continue;
+    const double box_area = static_cast<double>(group.box.area());
+    const double valid_fraction = n / box_area;
+    if (static_cast<double>(n) / group.area < options.min_valid_fraction) continue;
+    // Range from the interior when there is enough of it: block matching spreads an object's
+    // disparity a few pixels past its borders.
+    const cv::Mat1b mask = labels(group.box) == g;
+    std::vector<int16_t> inner;
+    if (interior > 1) {
+      cv::Mat1b eroded;
+      cv::erode(mask, eroded, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(interior, interior)),
+                cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+      Summarise(group);
+      for (int y = 0; y < eroded.rows; ++y) {
+        const uchar* e = eroded[y];
+        const uchar* c = classes[group.box.y + y] + group.box.x;
+        const int16_t* d = fixed[group.box.y + y] + group.box.x;
+        for (int x = 0; x < eroded.cols; ++x) {
+          if (e[x] && c[x] == kCandidate && std::abs(d[x] - group.median) <= 4 * std::max(gap_fixed, group.median / 10)) {
+            inner.push_back(d[x]);
+          }
+        }
+      }
+    }
+    const bool use_inner = static_cast<int>(inner.size()) >= std::max(30, n / 4);
+    std::vector<int16_t>& values = use_inner ? inner : group.disparities;
+    const double median_px = static_cast<double>(Percentile(values, 0.5)) / kScale;
+    if (!geometry::IsTrustedDisparity(median_px, rig.f_px(), rig.baseline_m(), range)) continue;
+    if (options.max_depth_per_height > 0 &&
+        LeanBack(disparity, labels, g, group.box, median_px, rig, min_rows) > options.max_depth_per_height) {
+      continue;  // terrain leaning back, or level ground
+    }
+    const double height_m = group.box.height * (rig.f_px() * rig.baseline_m() / median_px) / rig.f_px();
+    const bool too_short = group.box.height < min_rows || height_m < options.min_terrain_height_m;
+    if (options.max_attached_fraction < 1 && too_short && ground &&
+        group.box.y + group.box.height > ground->horizon_row &&
+        AttachedFraction(disparity, labels, g, group.box, median_px, range.min_disparity_px, ring_in,
+                         ring_out) > options.max_attached_fraction) {
+      continue;  // a patch of a continuous surface
+    }
+
+    Detection d;
+    d.bbox = group.box;
+    d.centroid_px = cv::Point2d(group.sum_x / group.area, group.sum_y / group.area);
+    d.area_px = group.area;
+    // Perimeter: the mask's boundary pixels (4-neighbour outside).
+    int boundary = 0;
+    for (int y = 0; y < mask.rows; ++y) {
+      for (int x = 0; x < mask.cols; ++x) {
+        if (!mask(y, x)) continue;
+        if (x == 0 || y == 0 || x == mask.cols - 1 || y == mask.rows - 1 || !mask(y, x - 1) ||
+            !mask(y, x + 1) || !mask(y - 1, x) || !mask(y + 1, x)) {
+          ++boundary;
+        }
+      }
+    }
+    d.perimeter_px = boundary;
+    d.disparity_px = median_px;
+    d.valid_disparities = n;
+    d.valid_fraction = std::clamp(valid_fraction, 0.0, 1.0);
+    d.disparity_sigma_px = range.disparity_sigma_px;
+    if (full != nullptr && !full->left.empty() && !getenv("NOREFINE")) {
+      const int k = std::max(1, full->binning);
+      const cv::Rect full_box = cv::Rect(group.box.x * k, group.box.y * k, group.box.width * k,
+                                         group.box.height * k) &
+                                cv::Rect(0, 0, full->left.cols, full->left.rows);
+      // The fit runs over the pixels at the hypothesis' own range (a box's oblique faces and a
+      // halo at other disparities would pull it off its nearest face).
+      const int band = std::max(kScale / 2, static_cast<int>(std::lround(0.03 * median_px * kScale)));
+      const int median_fixed = static_cast<int>(std::lround(median_px * kScale));
+      cv::Mat1b at_range(mask.size(), uchar{0});
+      for (int y = 0; y < mask.rows; ++y) {
+        const int16_t* dd = fixed[group.box.y + y] + group.box.x;
+        const uchar* c = classes[group.box.y + y] + group.box.x;
+        for (int x = 0; x < mask.cols; ++x) {
+          at_range(y, x) = (mask(y, x) && c[x] == kCandidate && std::abs(dd[x] - median_fixed) <= band) ? 255 : 0;
+        }
+      }
+      cv::Mat1b full_mask;
+      cv::resize(at_range, full_mask, cv::Size(group.box.width * k, group.box.height * k), 0, 0,
+                 cv::INTER_NEAREST);
+      full_mask = full_mask(cv::Rect(0, 0, full_box.width, full_box.height));
+      const std::optional<RefinedDisparity> refined =
+          RefineDisparity(full->left, full->right, full_mask, full_box, median_px * k);
+      if (refined && std::abs(refined->disparity_px - median_px * k) <= std::max(1.5 * k, 0.2 * median_px * k)) {
+        d.disparity_px = refined->disparity_px / k;
+        d.disparity_sigma_px = refined->sigma_px / k;
+      }
+    }
+    FillRange(d, rig, range);
+    // Score: how much of the hypothesis the stereo supports, and how consistently.
+    int consistent = 0;
+    const double band = std::max(1.0, 0.1 * median_px) * kScale;
+    for (int16_t v : group.disparities) consistent += std::abs(v - median_px * kScale) <= band;
+    d.score = std::clamp(std::min(1.0, 2.0 * static_cast<double>(n) / group.area), 0.0, 1.0) *
+              (static_cast<double>(consistent) / n);
+    d.extractor = std::string(extractor);
+    out.push_back(std::move(d));
+  }
+  return out;
+}
+
+}  // namespace stevi::detection
