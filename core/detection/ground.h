@@ -33,7 +33,7 @@ struct GroundOptions {
   // The supporting rows must span at least this much disparity (pixels): a fronto-parallel wall
   // filling many rows at one disparity is not ground, and ground that spans less lies beyond the
   // trusted range anyway.
-  double min_span_px = 1.0;
+  double min_span_px = 0.5;
   // A pixel stands out from the ground when its disparity exceeds the ground's on its row by more
   // than max(margin_px, margin_fraction * ground disparity).
   double margin_px = 1.0;

@@ -4,7 +4,6 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <cstdlib>
 #include <limits>
 #include <numeric>
 #include <string>
@@ -25,11 +24,14 @@ constexpr int kMinPieceDisparities = 3;
 // A depth mode smaller than this fraction of its region's trusted disparities is an outlier
 // (mismatches, a halo), not an object of its own.
 constexpr double kMinModeFraction = 0.1;
+// The sub-pixel bias of a block matcher's disparities (pixel locking), pixels: two medians closer
+// than this cannot be told apart.
+constexpr double kMatcherBiasPx = 0.1;
 // Blobs shorter than this (rows, at 640 px wide) are never given the slope test: too few rows.
 constexpr int kMinTerrainRows640 = 12;
-// At most this many pixels carry the sub-pixel fit (a regular subsample beyond).
-constexpr int kMaxRefinePixels = 1000;
-constexpr int kMinRefinePixels = 16;
+// At most this many patches carry the sub-pixel fit (an even subsample), and at least this many.
+constexpr int kMaxRefinePatches = 64;
+constexpr int kMinRefinePatches = 5;
 
 struct Piece {
   cv::Rect box;
@@ -37,18 +39,38 @@ struct Piece {
   double sum_x = 0, sum_y = 0;
   std::vector<int16_t> disparities;  // fixed point, the mode's trusted disparities
   int median = 0, lo = 0, hi = 0;    // fixed point: median, 10th and 90th percentiles
+  double median_sigma = 0;           // fixed point: 1-sigma of the median
 };
 
-int Percentile(std::vector<int16_t>& v, double q) {
-  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size() - 1) + 0.5));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
+// The 10th, 50th and 90th percentiles of fixed-point disparities, by counting (exact).
+std::array<int, 3> Percentiles(const std::vector<int16_t>& v) {
+  int lo = INT16_MAX, hi = 0;
+  for (int16_t d : v) {
+    lo = std::min<int>(lo, d);
+    hi = std::max<int>(hi, d);
+  }
+  thread_local std::vector<int> counts;
+  counts.assign(hi - lo + 1, 0);
+  for (int16_t d : v) ++counts[d - lo];
+  const int n = static_cast<int>(v.size());
+  const std::array<int, 3> rank = {(n - 1) / 10, (n - 1) / 2, (9 * (n - 1)) / 10};
+  std::array<int, 3> out = {lo, lo, lo};
+  int seen = 0, k = 0;
+  for (int i = 0; i < static_cast<int>(counts.size()) && k < 3; ++i) {
+    seen += counts[i];
+    while (k < 3 && seen > rank[k]) out[k++] = lo + i;
+  }
+  return out;
 }
 
 void Summarise(Piece& p) {
-  p.lo = Percentile(p.disparities, 0.1);
-  p.hi = Percentile(p.disparities, 0.9);
-  p.median = Percentile(p.disparities, 0.5);
+  const std::array<int, 3> q = Percentiles(p.disparities);
+  p.lo = q[0];
+  p.median = q[1];
+  p.hi = q[2];
+  // The spread from the 10th to the 90th percentile is 2.563 sigma for a normal scatter; the
+  // median of n values has 1.2533 sigma / sqrt(n).
+  p.median_sigma = 1.2533 * (p.hi - p.lo) / 2.563 / std::sqrt(static_cast<double>(p.disparities.size()));
 }
 
 // The depth modes of a region's trusted disparities: runs of the quarter-pixel histogram separated
@@ -136,24 +158,39 @@ double LeanBack(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, 
   if (box.height < min_rows) return 0;
   const double lo = 0.7 * median_px * kScale;
   const double hi = 1.3 * median_px * kScale;
-  cv::Matx33d ata = cv::Matx33d::zeros();
-  cv::Vec3d atd(0, 0, 0);
-  double dd = 0;
+  double suu = 0, suv = 0, su = 0, svv = 0, sv = 0, sud = 0, svd = 0, sd = 0, dd = 0;
   int n = 0;
   const double u0 = box.x + 0.5 * box.width, v0 = box.y + 0.5 * box.height;
   for (int y = box.y; y < box.y + box.height; ++y) {
     const int* lab = labels[y];
     const int16_t* d = disparity.fixed[y];
+    const double v = y - v0;
+    double row_u = 0, row_uu = 0, row_d = 0, row_ud = 0, row_dd = 0;
+    int row_n = 0;
     for (int x = box.x; x < box.x + box.width; ++x) {
       if (lab[x] != label || d[x] < lo || d[x] > hi) continue;
       const double value = static_cast<double>(d[x]) / kScale;
-      const cv::Vec3d row(x - u0, y - v0, 1.0);
-      ata += row * row.t();
-      atd += row * value;
-      dd += value * value;
-      ++n;
+      const double u = x - u0;
+      row_u += u;
+      row_uu += u * u;
+      row_d += value;
+      row_ud += u * value;
+      row_dd += value * value;
+      ++row_n;
     }
+    suu += row_uu;
+    su += row_u;
+    suv += v * row_u;
+    svv += v * v * row_n;
+    sv += v * row_n;
+    sud += row_ud;
+    svd += v * row_d;
+    sd += row_d;
+    dd += row_dd;
+    n += row_n;
   }
+  const cv::Matx33d ata(suu, suv, su, suv, svv, sv, su, sv, n);
+  const cv::Vec3d atd(sud, svd, sd);
   if (n < 30) return 0;
   cv::Matx33d inverse;
   if (cv::invert(ata, inverse, cv::DECOMP_CHOLESKY) == 0) return 0;
@@ -214,133 +251,141 @@ std::optional<RefinedDisparity> RefineDisparity(const cv::Mat1b& left, const cv:
   if (left.empty() || right.empty() || left.size() != right.size() || !(initial_px > 0)) {
     return std::nullopt;
   }
-  // Samples: the mask's pixels whose right-image counterpart (within the search) stays inside the
-  // image, on a regular subsample beyond kMaxRefinePixels.
-  constexpr double kSearchPx = 1.5;
-  const int margin = 3;
-  // The pixels that carry the disparity are those with a horizontal gradient: keep the
-  // kMaxRefinePixels strongest (flat pixels only tell the gain).
-  std::vector<std::pair<int, cv::Point>> textured;
-  for (int y = 0; y < box.height; ++y) {
-    const int v = box.y + y;
-    if (v < margin || v >= left.rows - margin) continue;
-    const uchar* m = mask[y];
-    const uchar* row = left[v];
-    for (int x = 0; x < box.width; ++x) {
-      if (!m[x]) continue;
-      const int u = box.x + x;
-      const double ur = u - initial_px;
-      if (u < margin || u >= left.cols - margin || ur - kSearchPx < margin ||
-          ur + kSearchPx >= left.cols - margin) {
-        continue;
+  // Patches: on a grid of kCell pixels, the mask pixel of strongest horizontal gradient in each
+  // cell, so that the patches barely overlap and their errors are nearly independent.
+  constexpr int kCell = 5;
+  constexpr int kHalf = 3;          // 7 x 7 patches
+  constexpr double kSearchPx = 2.0; // how far a patch may move from the initial disparity
+  const int margin = kHalf + 3;
+  struct Seed {
+    int gx;
+    cv::Point at;
+  };
+  std::vector<Seed> seeds;
+  for (int cy = 0; cy < box.height; cy += kCell) {
+    for (int cx = 0; cx < box.width; cx += kCell) {
+      Seed best{0, {}};
+      for (int y = cy; y < std::min(cy + kCell, box.height); ++y) {
+        const int v = box.y + y;
+        if (v < margin || v >= left.rows - margin) continue;
+        const uchar* m = mask[y];
+        const uchar* row = left[v];
+        for (int x = cx; x < std::min(cx + kCell, box.width); ++x) {
+          const int u = box.x + x;
+          if (!m[x] || u < margin || u >= left.cols - margin ||
+              u - initial_px - kSearchPx < margin || u - initial_px + kSearchPx >= left.cols - margin) {
+            continue;
+          }
+          const int gx = std::abs(row[u + 1] - row[u - 1]);
+          if (gx > best.gx) best = {gx, cv::Point(u, v)};
+        }
       }
-      const int gx = std::abs(row[u + 1] - row[u - 1]);
-      if (gx > 0) textured.emplace_back(gx, cv::Point(u, v));
+      if (best.gx >= 2) seeds.push_back(best);
     }
   }
-  if (static_cast<int>(textured.size()) > kMaxRefinePixels) {
-    std::nth_element(textured.begin(), textured.begin() + kMaxRefinePixels, textured.end(),
-                     [](const auto& a, const auto& b) { return a.first > b.first; });
-    textured.resize(kMaxRefinePixels);
+  if (static_cast<int>(seeds.size()) < kMinRefinePatches) return std::nullopt;
+  if (static_cast<int>(seeds.size()) > kMaxRefinePatches) {
+    // An even subsample: every part of the object counts alike.
+    std::vector<Seed> kept;
+    kept.reserve(kMaxRefinePatches);
+    const double step = static_cast<double>(seeds.size()) / kMaxRefinePatches;
+    for (int i = 0; i < kMaxRefinePatches; ++i) kept.push_back(seeds[static_cast<size_t>(i * step)]);
+    seeds.swap(kept);
   }
-  std::vector<cv::Point> samples;
-  samples.reserve(textured.size());
-  for (const auto& t : textured) samples.push_back(t.second);
-  const int n = static_cast<int>(samples.size());
-  if (n < kMinRefinePixels) return std::nullopt;
-  std::vector<float> l(n);
-  double l_mean = 0;
-  for (int i = 0; i < n; ++i) {
-    l[i] = left(samples[i].y, samples[i].x);
-    l_mean += l[i];
-  }
-  l_mean /= n;
-  double l_var = 0;
-  for (float v : l) l_var += (v - l_mean) * (v - l_mean);
-  if (l_var < 1e-6) return std::nullopt;
 
-  // 1. Coarse: normalised cross-correlation at quarter-pixel steps around the initial disparity.
-  std::vector<float> r(n);
-  double best_d = initial_px, best_score = -2;
-  for (double s = -kSearchPx; s <= kSearchPx + 1e-9; s += 0.25) {
-    const double d = initial_px + s;
-    if (d <= 0) continue;
-    double r_mean = 0;
-    for (int i = 0; i < n; ++i) {
-      r[i] = Bilinear(right, samples[i].x - d, samples[i].y);
-      r_mean += r[i];
-    }
-    r_mean /= n;
-    double cross = 0, r_var = 0;
-    for (int i = 0; i < n; ++i) {
-      cross += (l[i] - l_mean) * (r[i] - r_mean);
-      r_var += (r[i] - r_mean) * (r[i] - r_mean);
-    }
-    const double score = r_var > 1e-6 ? cross / std::sqrt(l_var * r_var) : -2;
-    if (score > best_score) {
-      best_score = score;
-      best_d = d;
-    }
-  }
-  if (best_score < 0.2) return std::nullopt;
-
-  // 2. Fine: robust Gauss-Newton on L(x, y) = a R(x - d, y + e) + b.
-  double d = best_d, e = 0, a = 1, b = 0;
-  std::vector<float> residual(n), abs_residual(n);
-  cv::Matx44d jtj;
-  double sigma_r = 0, weight_sum = 0;
-  for (int iteration = 0; iteration < 6; ++iteration) {
-    jtj = cv::Matx44d::zeros();
-    cv::Vec4d jtr(0, 0, 0, 0);
-    // Residuals and their robust scale.
-    for (int i = 0; i < n; ++i) {
-      const double x = samples[i].x - d, y = samples[i].y + e;
-      if (x < 1 || x >= right.cols - 2 || y < 1 || y >= right.rows - 2) {
-        residual[i] = 0;
-        abs_residual[i] = 0;
-        continue;
+  // Each patch: zero-mean SSD (a gain and an offset between the views drop out), translation
+  // (dx, dy) by Gauss-Newton from the initial disparity: the vertical term takes up a residual
+  // misalignment of the rectification.
+  constexpr int kSide = 2 * kHalf + 1, kCount = kSide * kSide;
+  constexpr int kOuter = kSide + 2;  // one more pixel around, for the right image's gradients
+  std::vector<double> estimates;
+  estimates.reserve(seeds.size());
+  std::array<float, kCount> l{};
+  std::array<float, kOuter * kOuter> r{};
+  for (const Seed& seed : seeds) {
+    double l_mean = 0;
+    for (int j = 0, i = 0; j < kSide; ++j) {
+      const uchar* row = left[seed.at.y - kHalf + j];
+      for (int k = 0; k < kSide; ++k, ++i) {
+        l[i] = row[seed.at.x - kHalf + k];
+        l_mean += l[i];
       }
-      residual[i] = static_cast<float>(l[i] - (a * Bilinear(right, x, y) + b));
-      abs_residual[i] = std::abs(residual[i]);
     }
-    std::vector<float> sorted = abs_residual;
-    std::nth_element(sorted.begin(), sorted.begin() + n / 2, sorted.end());
-    const double scale = std::max(0.5, 1.4826 * sorted[n / 2]);
-    const double huber = 1.345 * scale;
-    double wr2 = 0;
-    weight_sum = 0;
-    for (int i = 0; i < n; ++i) {
-      const double x = samples[i].x - d, y = samples[i].y + e;
-      if (x < 1 || x >= right.cols - 2 || y < 1 || y >= right.rows - 2) continue;
-      const double rx = 0.5 * (Bilinear(right, x + 1, y) - Bilinear(right, x - 1, y));
-      const double ry = 0.5 * (Bilinear(right, x, y + 1) - Bilinear(right, x, y - 1));
-      const double rv = Bilinear(right, x, y);
-      // r = L - (a R(x - d, y + e) + b): dr/dd = a Rx, dr/de = -a Ry, dr/da = -R, dr/db = -1.
-      const cv::Vec4d j(a * rx, -a * ry, -rv, -1.0);
-      const double w = abs_residual[i] <= huber ? 1.0 : huber / abs_residual[i];
-      jtj += w * j * j.t();
-      jtr += w * residual[i] * j;
-      wr2 += w * residual[i] * residual[i];
-      weight_sum += w;
+    l_mean /= kCount;
+    double l_energy = 0;
+    for (float& v : l) {
+      v = static_cast<float>(v - l_mean);
+      l_energy += v * v;
     }
-    if (weight_sum < kMinRefinePixels) return std::nullopt;
-    sigma_r = std::sqrt(wr2 / std::max(1.0, weight_sum - 4));
-    cv::Vec4d step;
-    if (!cv::solve(jtj, -jtr, step, cv::DECOMP_CHOLESKY)) return std::nullopt;
-    d += step[0];
-    e = std::clamp(e + step[1], -1.5, 1.5);
-    a = std::clamp(a + step[2], 0.5, 2.0);
-    b += step[3];
-    if (!std::isfinite(d) || std::abs(d - best_d) > kSearchPx) return std::nullopt;
-    if (std::abs(step[0]) < 1e-4 && std::abs(step[1]) < 1e-3) break;
+    if (l_energy < 4.0 * kCount) continue;  // flat: below a grey level rms
+    double d = initial_px, e = 0;
+    bool ok = true;
+    for (int iteration = 0; iteration < 5 && ok; ++iteration) {
+      // The right image around the patch's match, shifted by (d, e): every sample of the
+      // iteration shares the sub-pixel weights.
+      const double x0 = seed.at.x - kHalf - 1 - d, y0 = seed.at.y - kHalf - 1 + e;
+      const int ix = static_cast<int>(std::floor(x0)), iy = static_cast<int>(std::floor(y0));
+      if (ix < 0 || iy < 0 || ix + kOuter + 1 >= right.cols || iy + kOuter + 1 >= right.rows) {
+        ok = false;
+        break;
+      }
+      const float fx = static_cast<float>(x0 - ix), fy = static_cast<float>(y0 - iy);
+      const float w00 = (1 - fx) * (1 - fy), w10 = fx * (1 - fy), w01 = (1 - fx) * fy, w11 = fx * fy;
+      for (int j = 0; j < kOuter; ++j) {
+        const uchar* r0 = right[iy + j] + ix;
+        const uchar* r1 = right[iy + j + 1] + ix;
+        float* out = &r[j * kOuter];
+        for (int k = 0; k < kOuter; ++k) {
+          out[k] = w00 * r0[k] + w10 * r0[k + 1] + w01 * r1[k] + w11 * r1[k + 1];
+        }
+      }
+      double r_mean = 0;
+      for (int j = 1; j <= kSide; ++j) {
+        for (int k = 1; k <= kSide; ++k) r_mean += r[j * kOuter + k];
+      }
+      r_mean /= kCount;
+      // residual = L - R(x - d, y + e): d(res)/dd = Rx, d(res)/de = -Ry.
+      double a11 = 0, a12 = 0, a22 = 0, b1 = 0, b2 = 0;
+      for (int j = 1, i = 0; j <= kSide; ++j) {
+        const float* row = &r[j * kOuter];
+        for (int k = 1; k <= kSide; ++k, ++i) {
+          const double res = l[i] - (row[k] - r_mean);
+          const double jd = 0.5 * (row[k + 1] - row[k - 1]);
+          const double je = -0.5 * (row[k + kOuter] - row[k - kOuter]);
+          a11 += jd * jd;
+          a12 += jd * je;
+          a22 += je * je;
+          b1 += jd * res;
+          b2 += je * res;
+        }
+      }
+      const double det = a11 * a22 - a12 * a12;
+      if (a11 < 1.0 || det <= 1e-9 * a11 * a22) {
+        ok = false;
+        break;
+      }
+      const double step_d = -(a22 * b1 - a12 * b2) / det;
+      const double step_e = -(a11 * b2 - a12 * b1) / det;
+      d += std::clamp(step_d, -0.5, 0.5);
+      e = std::clamp(e + std::clamp(step_e, -0.5, 0.5), -1.0, 1.0);
+      if (std::abs(d - initial_px) > kSearchPx) ok = false;
+      if (std::abs(step_d) < 2e-3 && std::abs(step_e) < 2e-3) break;
+    }
+    if (ok) estimates.push_back(d);
   }
-  cv::Matx44d covariance;
-  if (cv::invert(jtj, covariance, cv::DECOMP_CHOLESKY) == 0) return std::nullopt;
-  const double var_d = covariance(0, 0) * sigma_r * sigma_r;
-  if (!(var_d >= 0) || !std::isfinite(var_d)) return std::nullopt;
+  const int n = static_cast<int>(estimates.size());
+  if (n < kMinRefinePatches) return std::nullopt;
+  std::sort(estimates.begin(), estimates.end());
+  const double median = n % 2 ? estimates[n / 2] : 0.5 * (estimates[n / 2 - 1] + estimates[n / 2]);
+  std::vector<double> deviations(n);
+  for (int i = 0; i < n; ++i) deviations[i] = std::abs(estimates[i] - median);
+  std::nth_element(deviations.begin(), deviations.begin() + n / 2, deviations.end());
+  // The median of n independent patch estimates: 1.2533 * sigma / sqrt(n), with the patches'
+  // scatter from their median absolute deviation.
+  const double scatter = 1.4826 * deviations[n / 2];
   RefinedDisparity out;
-  out.disparity_px = d;
-  out.sigma_px = std::sqrt(var_d);
+  out.disparity_px = median;
+  out.sigma_px = 1.2533 * scatter / std::sqrt(static_cast<double>(n));
   out.pixels = n;
   return out;
 }
@@ -451,7 +496,7 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   std::vector<int> parent(piece_count);
   std::iota(parent.begin(), parent.end(), 0);
   const int gap_fixed = static_cast<int>(std::lround(options.max_disparity_step_px * kScale));
-  const double join_fraction = getenv("JOIN") ? atof(getenv("JOIN")) : options.join_gap_fraction;
+  const double join_fraction = options.join_gap_fraction;
   if (join_fraction > 0) {
     for (int i = 1; i < piece_count; ++i) {
       const Piece& a = pieces[i];
@@ -459,9 +504,11 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
       for (int j = i + 1; j < piece_count; ++j) {
         const Piece& b = pieces[j];
         if (b.disparities.size() < static_cast<size_t>(kMinPieceDisparities)) continue;
-        // The same range: each median within the other's spread, or the medians within the mode
-        // gap (and a relative tolerance for near objects, whose faces span depth).
-        const int tolerance = std::max(gap_fixed, static_cast<int>(0.08 * std::max(a.median, b.median)));
+        // The same range: the medians agree within three sigmas of their difference (plus the
+        // matcher's sub-pixel bias), or each lies within the other's spread (the faces of a
+        // deep object).
+        const double tolerance =
+            3.0 * std::hypot(a.median_sigma, b.median_sigma) + kMatcherBiasPx * kScale;
         const bool same_range = std::abs(a.median - b.median) <= tolerance ||
                                 (a.median >= b.lo && a.median <= b.hi && b.median >= a.lo && b.median <= a.hi);
         if (!same_range) continue;
@@ -538,8 +585,8 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
       }
     }
     const bool use_inner = static_cast<int>(inner.size()) >= std::max(30, n / 4);
-    std::vector<int16_t>& values = use_inner ? inner : group.disparities;
-    const double median_px = static_cast<double>(Percentile(values, 0.5)) / kScale;
+    const std::vector<int16_t>& values = use_inner ? inner : group.disparities;
+    const double median_px = static_cast<double>(Percentiles(values)[1]) / kScale;
     if (!geometry::IsTrustedDisparity(median_px, rig.f_px(), rig.baseline_m(), range)) continue;
     if (options.max_depth_per_height > 0 &&
         LeanBack(disparity, labels, g, group.box, median_px, rig, min_rows) > options.max_depth_per_height) {
@@ -547,8 +594,10 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     }
     const double height_m = group.box.height * (rig.f_px() * rig.baseline_m() / median_px) / rig.f_px();
     const bool too_short = group.box.height < min_rows || height_m < options.min_terrain_height_m;
-    if (options.max_attached_fraction < 1 && too_short && ground &&
-        group.box.y + group.box.height > ground->horizon_row &&
+    // (Without a ground model too: an object in the sky has no ring of disparities, and one in
+    // front of terrain stands out from it.)
+    if (options.max_attached_fraction < 1 && too_short &&
+        (!ground || group.box.y + group.box.height > ground->horizon_row) &&
         AttachedFraction(disparity, labels, g, group.box, median_px, range.min_disparity_px, ring_in,
                          ring_out) > options.max_attached_fraction) {
       continue;  // a patch of a continuous surface
@@ -574,7 +623,7 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     d.valid_disparities = n;
     d.valid_fraction = std::clamp(valid_fraction, 0.0, 1.0);
     d.disparity_sigma_px = range.disparity_sigma_px;
-    if (full != nullptr && !full->left.empty() && !getenv("NOREFINE")) {
+    if (full != nullptr && !full->left.empty()) {
       const int k = std::max(1, full->binning);
       const cv::Rect full_box = cv::Rect(group.box.x * k, group.box.y * k, group.box.width * k,
                                          group.box.height * k) &

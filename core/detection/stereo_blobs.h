@@ -18,8 +18,10 @@
 namespace stevi::detection {
 
 struct StereoBlobOptions {
-  // Blobs smaller than this (pixels) are dropped.
-  int min_area_px = 60;
+  // Hypotheses smaller than this (pixels of the processed image) are dropped. Not scaled with
+  // the image: how many pixels it takes to see an object is a matter of the sensor's sampling,
+  // and an obstacle of 100 camera pixels binned 2x2 covers 25.
+  int min_area_px = 20;
   // Blobs wider than this fraction of the image width (the skyline, the ground) are dropped.
   double max_width_fraction = 0.8;
   // Hypotheses whose mask has fewer trusted disparities at their range than this fraction are
@@ -33,7 +35,7 @@ struct StereoBlobOptions {
   double max_disparity_step_px = 1.0;
   // Pieces at one range join when the gap between their boxes is at most this fraction of the
   // larger box's largest side (fragments of one low-contrast object). 0 never joins.
-  double join_gap_fraction = 0.5;
+  double join_gap_fraction = 0.25;
   // The blob's disparity is the median over its interior: the mask eroded by this many pixels
   // (0 = the whole mask), unless fewer than 30 interior pixels remain. Block matching spreads an
   // object's disparity a few pixels into its surroundings.

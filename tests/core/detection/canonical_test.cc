@@ -90,9 +90,10 @@ TEST(DetectCanonical, DropsWideBlobsBlobsBelowTheFloorAndSmallBlobs) {
   const cv::Rect kept(300, 300, 40, 40);
   Paint(map, kept, 30.0);
   Paint(map, cv::Rect(20, 20, 540, 30), 30.0);  // 540 > 0.8 * 640: the skyline
-  Paint(map, cv::Rect(50, 200, 60, 60), 4.0);   // below the 5 px floor
-  Paint(map, cv::Rect(200, 200, 60, 60), 5.0);  // 84 m: beyond the 80 m threshold range
-  Paint(map, cv::Rect(500, 300, 7, 7), 30.0);   // 49 px < 60 px
+  Paint(map, cv::Rect(50, 200, 60, 60), 2.0);   // below the 2.5 px floor
+  Paint(map, cv::Rect(200, 200, 60, 60), 4.5);  // 93 m: beyond the automatic threshold
+                                                 // (20 sigmas = 5 px: 84 m)
+  Paint(map, cv::Rect(500, 300, 4, 4), 30.0);   // 16 px < 20 px
   const std::vector<Detection> detections = DetectCanonical(map, rig, RangeOptions{}, {});
   ASSERT_EQ(detections.size(), 1u);
   EXPECT_EQ(detections[0].bbox, kept);
@@ -138,7 +139,7 @@ TEST(DetectCanonical, OpeningCutsAThinBridge) {
 TEST(CanonicalOptionsValidate, ListsEveryProblem) {
   EXPECT_TRUE(CanonicalOptions{}.Validate().empty());
   CanonicalOptions bad;
-  bad.threshold_range_m = 0;
+  bad.threshold_range_m = -1;
   bad.blobs.min_area_px = 0;
   bad.blobs.max_width_fraction = 1.5;
   bad.open_size_px = 4;
@@ -147,7 +148,7 @@ TEST(CanonicalOptionsValidate, ListsEveryProblem) {
   ASSERT_EQ(problems.size(), 5u);
   const char* fields[] = {"threshold_range_m: ", "open_size_px: ", "blobs.min_area_px: ",
                           "blobs.max_width_fraction: ", "blobs.min_valid_fraction: "};
-  const char* got[] = {"(got 0)", "(got 4)", "(got 0)", "(got 1.5)", "(got -0.1)"};
+  const char* got[] = {"(got -1)", "(got 4)", "(got 0)", "(got 1.5)", "(got -0.1)"};
   for (int i = 0; i < 5; ++i) {
     EXPECT_EQ(problems[i].rfind(fields[i], 0), 0u) << problems[i];
     EXPECT_NE(problems[i].find(got[i]), std::string::npos) << problems[i];
@@ -223,8 +224,11 @@ void Score(const drivers::FrameTruth& truth, const std::vector<Detection>& detec
   const double fb = kF * kB;
   std::vector<const drivers::ObstacleTruth*> near;
   for (const drivers::ObstacleTruth& o : truth.obstacles) {
-    if (o.visible_px >= options.blobs.min_area_px && !o.bbox.empty() &&
-        o.depth_m < options.threshold_range_m) {
+    // The automatic threshold: 20 disparity sigmas (5 px, 84 m on this rig).
+    const double threshold_m = options.threshold_range_m > 0
+                                   ? options.threshold_range_m
+                                   : kF * kB / (20 * RangeOptions{}.disparity_sigma_px);
+    if (o.visible_px >= options.blobs.min_area_px && !o.bbox.empty() && o.depth_m < threshold_m) {
       near.push_back(&o);
     }
   }
