@@ -2,7 +2,14 @@
 
 #include "core/common/error.h"
 
+#include <algorithm>
+
+#include "core/stereo/matcher.h"
+
 namespace stevi::detection {
+namespace {
+constexpr double kEdgeReferenceNoise = 2.0;
+}  // namespace
 std::vector<std::string> SteViEOptions::Validate() const {
   std::vector<std::string> problems;
   AppendPrefixed(problems, "edges.", edges.Validate());
@@ -22,8 +29,13 @@ std::vector<Detection> DetectSteViE(const cv::Mat1b& left, const stereo::Dispari
   extraction::MorphologyOptions morphology = options.morphology;
   morphology.close_size = ScaledKernel(morphology.close_size, left.cols);
   morphology.open_size = ScaledKernel(morphology.open_size, left.cols);
-  const cv::Mat1b regions =
-      extraction::CloseFillOpen(extraction::DetectEdges(left, options.edges), morphology);
+  // The Canny thresholds are given for a pixel noise of 2 grey levels and follow the frame's own
+  // (within a factor of 2 either way): noise must not draw contours, nor a faint outline vanish.
+  extraction::EdgeOptions edges = options.edges;
+  const double noise_scale = std::clamp(stereo::EstimateNoiseSigma(left) / kEdgeReferenceNoise, 0.5, 2.0);
+  edges.canny_low *= noise_scale;
+  edges.canny_high *= noise_scale;
+  const cv::Mat1b regions = extraction::CloseFillOpen(extraction::DetectEdges(left, edges), morphology);
   const std::optional<GroundModel> ground =
       options.ground.enabled ? FitGround(disparity, options.ground) : std::nullopt;
   const cv::Mat1b classes = ClassifyPixels(disparity, rig, range, ground, options.ground);

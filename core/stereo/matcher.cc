@@ -1,6 +1,7 @@
 #include "core/stereo/matcher.h"
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <utility>
 
@@ -63,6 +64,11 @@ int ToOpenCvMode(SemiGlobalOptions::Mode mode) {
   }
   return cv::StereoSGBM::MODE_SGBM_3WAY;
 }
+
+// The texture gates' thresholds are given for this pixel noise (grey levels, 1-sigma) and scale
+// with the noise measured in each frame, down to kMinGateThreshold.
+constexpr double kGateReferenceNoise = 2.0;
+constexpr int kMinGateThreshold = 3;
 
 // Smallest window of the SGBM texture gate: with smaller blocks (1, 3) the mean of |x-Sobel| over
 // the block would follow the pixel noise too closely to separate it from texture.
@@ -141,9 +147,15 @@ class OpenCvMatcher final : public DisparityMatcher {
     }
 
     // Texture gate, in the same pass: the window sum of |x-Sobel| against threshold * area
-    // (exact integer form of "window mean >= threshold").
+    // (exact integer form of "window mean >= threshold"). The threshold is given for the pixel
+    // noise it was chosen at (kGateReferenceNoise) and follows the frame's own noise: a noisy
+    // sensor's sky must not pass for texture, nor a clean sensor's faint object fail.
     ComputeTextureSum(left_rect);
-    const int64_t min_sum = int64_t{gate_.threshold} * gate_.window * gate_.window;
+    const double noise = EstimateNoiseSigma(left_rect);
+    const int threshold = std::max(
+        kMinGateThreshold, static_cast<int>(std::lround(gate_.threshold * noise / kGateReferenceNoise)));
+    last_gate_threshold_ = threshold;
+    const int64_t min_sum = int64_t{threshold} * gate_.window * gate_.window;
     for (int y = 0; y < out.fixed.rows; ++y) {
       const int16_t* src = raw_.ptr<int16_t>(y) + pad_columns_;
       const TextureSum* texture = texture_sum_.ptr<TextureSum>(y);
@@ -156,8 +168,10 @@ class OpenCvMatcher final : public DisparityMatcher {
   }
 
   const MatcherOptions& options() const override { return options_; }
+  int last_gate_threshold() const { return last_gate_threshold_; }
 
  private:
+  int last_gate_threshold_ = 0;
   // texture_sum_ (CV_32SC1, the left image's size) = sum over the gate window of
   // min(|x-Sobel|, 255) of `left`. The border is replicated, so the first and last columns get a
   // one-sided derivative rather than 0. Member buffers: allocated again only on a size change.
@@ -281,6 +295,38 @@ SadBlockMatcherParams SadParamsFor(const BlockMatchingOptions& o) {
   // Filtered on the fixed-point map: the range in 1/16 pixel.
   params.speckle_range = o.speckle_range * DisparityMap::kScale;
   return params;
+}
+
+double EstimateNoiseSigma(const cv::Mat& grey) {
+  CV_Assert(grey.type() == CV_8UC1);
+  if (grey.rows < 3 || grey.cols < 3) return 0.0;
+  // Immerkaer's operator (the difference of two Laplacians) cancels any local plane; its response
+  // to i.i.d. noise of sigma s has sigma 6 s. The median of its magnitude over every fourth row
+  // ignores the edges and texture that a minority of the pixels hold.
+  std::array<int, 4 * 255 * 4 + 1> histogram{};
+  int count = 0;
+  for (int y = 1; y + 1 < grey.rows; y += 4) {
+    const uchar* a = grey.ptr<uchar>(y - 1);
+    const uchar* b = grey.ptr<uchar>(y);
+    const uchar* c = grey.ptr<uchar>(y + 1);
+    for (int x = 1; x + 1 < grey.cols; ++x) {
+      const int r = a[x - 1] - 2 * a[x] + a[x + 1] - 2 * b[x - 1] + 4 * b[x] - 2 * b[x + 1] +
+                    c[x - 1] - 2 * c[x] + c[x + 1];
+      ++histogram[std::abs(r)];
+      ++count;
+    }
+  }
+  int seen = 0;
+  for (size_t v = 0; v < histogram.size(); ++v) {
+    seen += histogram[v];
+    if (2 * seen >= count) {
+      // |r| is quantised to whole grey levels: interpolate within the median's bin.
+      const double below = seen - histogram[v];
+      const double median = v - 0.5 + (0.5 * count - below) / std::max(1, histogram[v]);
+      return 1.4826 * std::max(0.0, median) / 6.0;
+    }
+  }
+  return 0.0;
 }
 
 std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options) {

@@ -47,7 +47,9 @@ struct BlockMatchingOptions {
   // Halo gate: a pixel keeps its disparity only when the mean |x-Sobel| of the left image over the
   // 5x5 window centred on it reaches this (the measure of SemiGlobalOptions::texture_threshold).
   // Block matching gives the flat sky within half a block of an object the object's disparity;
-  // the gate trims that halo to about 2 px, so boxes fit their objects. 0 disables.
+  // the gate trims that halo to about 2 px, so boxes fit their objects. 0 disables. The value is
+  // for a pixel noise of 2 grey levels: each frame's gate scales it by its measured noise / 2
+  // (EstimateNoiseSigma), down to 3.
   int local_texture_threshold = 14;
 
   std::vector<std::string> Validate() const;
@@ -86,6 +88,7 @@ struct SemiGlobalOptions {
   // sky away from obstacles 26 % -> 0.001 % matched) and keeps 99 % of the textured obstacles.
   // It also drops the nearly noise-free low-texture areas of Middlebury that SGM fills correctly
   // (filled bad pixels 4.7 % -> 8.5 %, see middlebury_test): use 0 for such low-noise imagery.
+  // Like the block matcher's gate, it is scaled by each frame's measured noise / 2 (down to 3).
   int texture_threshold = 14;
 
   std::vector<std::string> Validate() const;
@@ -108,6 +111,10 @@ struct MatcherOptions {
   int num_disparities() const;
   int min_disparity() const;
 };
+
+// The 1-sigma pixel noise of a grey image (grey levels), by Immerkaer's method with a median:
+// robust to the edges and texture of a minority of the pixels.
+double EstimateNoiseSigma(const cv::Mat& grey);
 
 // Thread-compatible: one instance per thread (OpenCV matchers keep state between calls, and the
 // padded images are reused buffers).
