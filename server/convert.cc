@@ -40,6 +40,8 @@ void ToProto(const detection::StereoBlobOptions& o, v1::BlobConfig* p) {
   p->set_max_depth_per_height(o.max_depth_per_height);
   p->set_min_terrain_height_m(o.min_terrain_height_m);
   p->set_max_attached_fraction(o.max_attached_fraction);
+  p->set_min_valid_px(o.min_valid_px);
+  p->set_join_gap_fraction(o.join_gap_fraction);
 }
 
 void MergeBlobs(const v1::BlobConfig& p, detection::StereoBlobOptions& o) {
@@ -51,6 +53,8 @@ void MergeBlobs(const v1::BlobConfig& p, detection::StereoBlobOptions& o) {
   STEVI_MERGE(p, max_depth_per_height, o.max_depth_per_height);
   STEVI_MERGE(p, min_terrain_height_m, o.min_terrain_height_m);
   STEVI_MERGE(p, max_attached_fraction, o.max_attached_fraction);
+  STEVI_MERGE(p, min_valid_px, o.min_valid_px);
+  STEVI_MERGE(p, join_gap_fraction, o.join_gap_fraction);
 }
 
 // "<path>: unknown value <n>", the problem of an enum value the schema does not know.
@@ -537,6 +541,8 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
       t->set_range_m(d.range_m);
     }
     t->set_range_sigma_m(d.range_sigma_m);
+    t->set_valid_fraction(d.valid_fraction);
+    t->set_disparity_sigma_px(d.disparity_sigma_px);
     SetPoint(track.position_cam_m, t->mutable_position_cam());
     t->set_disparity_px(d.disparity_px);
     t->set_score(d.score);

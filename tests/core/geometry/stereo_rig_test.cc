@@ -486,6 +486,11 @@ TEST(BinningFactor, IsTheSmallestWholeFactorThatFitsTheWidth) {
   EXPECT_EQ(BinningFactor(1920, 800), 3);
   EXPECT_EQ(BinningFactor(4096, 800), 6);
   EXPECT_EQ(BinningFactor(4096, 0), 1);  // 0: never bin
+  // No further than keeps the disparity floor (camera pixels) at 1.25 px or more when binned.
+  EXPECT_EQ(BinningFactor(1920, 800, 2.5), 2);
+  EXPECT_EQ(BinningFactor(1920, 800, 5.0), 3);
+  EXPECT_EQ(BinningFactor(1280, 800, 2.0), 1);
+  EXPECT_EQ(BinningFactor(1280, 800, 0.0), 2);
 }
 
 // BinImage against a plain average of each block, rounded to nearest, on noise whose size is not a
