@@ -36,12 +36,14 @@ constexpr double kMatcherBiasPx = 0.1;
 // Blobs shorter than this (rows, at 640 px wide) are never given the slope test: too few rows.
 constexpr int kMinTerrainRows640 = 12;
 // At most this many patches carry the sub-pixel fit (an even subsample), and at least this many.
-constexpr int kMaxRefinePatches = 64;
+constexpr int kMaxRefinePatches = 40;
 constexpr int kMinRefinePatches = 5;
 // What the patches' scatter does not show: the bias of bilinear interpolation and of sampling that
 // every patch shares (pixels, added in quadrature; about what regions_test measures on rendered
 // boxes, whose errors it leaves at 1 sigma rms).
 constexpr double kRefineSystematicPx = 0.03;
+// Hypotheses whose disparity's 1-sigma exceeds this fraction of it (10 % of the range) are dropped.
+constexpr double kMaxRelativeDisparitySigma = 0.1;
 
 struct Piece {
   cv::Rect box;
@@ -419,117 +421,113 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   //    with the nearest surface's disparity (a grey dilation), so that a sparsely matched object
   //    holds together; only the candidates' own disparities measure it. Each piece is then split
   //    where its disparities form separate depth modes.
-  cv::Mat1s linked_disparity(fixed.size(), stereo::DisparityMap::kInvalid);
-  cv::Mat1b candidates(fixed.size());
-  for (int y = 0; y < height; ++y) {
-    const uchar* a = appearance[y];
-    const uchar* c = classes[y];
-    const int16_t* d = fixed[y];
-    uchar* o = candidates[y];
-    int16_t* l = linked_disparity[y];
-    for (int x = 0; x < width; ++x) {
-      o[x] = (a[x] && c[x] == kCandidate) ? 255 : 0;
-      if (o[x]) l[x] = d[x];
-    }
-  }
+  // Per-frame buffers, kept between frames of a thread (no page faults for fresh memory).
+  thread_local cv::Mat1s linked_disparity, grown;
+  thread_local cv::Mat1b candidates, linked;
+  thread_local cv::Mat1i piece_labels, labels;
+  // (Whole-image steps are OpenCV's vectorised operations.)
+  cv::compare(classes, static_cast<double>(kCandidate), candidates, cv::CMP_EQ);
+  cv::bitwise_and(candidates, appearance, candidates);  // appearance is 0 or not: 255 & a
+  cv::compare(candidates, 0, candidates, cv::CMP_NE);
+  linked_disparity.create(fixed.size());
+  linked_disparity.setTo(stereo::DisparityMap::kInvalid);
+  fixed.copyTo(linked_disparity, candidates);
   const int link = ScaledKernel(kLinkSize640, width);
-  cv::Mat1s grown;
   cv::dilate(linked_disparity, grown, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(link, link)));
-  cv::Mat1b linked(fixed.size());
-  for (int y = 0; y < height; ++y) {
-    const uchar* a = appearance[y];
-    const uchar* o = candidates[y];
-    const int16_t* g = grown[y];
-    int16_t* l = linked_disparity[y];
-    uchar* k = linked[y];
-    for (int x = 0; x < width; ++x) {
-      if (!o[x] && a[x] && g[x] >= 0) l[x] = g[x];
-      k[x] = l[x] >= 0 ? 255 : 0;
-    }
-  }
+  // The appearance pixels that are not candidates take the grown disparity where there is one.
+  thread_local cv::Mat1b grow;
+  cv::compare(grown, 0, grow, cv::CMP_GE);
+  cv::bitwise_and(grow, appearance, grow);
+  cv::compare(grow, 0, grow, cv::CMP_NE);
+  cv::bitwise_and(grow, ~candidates, grow);
+  grown.copyTo(linked_disparity, grow);
+  cv::compare(linked_disparity, 0, linked, cv::CMP_GE);
   const int step_fixed = std::max(1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale)));
   const extraction::BlobSet blobs =
       options.max_disparity_step_px > 0
-          ? extraction::ExtractDisparityBlobs(linked, linked_disparity, step_fixed, kMinPieceDisparities)
+          ? extraction::ExtractDisparityBlobs(linked, linked_disparity, step_fixed, kMinPieceDisparities,
+                                              /*shapes=*/false)
           : extraction::ExtractBlobs(linked, kMinPieceDisparities);
   const int gap_bins = std::max(1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale / kBinFixed)));
-  cv::Mat1i piece_labels(fixed.size(), 0);
+  // Per blob, in whole-image passes (a blob's box overlaps others'): the quarter-pixel histogram
+  // of its candidates' disparities, its depth modes, and each mode's piece.
+  std::vector<int> blob_of(std::max(1, blobs.label_count), -1);  // label -> blob (-1: dropped)
+  for (size_t i = 0; i < blobs.blobs.size(); ++i) blob_of[blobs.blobs[i].label] = static_cast<int>(i);
+  const size_t blob_count = blobs.blobs.size();
+  int top_px = disparity.min_disparity + disparity.num_disparities;
+  if (disparity.num_disparities <= 0) {  // a map that does not say its search range
+    double top = 0;
+    cv::minMaxLoc(fixed, nullptr, &top);
+    top_px = static_cast<int>(top) / kScale;
+  }
+  const int bins = (std::max(1, top_px) + 1) * kScale / kBinFixed + 1;
+  std::vector<int> histogram(blob_count * bins, 0), counts(blob_count, 0);
+  for (int y = 0; y < height; ++y) {
+    const int* lab = blobs.labels[y];
+    const uchar* c = candidates[y];
+    const int16_t* d = fixed[y];
+    for (int x = 0; x < width; ++x) {
+      if ((lab[x] == 0) | (c[x] == 0)) continue;
+      const int b = blob_of[lab[x]];
+      if (b < 0) continue;
+      ++histogram[static_cast<size_t>(b) * bins + std::min(bins - 1, d[x] / kBinFixed)];
+      ++counts[b];
+    }
+  }
+  // Modes, and the piece of each (bin -> piece index, 0 = no mode).
   std::vector<Piece> pieces(1);  // piece 0 = nothing
-  std::vector<int> histogram;
-  std::vector<int> mode_of_bin;
-  for (const extraction::Blob& blob : blobs.blobs) {
-    const cv::Rect& box = blob.bbox;
-    int lo_fixed = INT16_MAX, hi_fixed = 0, n = 0;
-    for (int y = box.y; y < box.br().y; ++y) {
-      const int* lab = blobs.labels[y];
-      const uchar* c = candidates[y];
-      const int16_t* d = fixed[y];
-      for (int x = box.x; x < box.br().x; ++x) {
-        if (lab[x] != blob.label || !c[x]) continue;
-        lo_fixed = std::min<int>(lo_fixed, d[x]);
-        hi_fixed = std::max<int>(hi_fixed, d[x]);
-        ++n;
-      }
-    }
+  std::vector<int> piece_of_bin(histogram.size(), 0);
+  std::vector<int> blob_histogram;
+  for (size_t b = 0; b < blob_count; ++b) {
+    const int n = counts[b];
     if (n < kMinPieceDisparities) continue;
-    const int first_bin = lo_fixed / kBinFixed;
-    histogram.assign(hi_fixed / kBinFixed - first_bin + 1, 0);
-    for (int y = box.y; y < box.br().y; ++y) {
-      const int* lab = blobs.labels[y];
-      const uchar* c = candidates[y];
-      const int16_t* d = fixed[y];
-      for (int x = box.x; x < box.br().x; ++x) {
-        if (lab[x] == blob.label && c[x]) ++histogram[d[x] / kBinFixed - first_bin];
-      }
-    }
+    blob_histogram.assign(histogram.begin() + b * bins, histogram.begin() + (b + 1) * bins);
     // Bins holding fewer than 1 % of the values are empty: a sparse bridge is no mode.
     const int sparse = std::max(1, n / 100);
-    for (int& b : histogram) b = b >= sparse ? b : 0;
-    const std::vector<std::pair<int, int>> modes =
-        options.max_disparity_step_px > 0
-            ? DepthModes(histogram, n, gap_bins)
-            : std::vector<std::pair<int, int>>{{0, static_cast<int>(histogram.size()) - 1}};
-    if (modes.empty()) continue;
-    mode_of_bin.assign(histogram.size(), 0);
-    for (size_t m = 0; m < modes.size(); ++m) {
-      for (int b = modes[m].first; b <= modes[m].second; ++b) mode_of_bin[b] = static_cast<int>(m) + 1;
+    for (int& v : blob_histogram) v = v >= sparse ? v : 0;
+    std::vector<std::pair<int, int>> modes;
+    if (options.max_disparity_step_px > 0) {
+      modes = DepthModes(blob_histogram, n, gap_bins);
+    } else {
+      modes = {{0, bins - 1}};
     }
-    const int base = static_cast<int>(pieces.size()) - 1;
-    for (size_t m = 0; m < modes.size(); ++m) pieces.emplace_back();
-    std::vector<cv::Point> lo(modes.size(), cv::Point(INT32_MAX, INT32_MAX));
-    std::vector<cv::Point> hi(modes.size(), cv::Point(-1, -1));
-    std::vector<int> pixels(modes.size(), 0);
-    for (int y = box.y; y < box.br().y; ++y) {
-      const int* lab = blobs.labels[y];
-      const uchar* c = candidates[y];
-      const int16_t* d = fixed[y];
-      const int16_t* l = linked_disparity[y];
-      int* out_label = piece_labels[y];
-      for (int x = box.x; x < box.br().x; ++x) {
-        if (lab[x] != blob.label) continue;
-        // A linked pixel goes with the mode of the disparity it took.
-        const int bin = std::clamp(l[x] / kBinFixed - first_bin, 0, static_cast<int>(histogram.size()) - 1);
-        const int m = mode_of_bin[bin];
-        if (m == 0) continue;
-        Piece& p = pieces[base + m];
-        ++pixels[m - 1];
-        p.sum_x += x;
-        p.sum_y += y;
-        lo[m - 1].x = std::min(lo[m - 1].x, x);
-        lo[m - 1].y = std::min(lo[m - 1].y, y);
-        hi[m - 1].x = std::max(hi[m - 1].x, x);
-        hi[m - 1].y = std::max(hi[m - 1].y, y);
-        if (!c[x]) continue;
-        out_label[x] = base + m;
-        p.disparities.push_back(d[x]);
-      }
+    for (const auto& [first, last] : modes) {
+      pieces.emplace_back();
+      for (int k = first; k <= last; ++k) piece_of_bin[b * bins + k] = static_cast<int>(pieces.size()) - 1;
     }
-    for (size_t m = 0; m < modes.size(); ++m) {
-      Piece& p = pieces[base + 1 + m];
-      if (hi[m].x < 0) continue;
-      p.box = cv::Rect(lo[m].x, lo[m].y, hi[m].x - lo[m].x + 1, hi[m].y - lo[m].y + 1);
-      p.area = pixels[m];
+  }
+  std::vector<cv::Point> lo(pieces.size(), cv::Point(INT32_MAX, INT32_MAX));
+  std::vector<cv::Point> hi(pieces.size(), cv::Point(-1, -1));
+  piece_labels.create(fixed.size());
+  for (int y = 0; y < height; ++y) {
+    const int* lab = blobs.labels[y];
+    const uchar* c = candidates[y];
+    const int16_t* d = fixed[y];
+    const int16_t* l = linked_disparity[y];
+    int* out_label = piece_labels[y];
+    for (int x = 0; x < width; ++x) {
+      out_label[x] = 0;
+      if (lab[x] == 0) continue;
+      const int b = blob_of[lab[x]];
+      if (b < 0) continue;
+      // A linked pixel goes with the mode of the disparity it took.
+      const int k = piece_of_bin[static_cast<size_t>(b) * bins + std::min(bins - 1, l[x] / kBinFixed)];
+      if (k == 0) continue;
+      Piece& p = pieces[k];
+      ++p.area;
+      p.sum_x += x;
+      p.sum_y += y;
+      lo[k].x = std::min(lo[k].x, x);
+      lo[k].y = std::min(lo[k].y, y);
+      hi[k].x = std::max(hi[k].x, x);
+      hi[k].y = std::max(hi[k].y, y);
+      if (c[x] == 0) continue;
+      out_label[x] = k;
+      p.disparities.push_back(d[x]);
     }
+  }
+  for (size_t k = 1; k < pieces.size(); ++k) {
+    if (hi[k].x >= 0) pieces[k].box = cv::Rect(lo[k].x, lo[k].y, hi[k].x - lo[k].x + 1, hi[k].y - lo[k].y + 1);
   }
   const int piece_count = static_cast<int>(pieces.size());
   for (int i = 1; i < piece_count; ++i) {
@@ -539,7 +537,6 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   // 2. Pieces at one range join across gaps that scale with their size.
   std::vector<int> parent(piece_count);
   std::iota(parent.begin(), parent.end(), 0);
-  const int gap_fixed = static_cast<int>(std::lround(options.max_disparity_step_px * kScale));
   const double join_fraction = options.join_gap_fraction;
   if (join_fraction > 0) {
     for (int i = 1; i < piece_count; ++i) {
@@ -587,11 +584,11 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     g.sum_y += p.sum_y;
     g.disparities.insert(g.disparities.end(), p.disparities.begin(), p.disparities.end());
   }
-  cv::Mat1i labels(fixed.size(), 0);
+  labels.create(fixed.size());
   for (int y = 0; y < height; ++y) {
     const int* p = piece_labels[y];
     int* g = labels[y];
-    for (int x = 0; x < width; ++x) g[x] = p[x] ? group_of[p[x]] : 0;
+    for (int x = 0; x < width; ++x) g[x] = group_of[p[x]];
   }
 
   // 3. Filters and range.
@@ -603,7 +600,6 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   for (int g = 1; g <= group_count; ++g) {
     Piece& group = groups[g];
     const int n = static_cast<int>(group.disparities.size());
-    if (getenv("DEBUG_REGIONS")) fprintf(stderr, "group %d box %d,%d %dx%d area %d n %d\n", g, group.box.x, group.box.y, group.box.width, group.box.height, group.area, n);
     if (group.area < options.min_area_px || group.box.width > max_width_px) continue;
     if (n < std::max(options.min_valid_px, kMinPieceDisparities)) continue;
     const double box_area = static_cast<double>(group.box.area());
@@ -612,26 +608,8 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     // Range from the interior when there is enough of it: block matching spreads an object's
     // disparity a few pixels past its borders.
     const cv::Mat1b mask = labels(group.box) == g;
-    std::vector<int16_t> inner;
-    if (interior > 1) {
-      cv::Mat1b eroded;
-      cv::erode(mask, eroded, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(interior, interior)),
-                cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
-      Summarise(group);
-      for (int y = 0; y < eroded.rows; ++y) {
-        const uchar* e = eroded[y];
-        const uchar* c = classes[group.box.y + y] + group.box.x;
-        const int16_t* d = fixed[group.box.y + y] + group.box.x;
-        for (int x = 0; x < eroded.cols; ++x) {
-          if (e[x] && c[x] == kCandidate && std::abs(d[x] - group.median) <= 4 * std::max(gap_fixed, group.median / 10)) {
-            inner.push_back(d[x]);
-          }
-        }
-      }
-    }
-    const bool use_inner = static_cast<int>(inner.size()) >= std::max(30, n / 4);
-    const std::vector<int16_t>& values = use_inner ? inner : group.disparities;
-    const double median_px = static_cast<double>(Percentiles(values)[1]) / kScale;
+    Summarise(group);
+    const double median_px = static_cast<double>(group.median) / kScale;
     if (!geometry::IsTrustedDisparity(median_px, rig.f_px(), rig.baseline_m(), range)) continue;
     if (options.max_depth_per_height > 0 &&
         LeanBack(disparity, labels, g, group.box, median_px, rig, min_rows) > options.max_depth_per_height) {
@@ -658,7 +636,8 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     d.valid_disparities = n;
     d.valid_fraction = std::clamp(valid_fraction, 0.0, 1.0);
     d.disparity_sigma_px = range.disparity_sigma_px;
-    if (full != nullptr && !full->left.empty()) {
+    bool refined_ok = false;
+    if (full != nullptr && !full->left.empty() && !getenv("NOREFINE")) {
       const int k = std::max(1, full->binning);
       const cv::Rect full_box = cv::Rect(group.box.x * k, group.box.y * k, group.box.width * k,
                                          group.box.height * k) &
@@ -667,12 +646,15 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
       // halo at other disparities would pull it off its nearest face).
       const int band = std::max(kScale / 2, static_cast<int>(std::lround(0.03 * median_px * kScale)));
       const int median_fixed = static_cast<int>(std::lround(median_px * kScale));
-      cv::Mat1b at_range(mask.size(), uchar{0});
+      cv::Mat1b at_range(mask.size());
       for (int y = 0; y < mask.rows; ++y) {
         const int16_t* dd = fixed[group.box.y + y] + group.box.x;
         const uchar* c = classes[group.box.y + y] + group.box.x;
+        const uchar* m = mask[y];
+        uchar* o = at_range[y];
         for (int x = 0; x < mask.cols; ++x) {
-          at_range(y, x) = (mask(y, x) && c[x] == kCandidate && std::abs(dd[x] - median_fixed) <= band) ? 255 : 0;
+          const bool near = (m[x] != 0) & (c[x] == kCandidate) & (std::abs(dd[x] - median_fixed) <= band);
+          o[x] = near ? 255 : 0;
         }
       }
       cv::Mat1b full_mask;
@@ -684,8 +666,31 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
       if (refined && std::abs(refined->disparity_px - median_px * k) <= std::max(1.5 * k, 0.2 * median_px * k)) {
         d.disparity_px = refined->disparity_px / k;
         d.disparity_sigma_px = refined->sigma_px / k;
+        refined_ok = true;
       }
     }
+    if (!refined_ok && interior > 1) {
+      // No fit: the median of the interior when there is enough of it (block matching spreads an
+      // object's disparity a few pixels past its borders).
+      std::vector<int16_t> inner;
+      cv::Mat1b eroded;
+      cv::erode(mask, eroded, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(interior, interior)),
+                cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+      for (int y = 0; y < eroded.rows; ++y) {
+        const uchar* e = eroded[y];
+        const uchar* c = classes[group.box.y + y] + group.box.x;
+        const int16_t* dd = fixed[group.box.y + y] + group.box.x;
+        for (int x = 0; x < eroded.cols; ++x) {
+          if (e[x] && c[x] == kCandidate) inner.push_back(dd[x]);
+        }
+      }
+      if (static_cast<int>(inner.size()) >= std::max(30, n / 4)) {
+        d.disparity_px = static_cast<double>(Percentiles(inner)[1]) / kScale;
+      }
+    }
+    // A hypothesis whose own disparity is this uncertain says nothing about where it is: its
+    // range is not trusted.
+    if (d.disparity_sigma_px > kMaxRelativeDisparitySigma * d.disparity_px) continue;
     FillRange(d, rig, range);
     // Score: how much of the hypothesis the stereo supports, and how consistently.
     int consistent = 0;

@@ -89,7 +89,7 @@ void Unite(std::vector<int>& parent, int a, int b) {
 }  // namespace
 
 BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity, int max_step,
-                              int min_area_px) {
+                              int min_area_px, bool shapes) {
   BlobSet set;
   if (mask.empty()) return set;
   CV_Assert(disparity.size() == mask.size());
@@ -182,11 +182,14 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
     blob.centroid_px = cv::Point2d(static_cast<double>(a.sx) / a.area,
                                    static_cast<double>(a.sy) / a.area);
     blob.area_px = a.area;
-    const Shape shape = BlobShape(set.labels, label, blob.bbox);
-    blob.perimeter_px = shape.perimeter_px;
-    blob.moments = shape.moments;
+    if (shapes) {
+      const Shape shape = BlobShape(set.labels, label, blob.bbox);
+      blob.perimeter_px = shape.perimeter_px;
+      blob.moments = shape.moments;
+    }
     set.blobs.push_back(blob);
   }
+  set.label_count = static_cast<int>(acc.size());
   return set;
 }
 
@@ -199,6 +202,7 @@ BlobSet ExtractBlobs(const cv::Mat1b& mask, int min_area_px) {
   const int n =
       cv::connectedComponentsWithStats(mask, labels, stats, centroids, /*connectivity=*/8, CV_32S);
   set.labels = labels;
+  set.label_count = n;
   for (int label = 1; label < n; ++label) {
     const int area = stats.at<int>(label, cv::CC_STAT_AREA);
     if (area < min_area_px) continue;

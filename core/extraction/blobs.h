@@ -22,6 +22,7 @@ struct Blob {
 struct BlobSet {
   cv::Mat1i labels;  // 0 = background, else the blob's label (labels of dropped blobs are kept)
   std::vector<Blob> blobs;
+  int label_count = 0;  // every label in `labels` is below this (dropped blobs' included)
 };
 
 // Connected components (8-connectivity) of `mask` (non-zero = foreground) with at least
@@ -32,6 +33,6 @@ BlobSet ExtractBlobs(const cv::Mat1b& mask, int min_area_px);
 // (fixed point, CV_16S, the mask's size) differ by at most max_step: surfaces at different ranges
 // that touch in the image come out as separate blobs. Mask pixels must hold valid disparities.
 BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity, int max_step,
-                              int min_area_px);
+                              int min_area_px, bool shapes = true);
 
 }  // namespace stevi::extraction
