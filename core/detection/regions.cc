@@ -263,34 +263,36 @@ std::optional<RefinedDisparity> RefineDisparity(const cv::Mat1b& left, const cv:
   if (left.empty() || right.empty() || left.size() != right.size() || !(initial_px > 0)) {
     return std::nullopt;
   }
-  // Patches: on a grid of kCell pixels, the mask pixel of strongest horizontal gradient in each
-  // cell, so that the patches barely overlap and their errors are nearly independent.
-  constexpr int kCell = 5;
+  // Patches: on a grid of cells (5 px, larger for large objects, so that about twice
+  // kMaxRefinePatches cells cover the box), in each cell's middle row the mask pixel of strongest
+  // horizontal gradient, so that the patches barely overlap and their errors are nearly
+  // independent.
   constexpr int kHalf = 3;          // 7 x 7 patches
   constexpr double kSearchPx = 2.0; // how far a patch may move from the initial disparity
+  const int cell = std::max(5, static_cast<int>(std::lround(std::sqrt(
+                                  static_cast<double>(box.area()) / (2.0 * kMaxRefinePatches)))));
   const int margin = kHalf + 3;
   struct Seed {
     int gx;
     cv::Point at;
   };
   std::vector<Seed> seeds;
-  for (int cy = 0; cy < box.height; cy += kCell) {
-    for (int cx = 0; cx < box.width; cx += kCell) {
+  for (int cy = 0; cy < box.height; cy += cell) {
+    const int y = std::min(cy + cell / 2, box.height - 1);
+    const int v = box.y + y;
+    if (v < margin || v >= left.rows - margin) continue;
+    const uchar* m = mask[y];
+    const uchar* row = left[v];
+    for (int cx = 0; cx < box.width; cx += cell) {
       Seed best{0, {}};
-      for (int y = cy; y < std::min(cy + kCell, box.height); ++y) {
-        const int v = box.y + y;
-        if (v < margin || v >= left.rows - margin) continue;
-        const uchar* m = mask[y];
-        const uchar* row = left[v];
-        for (int x = cx; x < std::min(cx + kCell, box.width); ++x) {
-          const int u = box.x + x;
-          if (!m[x] || u < margin || u >= left.cols - margin ||
-              u - initial_px - kSearchPx < margin || u - initial_px + kSearchPx >= left.cols - margin) {
-            continue;
-          }
-          const int gx = std::abs(row[u + 1] - row[u - 1]);
-          if (gx > best.gx) best = {gx, cv::Point(u, v)};
+      for (int x = cx; x < std::min(cx + cell, box.width); ++x) {
+        const int u = box.x + x;
+        if (!m[x] || u < margin || u >= left.cols - margin ||
+            u - initial_px - kSearchPx < margin || u - initial_px + kSearchPx >= left.cols - margin) {
+          continue;
         }
+        const int gx = std::abs(row[u + 1] - row[u - 1]);
+        if (gx > best.gx) best = {gx, cv::Point(u, v)};
       }
       if (best.gx >= 2) seeds.push_back(best);
     }
