@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <numeric>
 #include <string>
@@ -75,14 +77,18 @@ std::array<int, 3> Percentiles(const std::vector<int16_t>& v) {
   return out;
 }
 
-void Summarise(Piece& p) {
+// `block_px`: the matcher's window, over which its errors are correlated.
+void Summarise(Piece& p, int block_px) {
   const std::array<int, 3> q = Percentiles(p.disparities);
   p.lo = q[0];
   p.median = q[1];
   p.hi = q[2];
   // The spread from the 10th to the 90th percentile is 2.563 sigma for a normal scatter; the
-  // median of n values has 1.2533 sigma / sqrt(n).
-  p.median_sigma = 1.2533 * (p.hi - p.lo) / 2.563 / std::sqrt(static_cast<double>(p.disparities.size()));
+  // median of n independent values has 1.2533 sigma / sqrt(n). A block matcher's neighbouring
+  // disparities share most of their window: about one independent value per half-window square.
+  const double independent = std::max(
+      1.0, static_cast<double>(p.disparities.size()) / std::max(1.0, 0.25 * block_px * block_px));
+  p.median_sigma = 1.2533 * std::max(p.hi - p.lo, 1) / 2.563 / std::sqrt(independent);
 }
 
 // The depth modes of a region's trusted disparities: runs of the quarter-pixel histogram separated
@@ -533,7 +539,7 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   }
   const int piece_count = static_cast<int>(pieces.size());
   for (int i = 1; i < piece_count; ++i) {
-    if (!pieces[i].disparities.empty()) Summarise(pieces[i]);
+    if (!pieces[i].disparities.empty()) Summarise(pieces[i], disparity.block_size);
   }
 
   // 2. Pieces at one range join across gaps that scale with their size.
@@ -602,6 +608,7 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   for (int g = 1; g <= group_count; ++g) {
     Piece& group = groups[g];
     const int n = static_cast<int>(group.disparities.size());
+    if (getenv("DEBUG_REGIONS")) fprintf(stderr, "group %d box %d,%d %dx%d area %d n %d\n", g, group.box.x, group.box.y, group.box.width, group.box.height, group.area, n);
     if (group.area < options.min_area_px || group.box.width > max_width_px) continue;
     if (n < std::max(options.min_valid_px, kMinPieceDisparities)) continue;
     const double box_area = static_cast<double>(group.box.area());
@@ -610,7 +617,7 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     // Range from the interior when there is enough of it: block matching spreads an object's
     // disparity a few pixels past its borders.
     const cv::Mat1b mask = labels(group.box) == g;
-    Summarise(group);
+    Summarise(group, disparity.block_size);
     const double median_px = static_cast<double>(group.median) / kScale;
     if (!geometry::IsTrustedDisparity(median_px, rig.f_px(), rig.baseline_m(), range)) continue;
     if (options.max_depth_per_height > 0 &&
@@ -619,10 +626,10 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     }
     const double height_m = group.box.height * (rig.f_px() * rig.baseline_m() / median_px) / rig.f_px();
     const bool too_short = group.box.height < min_rows || height_m < options.min_terrain_height_m;
-    // (Without a ground model too: an object in the sky has no ring of disparities, and one in
-    // front of terrain stands out from it.)
-    if (options.max_attached_fraction < 1 && too_short &&
-        (!ground || group.box.y + group.box.height > ground->horizon_row) &&
+    // Terrain is below the horizon: the ground model's, or without one the principal point's
+    // row (a level camera's horizon).
+    const double horizon_row = ground ? ground->horizon_row : rig.cy();
+    if (options.max_attached_fraction < 1 && too_short && group.box.y + group.box.height > horizon_row &&
         AttachedFraction(disparity, labels, g, group.box, median_px, range.min_disparity_px, ring_in,
                          ring_out) > options.max_attached_fraction) {
       continue;  // a patch of a continuous surface

@@ -17,6 +17,8 @@ struct DisparityMap {
   cv::Mat1s fixed;         // CV_16SC1, the left image's size
   int min_disparity = 0;   // search range used, pixels
   int num_disparities = 0;
+  // The matcher's window (pixels): its errors are correlated over about this distance.
+  int block_size = 1;
 
   bool empty() const { return fixed.empty(); }
   // Disparity in pixels at (x, y), or nullopt when unmatched.

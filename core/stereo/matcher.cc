@@ -108,6 +108,7 @@ class OpenCvMatcher final : public DisparityMatcher {
     DisparityMap out;
     out.min_disparity = options_.min_disparity();
     out.num_disparities = options_.num_disparities();
+    out.block_size = block_size_;
     if (left_rect.empty()) return out;
     out.fixed.create(left_rect.size());
     const int width = left_rect.cols + pad_columns_;

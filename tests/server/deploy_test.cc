@@ -85,7 +85,7 @@ std::string SystemdAnalyze() {
 // The example configs.
 
 const char* const kConfigNames[] = {"demo.textproto", "ground-rig.textproto",
-                                    "vehicle-gps.textproto"};
+                                    "telephoto-long-range.textproto", "vehicle-gps.textproto"};
 
 v1::ServerConfig LoadOrFail(const std::string& name) {
   Result<v1::ServerConfig> config = LoadServerConfig(SourcePath("deploy/config/").append(name));
@@ -141,6 +141,19 @@ TEST(DeployConfigs, VehicleTakesItsPoseFromTheAutopilotAndRecordsFromBoot) {
   EXPECT_TRUE(vehicle.geo().has_max_age_s());
   EXPECT_EQ(vehicle.record().dir(), "/var/lib/stevi/recordings/boot");
   EXPECT_EQ(vehicle.record().max_bytes(), 20'000'000'000u);
+}
+
+TEST(DeployConfigs, TelephotoRigLeavesTheDefaultsThatFollowTheRig) {
+  const v1::ServerConfig tele = LoadOrFail("telephoto-long-range.textproto");
+  EXPECT_EQ(tele.source().kind(), v1::SOURCE_KIND_ARAVIS);
+  EXPECT_EQ(tele.source().aravis().width(), 1280u);
+  EXPECT_EQ(tele.pipeline().algorithm(), v1::ALGORITHM_STEVIE);
+  // The binning, the disparity floor and the detectors' sizes are the defaults, which follow the
+  // rig (tests/core/pipeline/long_range_test runs this rig with them); only a site range limit.
+  EXPECT_FALSE(tele.pipeline().has_max_width_px());
+  EXPECT_FALSE(tele.pipeline().range().has_min_disparity_px());
+  EXPECT_DOUBLE_EQ(tele.pipeline().range().max_range_m(), 1500);
+  EXPECT_FALSE(tele.pipeline().has_stevie());
 }
 
 TEST(DeployConfigs, GroundRigSitsAtPisaRunway04RAndServesTheNetworkWithAuthentication) {
