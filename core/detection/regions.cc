@@ -4,10 +4,6 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
-#include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <numeric>
 #include <string>
@@ -215,8 +211,14 @@ double LeanBack(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, 
   const cv::Vec3d p = inverse * atd;  // alpha, beta, disparity at the box centre
   const double residual = std::max(0.0, dd - p.dot(atd));
   const double sigma2 = std::max(residual / std::max(1, n - 3), 1e-4);
-  const double beta = p[1];
-  if (!(beta > 3.0 * std::sqrt(sigma2 * inverse(1, 1)))) return 0;
+  // A block matcher's neighbouring disparities share most of their window: about one
+  // independent value per half-window square, so the fit's standard error is that much larger.
+  const int block = std::max(1, disparity.block_size);
+  const double correlated = std::max(1.0, 0.25 * block * block);
+  const double beta_se = std::sqrt(sigma2 * inverse(1, 1) * std::min(correlated, static_cast<double>(n)));
+  // The lean that the fit shows beyond doubt: beta less three standard errors.
+  const double beta = p[1] - 3.0 * beta_se;
+  if (!(beta > 0)) return 0;
   // gamma + alpha cx + beta cy with gamma the disparity at (0, 0): the plane's disparity at the
   // principal point.
   const double at_principal = p[2] + p[0] * (rig.cx() - u0) + beta * (rig.cy() - v0);
@@ -608,7 +610,6 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   for (int g = 1; g <= group_count; ++g) {
     Piece& group = groups[g];
     const int n = static_cast<int>(group.disparities.size());
-    if (getenv("DEBUG_REGIONS")) fprintf(stderr, "group %d box %d,%d %dx%d area %d n %d\n", g, group.box.x, group.box.y, group.box.width, group.box.height, group.area, n);
     if (group.area < options.min_area_px || group.box.width > max_width_px) continue;
     if (n < std::max(options.min_valid_px, kMinPieceDisparities)) continue;
     const double box_area = static_cast<double>(group.box.area());
@@ -619,7 +620,6 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     const cv::Mat1b mask = labels(group.box) == g;
     Summarise(group, disparity.block_size);
     const double median_px = static_cast<double>(group.median) / kScale;
-    if (!geometry::IsTrustedDisparity(median_px, rig.f_px(), rig.baseline_m(), range)) continue;
     if (options.max_depth_per_height > 0 &&
         LeanBack(disparity, labels, g, group.box, median_px, rig, min_rows) > options.max_depth_per_height) {
       continue;  // terrain leaning back, or level ground
@@ -646,7 +646,7 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     d.valid_fraction = std::clamp(valid_fraction, 0.0, 1.0);
     d.disparity_sigma_px = range.disparity_sigma_px;
     bool refined_ok = false;
-    if (full != nullptr && !full->left.empty() && !getenv("NOREFINE")) {
+    if (full != nullptr && !full->left.empty()) {
       const int k = std::max(1, full->binning);
       const cv::Rect full_box = cv::Rect(group.box.x * k, group.box.y * k, group.box.width * k,
                                          group.box.height * k) &

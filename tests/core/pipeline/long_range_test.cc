@@ -5,10 +5,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <string>
 #include <memory>
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/pipeline/pipeline.h"
 #include "drivers/synthetic/synthetic_source.h"
@@ -83,6 +87,13 @@ TEST(LongRange, DefaultsRangeAnApproachingAirlinerAndACrossingAircraftHonestly) 
         if (o.visible_px < 100) continue;
         objects.push_back(&o);
         truth_boxes.push_back(o.bbox);
+      }
+      if (const char* dump = std::getenv("STEVI_DUMP")) {
+        cv::Mat3b out;
+        cv::cvtColor(frame.left, out, cv::COLOR_GRAY2BGR);
+        for (const cv::Rect& r : truth_boxes) cv::rectangle(out, r, {0, 255, 0}, 2);
+        for (const cv::Rect& r : detected) cv::rectangle(out, r, {0, 0, 255}, 2);
+        cv::imwrite(std::string(dump) + "/long_range_" + std::to_string(static_cast<int>(range)) + ".png", out);
       }
       expected += static_cast<int>(objects.size());
       boxes += static_cast<int>(detected.size());
