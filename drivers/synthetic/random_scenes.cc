@@ -253,6 +253,7 @@ struct FamilySpec {
   double z_lo = 5, z_hi = 1500;                       // camera depth range, metres
   double contrast_lo = 0.1, contrast_hi = 1.0;
   bool prefer_sky = false;      // airborne obstacles above the horizon
+  double parked = 0.0;          // the chance that an aircraft stands on the ground
   double scale = 1.0;           // size factor (close: smaller things)
 };
 
@@ -280,7 +281,9 @@ std::string PickKind(Rng& rng, const FamilySpec& spec) {
 
 Shape MakeShape(Rng& rng, const std::string& kind, const FamilySpec& spec) {
   const double k = spec.scale;
-  if (kind == "aircraft") return Aircraft(rng, rng.LogUniform(6.0, 40.0) * k, rng.Chance(0.2));
+  if (kind == "aircraft") {
+    return Aircraft(rng, rng.LogUniform(6.0, 40.0) * k, rng.Chance(spec.parked));
+  }
   if (kind == "drone") return Drone(rng, rng.LogUniform(0.4, 2.0));
   if (kind == "balloon") {
     return Balloon(rng, k < 1.0 ? rng.LogUniform(0.5, 2.5) : rng.LogUniform(1.0, 18.0));
@@ -332,6 +335,7 @@ FamilySpec SetUpFamily(const std::string& family, Rng& rng, Camera& cam, Synthet
                   {"aircraft", 0.25}, {"drone", 0.15}};
     spec.z_lo = 15.0;
     spec.z_hi = 400.0;
+    spec.parked = 0.3;
     if (rng.Chance(0.5)) {  // a runway along z, with edge lines and a dashed centreline
       const double x = rng.Uniform(-60.0, 60.0), half = rng.Uniform(12.0, 22.0);
       const double asphalt = rng.Uniform(0.2, 0.38);

@@ -11,7 +11,7 @@
 //     high up (60..400 m, pitch 0..+12 deg) or low and pitched up (+10..+25 deg); any image size
 //     and f 500..2500 px, B 0.2..1 m; ranges 10..800 m.
 //   - "airfield": the camera 2..30 m over textured ground (sometimes a runway), pitch -10..+5 deg;
-//     towers, poles and buildings standing on the ground, aircraft parked or flying low, drones;
+//     towers, poles and buildings standing on the ground, aircraft parked (30 %) or flying, drones;
 //     f 400..1600 px, B 0.2..0.8 m; ranges 15..400 m.
 //   - "long_range": a telephoto rig (f 2000..6000 px, B 0.3..1 m, 1280x720 to 1920x1200) near the
 //     ground (2..20 m, pitch 0..+5 deg); aircraft 200..1500 m away on approach or crossing, and
