@@ -99,6 +99,12 @@ std::vector<std::string> Scene::Validate() const {
         "ground_texture_cell_m", "must be > 0", problems);
   Check(!InUnit(sky_top), "sky_top", "must be in 0..1", problems);
   Check(!InUnit(sky_horizon), "sky_horizon", "must be in 0..1", problems);
+  Check(!(std::abs(camera_pitch_deg) <= 45.0), "camera_pitch_deg", "must be in -45..45",
+        problems);
+  Check(!InUnit(cloud_cover), "cloud_cover", "must be in 0..1", problems);
+  Check(!(std::abs(cloud_grey) <= 1.0), "cloud_grey", "must be in -1..1", problems);
+  Check(!(cloud_scale > 0.0) || !std::isfinite(cloud_scale), "cloud_scale", "must be > 0",
+        problems);
 
   std::map<int, size_t> first_with_id;
   for (size_t i = 0; i < obstacles.size(); ++i) {
@@ -110,8 +116,18 @@ std::vector<std::string> Scene::Validate() const {
           "duplicate id " + std::to_string(o.id) + " (also obstacles[" +
               std::to_string(it->second) + "])",
           problems);
-    Check(!(o.size_m[0] > 0.0 && o.size_m[1] > 0.0 && o.size_m[2] > 0.0) || !Finite(o.size_m),
-          prefix + "size_m", "every side must be > 0", problems);
+    if (o.parts.empty()) {
+      Check(!(o.size_m[0] > 0.0 && o.size_m[1] > 0.0 && o.size_m[2] > 0.0) || !Finite(o.size_m),
+            prefix + "size_m", "every side must be > 0", problems);
+    }
+    for (size_t k = 0; k < o.parts.size(); ++k) {
+      const ObstaclePart& part = o.parts[k];
+      const std::string part_prefix = prefix + "parts[" + std::to_string(k) + "].";
+      Check(!Finite(part.offset_m), part_prefix + "offset_m", "must be finite", problems);
+      Check(!(part.size_m[0] > 0.0 && part.size_m[1] > 0.0 && part.size_m[2] > 0.0) ||
+                !Finite(part.size_m),
+            part_prefix + "size_m", "every side must be > 0", problems);
+    }
     Check(!InUnit(o.albedo), prefix + "albedo", "must be in 0..1", problems);
     Check(!InUnit(o.contrast), prefix + "contrast", "must be in 0..1", problems);
     Check(!(o.texture_cell_m > 0.0) || !std::isfinite(o.texture_cell_m), prefix + "texture_cell_m",

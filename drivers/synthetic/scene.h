@@ -1,8 +1,11 @@
-// A scene description for the synthetic rig. World frame = the left camera's frame at rest:
-// x right, y down, z forward, metres. The camera looks along +z (level, no pitch); the ground is
-// the plane y = camera_height_m. Besides the obstacles (boxes, the only things with an obstacle
-// id), the ground may carry hills (half-buried ellipsoids) and flat painted marks: they are
-// terrain, object_id 0 in the truth, like the ground.
+// A scene description for the synthetic rig. World frame = the left camera's centre at rest,
+// level: x right, y down, z forward, metres. The camera looks along +z pitched up by
+// Scene::camera_pitch_deg (0 = level; roll is always 0, and both views are pitched alike, so
+// the rig stays rectified); the ground is the world plane y = camera_height_m. Besides the
+// obstacles (boxes, or composites of boxes and ellipsoids: the only things with an obstacle id),
+// the ground may carry hills (half-buried ellipsoids) and flat painted marks: they are terrain,
+// object_id 0 in the truth, like the ground. The sky (object_id -1, disparity 0) is a vertical
+// gradient with optional clouds at infinity.
 #pragma once
 
 #include <string>
@@ -30,15 +33,31 @@ struct Path {
   cv::Vec3d PositionAt(double t_s) const;
 };
 
-// An axis-aligned textured box.
+// One solid of a composite obstacle: an axis-aligned box or an axis-aligned ellipsoid, centred
+// at offset_m from the obstacle's position (its path), with full extents size_m (an ellipsoid's
+// diameters). Parts share the obstacle's id, albedo and texture.
+struct ObstaclePart {
+  enum class Shape { kBox, kEllipsoid };
+  Shape shape = Shape::kBox;
+  cv::Vec3d offset_m{0.0, 0.0, 0.0};
+  cv::Vec3d size_m{1.0, 1.0, 1.0};  // every side > 0
+};
+
+// An obstacle: an axis-aligned textured box of size_m centred on its path (parts empty, the
+// classic), or a composite of parts (size_m is then unused): an aircraft, a drone, a tower...
+// Boxes are shaded by face orientation (edges show); ellipsoids are lit from above like hills.
 struct Obstacle {
   int id = 0;                // > 0, unique in the scene
   std::string name;
-  cv::Vec3d size_m;          // x (width), y (height), z (depth)
+  cv::Vec3d size_m;          // x (width), y (height), z (depth); parts empty only
   Path path;
   double albedo = 0.5;       // mean grey level 0..1 of its texture
   double contrast = 0.35;    // texture contrast 0..1
   double texture_cell_m = 0.15;  // finest texture detail, metres
+  // What it is, copied to the truth: "box", "aircraft", "drone", "tower", "pole", "building",
+  // "balloon".
+  std::string kind = "box";
+  std::vector<ObstaclePart> parts;  // empty: one box of size_m
 };
 
 // A smooth bump of the terrain: the part of the ellipsoid
@@ -89,6 +108,16 @@ struct Scene {
   double ground_texture_cell_m = 0.4;
   double sky_top = 0.55;          // grey of the sky at the top row, 0..1
   double sky_horizon = 0.9;       // grey at the horizon
+  // The camera's pitch, degrees, positive up (|pitch| <= 45). The horizon is then the row
+  // cy + f tan(pitch); the sky gradient runs from sky_horizon there to sky_top cy rows above.
+  double camera_pitch_deg = 0.0;
+  // Clouds: low-frequency noise in the sky's grey, at infinity (disparity 0, object_id -1).
+  // cloud_cover 0..1 (0 = none), cloud_grey the grey the densest cloud adds to the sky (-1..1:
+  // negative for dark clouds), cloud_scale the size of the largest cloud features as a fraction
+  // of the image width (> 0). Clouds fade out towards the horizon.
+  double cloud_cover = 0.0;
+  double cloud_grey = 0.2;
+  double cloud_scale = 0.3;
   std::vector<Obstacle> obstacles;
   // Terrain (object_id 0, never in the truth's obstacle list).
   std::vector<Hill> hills;

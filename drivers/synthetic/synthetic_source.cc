@@ -4,10 +4,12 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <sstream>
 #include <utility>
 
 #include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace stevi::drivers {
 namespace {
@@ -95,10 +97,13 @@ inline float Texture(uint32_t seed, double s, double t, double cell_m, double fo
   return sum;
 }
 
-// One obstacle at the frame's time.
+// One solid of an obstacle at the frame's time: a box, or the ellipsoid inscribed in it.
 struct Box {
   int id = 0;
-  cv::Vec3d lo, hi, centre;  // corners and centre, world (= cam) frame, metres
+  int obstacle = 0;          // index in Scene::obstacles
+  bool ellipsoid = false;
+  cv::Vec3d lo, hi, centre;  // corners and centre, world frame, metres
+  cv::Vec3d inv_r;           // ellipsoid: 1 / semi-axes
   float albedo = 0, contrast = 0;
   double cell_m = 0;
   uint32_t seed[3] = {0, 0, 0};  // texture seed per face axis (x, y, z)
@@ -159,7 +164,7 @@ double DashedCoverZ(const DashedLine& line, double z0, double z1) {
 
 // Everything one frame's rows need; read-only while the rows render.
 struct FrameSetup {
-  std::vector<Box> boxes;
+  std::vector<Box> boxes;           // every solid of every obstacle, in obstacle order
   std::vector<PixelRect> rects[2];  // per view: 0 left, 1 right
   double origin_x[2] = {0.0, 0.0};  // camera centre x per view, metres
   cv::Vec3d rig_offset{0.0, 0.0, 0.0};  // the moving rig's offset from its rest position
@@ -174,10 +179,25 @@ struct SyntheticRenderer::Impl {
   std::vector<std::array<uint32_t, 3>> face_seeds;  // per obstacle, per face axis
   std::vector<HillGeom> hills;                      // static terrain
   double hill_light[3] = {0.0, 0.0, 0.0};           // unit vector towards the light
+  // The pitch: a camera ray (a, b, 1) is the world direction (a, b cp - sp, b sp + cp), whose
+  // parameter t is still the camera depth. Level: cp = 1, sp = 0 exactly.
+  bool pitched = false;
+  double cp = 1.0, sp = 0.0;
+  double horizon_v = 0.0;  // the row of the horizon (cy + f tan(pitch))
+  // Clouds: per view, the sky's grey per pixel (gradient and clouds), computed once.
+  cv::Mat1f sky_layer[2];
+  bool effects = false;  // any sensor effect besides the noise
 
   explicit Impl(SyntheticOptions o) : options(std::move(o)) {
     cx = options.width / 2.0;
     cy = options.height / 2.0;
+    const double pitch_rad = options.scene.camera_pitch_deg * 3.14159265358979323846 / 180.0;
+    pitched = pitch_rad != 0.0;
+    cp = std::cos(pitch_rad);
+    sp = std::sin(pitch_rad);
+    horizon_v = pitched ? cy + options.f_px * std::tan(pitch_rad) : cy;
+    effects = options.blur_sigma_px > 0.0 || options.vignetting > 0.0 ||
+              options.right_gain != 1.0 || options.right_vertical_shift_px != 0.0;
     ground_seed = static_cast<uint32_t>(Mix(options.seed, 0x67726F756E64ull));  // "ground"
     for (const Obstacle& ob : options.scene.obstacles) {
       std::array<uint32_t, 3> s{};
@@ -220,6 +240,67 @@ struct SyntheticRenderer::Impl {
       }
       hills.push_back(g);
     }
+    if (options.scene.cloud_cover > 0.0) BuildSkyLayers();
+  }
+
+  // The row coordinate the rays of `view`'s row v go through (the right image's misalignment).
+  double RayRow(int view, int v) const {
+    return view == 1 && options.right_vertical_shift_px != 0.0
+               ? v - options.right_vertical_shift_px
+               : static_cast<double>(v);
+  }
+
+  // World direction (per row): y and z components of the ray through row coordinate vr.
+  void RowDirection(double vr, double& dy, double& dz) const {
+    const double b = (vr - cy) / options.f_px;
+    dy = b * cp - sp;
+    dz = b * sp + cp;
+  }
+
+  // Cloud density 0..1 at pixel (u, vr): thresholded fractal value noise, fading out towards
+  // the horizon. A function of the ray's direction only (clouds are at infinity): both views
+  // see it alike.
+  float CloudDensity(uint32_t seed, double u, double vr) const {
+    const Scene& scene = options.scene;
+    const double above = horizon_v - vr;
+    if (above <= 0.0) return 0.0f;
+    const double scale_px = scene.cloud_scale * options.width;
+    double n = 0.0, weight = 0.5, norm = 0.0, size = scale_px;
+    for (int k = 0; k < 4; ++k) {
+      n += weight * ValueNoise(seed + static_cast<uint32_t>(k) * 0x5BD1E995u, u / size + 0.31 * k,
+                               vr / size + 0.57 * k);
+      norm += weight;
+      weight *= 0.5;
+      size *= 0.5;
+    }
+    n /= norm;  // ~0.5 +- 0.2
+    const double threshold = 0.5 + 0.3 * (0.5 - scene.cloud_cover);
+    const double density = std::clamp((n - threshold) / 0.12, 0.0, 1.0);
+    const double fade = std::clamp(above / (0.08 * options.height), 0.0, 1.0);
+    return static_cast<float>(SmoothStep(static_cast<float>(density)) * fade);
+  }
+
+  void BuildSkyLayers() {
+    const uint32_t seed = static_cast<uint32_t>(Mix(options.seed, 0x636C6F7564ull));  // "cloud"
+    const auto grey = static_cast<float>(options.scene.cloud_grey);
+    for (int view = 0; view < 2; ++view) {
+      if (view == 1 && options.right_vertical_shift_px == 0.0) {
+        sky_layer[1] = sky_layer[0];
+        break;
+      }
+      cv::Mat1f& layer = sky_layer[view];
+      layer.create(options.height, options.width);
+      cv::parallel_for_(cv::Range(0, options.height), [&](const cv::Range& rows) {
+        for (int v = rows.start; v < rows.end; ++v) {
+          const double vr = RayRow(view, v);
+          const float sky = SkyGrey(vr);
+          float* out = layer[v];
+          for (int u = 0; u < options.width; ++u) {
+            out[u] = sky + grey * CloudDensity(seed, u, vr);
+          }
+        }
+      });
+    }
   }
 
   double TimeOf(int64_t index) const { return static_cast<double>(index) / options.fps; }
@@ -231,16 +312,29 @@ struct SyntheticRenderer::Impl {
     const auto& obstacles = options.scene.obstacles;
     for (size_t i = 0; i < obstacles.size(); ++i) {
       const Obstacle& ob = obstacles[i];
-      Box box;
-      box.id = ob.id;
-      box.centre = ob.path.PositionAt(t_s) - setup.rig_offset;
-      box.lo = box.centre - ob.size_m * 0.5;
-      box.hi = box.centre + ob.size_m * 0.5;
-      box.albedo = static_cast<float>(ob.albedo);
-      box.contrast = static_cast<float>(ob.contrast);
-      box.cell_m = ob.texture_cell_m;
-      for (int axis = 0; axis < 3; ++axis) box.seed[axis] = face_seeds[i][axis];
-      setup.boxes.push_back(box);
+      const cv::Vec3d position = ob.path.PositionAt(t_s) - setup.rig_offset;
+      const size_t n_parts = std::max<size_t>(1, ob.parts.size());
+      for (size_t k = 0; k < n_parts; ++k) {
+        Box box;
+        box.id = ob.id;
+        box.obstacle = static_cast<int>(i);
+        cv::Vec3d size = ob.size_m;
+        box.centre = position;
+        if (!ob.parts.empty()) {
+          const ObstaclePart& part = ob.parts[k];
+          size = part.size_m;
+          box.centre = position + part.offset_m;
+          box.ellipsoid = part.shape == ObstaclePart::Shape::kEllipsoid;
+        }
+        box.lo = box.centre - size * 0.5;
+        box.hi = box.centre + size * 0.5;
+        for (int axis = 0; axis < 3; ++axis) box.inv_r[axis] = 2.0 / size[axis];
+        box.albedo = static_cast<float>(ob.albedo);
+        box.contrast = static_cast<float>(ob.contrast);
+        box.cell_m = ob.texture_cell_m;
+        for (int axis = 0; axis < 3; ++axis) box.seed[axis] = face_seeds[i][axis];
+        setup.boxes.push_back(box);
+      }
     }
     for (int view = 0; view < 2; ++view) {
       for (const Box& box : setup.boxes) {
@@ -254,21 +348,45 @@ struct SyntheticRenderer::Impl {
   PixelRect Project(const Box& box, double ox) const {
     const int w = options.width, h = options.height;
     PixelRect r;
-    if (box.hi[2] <= kNearM) return r;  // behind the camera
-    if (box.lo[2] <= kNearM) return PixelRect{0, w - 1, 0, h - 1};
     const double f = options.f_px;
     double umin = std::numeric_limits<double>::infinity(), umax = -umin;
     double vmin = umin, vmax = -umin;
-    for (double z : {box.lo[2], box.hi[2]}) {
-      for (double x : {box.lo[0], box.hi[0]}) {
-        const double u = cx + f * (x - ox) / z;
-        umin = std::min(umin, u);
-        umax = std::max(umax, u);
+    if (pitched) {
+      // The eight corners in the camera frame: cam = R^T world.
+      int behind = 0;
+      for (double z : {box.lo[2], box.hi[2]}) {
+        for (double y : {box.lo[1], box.hi[1]}) {
+          const double yc = y * cp + z * sp, zc = z * cp - y * sp;
+          if (zc <= kNearM) {
+            ++behind;
+            continue;
+          }
+          for (double x : {box.lo[0], box.hi[0]}) {
+            const double u = cx + f * (x - ox) / zc;
+            umin = std::min(umin, u);
+            umax = std::max(umax, u);
+          }
+          const double v = cy + f * yc / zc;
+          vmin = std::min(vmin, v);
+          vmax = std::max(vmax, v);
+        }
       }
-      for (double y : {box.lo[1], box.hi[1]}) {
-        const double v = cy + f * y / z;
-        vmin = std::min(vmin, v);
-        vmax = std::max(vmax, v);
+      if (behind == 4) return r;  // all behind the camera
+      if (behind > 0) return PixelRect{0, w - 1, 0, h - 1};
+    } else {
+      if (box.hi[2] <= kNearM) return r;  // behind the camera
+      if (box.lo[2] <= kNearM) return PixelRect{0, w - 1, 0, h - 1};
+      for (double z : {box.lo[2], box.hi[2]}) {
+        for (double x : {box.lo[0], box.hi[0]}) {
+          const double u = cx + f * (x - ox) / z;
+          umin = std::min(umin, u);
+          umax = std::max(umax, u);
+        }
+        for (double y : {box.lo[1], box.hi[1]}) {
+          const double v = cy + f * y / z;
+          vmin = std::min(vmin, v);
+          vmax = std::max(vmax, v);
+        }
       }
     }
     // Clamp in double first: far-off boxes must not overflow int.
@@ -282,10 +400,11 @@ struct SyntheticRenderer::Impl {
     return r;
   }
 
-  float SkyGrey(int v) const {
+  float SkyGrey(double v) const {
     const Scene& s = options.scene;
-    if (v >= cy) return static_cast<float>(s.sky_horizon);
-    const double frac = (cy - v) / cy;  // 1 at row 0, 0 at the horizon row
+    if (v >= horizon_v) return static_cast<float>(s.sky_horizon);
+    // 1 at row 0 (level camera), cy rows above the horizon; 0 at the horizon row.
+    const double frac = std::min(1.0, (horizon_v - v) / cy);
     return static_cast<float>(s.sky_horizon + (s.sky_top - s.sky_horizon) * frac);
   }
 
@@ -326,24 +445,72 @@ struct SyntheticRenderer::Impl {
     return shade * (g.albedo + 2.0f * g.contrast * tex);
   }
 
-  // Ray-casts and shades row v of one view. `grey` (nullable) gets the 8-bit image row,
-  // `disparity`, `ids` and `stats` (all nullable) the truth of the row.
-  void RenderRow(const FrameSetup& setup, int view, int v, uint8_t* grey, float* disparity,
-                 int* ids, RowStat* stats, cv::RNG* rng) const {
+  // Grey of the ellipsoid solid's surface point (x, y, z) (world), seen at camera depth `depth`:
+  // lit like a hill, textured triplanar in the solid's own frame (so the texture moves with it).
+  // A function of the world point and its depth alone, so both views shade it alike.
+  float ShadeEllipsoid(const Box& box, double x, double y, double z, double depth) const {
+    const double p[3] = {x - box.centre[0], y - box.centre[1], z - box.centre[2]};
+    double n[3] = {p[0] * box.inv_r[0] * box.inv_r[0], p[1] * box.inv_r[1] * box.inv_r[1],
+                   p[2] * box.inv_r[2] * box.inv_r[2]};
+    const double n_norm = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (n_norm > 0.0) {
+      for (double& c : n) c /= n_norm;
+    }
+    const double footprint = depth / options.f_px;
+    const double n2[3] = {n[0] * n[0], n[1] * n[1], n[2] * n[2]};
+    const double floor2 = kHillBlendFloor * std::max({n2[0], n2[1], n2[2]});
+    const double wx = std::max(0.0, n2[0] - floor2);
+    const double wy = std::max(0.0, n2[1] - floor2);
+    const double wz = std::max(0.0, n2[2] - floor2);
+    const double w_sum = wx + wy + wz;
+    float tex = 0.0f;
+    if (w_sum > 0.0) {
+      if (wy > 0.0) {
+        tex += static_cast<float>(wy / w_sum) *
+               Texture(box.seed[1], p[0], p[2], box.cell_m, footprint);
+      }
+      if (wz > 0.0) {
+        tex += static_cast<float>(wz / w_sum) *
+               Texture(box.seed[2], p[0], p[1], box.cell_m, footprint);
+      }
+      if (wx > 0.0) {
+        tex += static_cast<float>(wx / w_sum) *
+               Texture(box.seed[0], p[2], p[1], box.cell_m, footprint);
+      }
+    }
+    const double lit = n[0] * hill_light[0] + n[1] * hill_light[1] + n[2] * hill_light[2];
+    const auto shade = static_cast<float>(kHillAmbient + kHillDiffuse * lit);
+    return shade * (box.albedo + 2.0f * box.contrast * tex);
+  }
+
+  // Ray-casts and shades row v of one view. `grey` (nullable) gets the 8-bit image row with its
+  // noise, or `linear` (nullable) the row's grey 0..255 before any sensor effect; `disparity`,
+  // `ids` and `stats` (all nullable; stats per obstacle) the truth of the row.
+  void RenderRow(const FrameSetup& setup, int view, int v, uint8_t* grey, float* linear,
+                 float* disparity, int* ids, RowStat* stats, cv::RNG* rng) const {
     const Scene& scene = options.scene;
     const double f = options.f_px;
     const double fb = options.f_px * options.baseline_m;
     const double ox = setup.origin_x[view];
-    const double b = (v - cy) / f;  // ray y-direction (z-direction is 1, so t = depth)
-    const float sky = SkyGrey(v);
+    const double vr = RayRow(view, v);
+    // The ray's world y- and z-direction (level camera: b = (v - cy) / f and dz = 1; the x
+    // direction is a = (u - cx) / f, and the ray parameter t is the camera depth).
+    double b = 0.0, dz = 1.0;
+    RowDirection(vr, b, dz);
+    const bool shading = grey != nullptr || linear != nullptr;
+    const float sky = SkyGrey(vr);
+    const float* sky_px = sky_layer[view].empty() ? nullptr : sky_layer[view][v];
     const double sigma = options.noise_sigma;
 
-    // Boxes this row may see, with their y slab.
+    // Solids this row may see: a box with its y and z slabs, or an ellipsoid with its row terms
+    // of the ray-ellipsoid quadratic (as the hills below).
     struct Candidate {
       int index;
       int u0, u1;
       double ty_min, ty_max;
+      double tz_min, tz_max;
       bool y_enters_hi;
+      double a_row, b_row, os_x, qc;  // ellipsoids
     };
     Candidate candidates[64];
     std::vector<Candidate> many;
@@ -352,12 +519,36 @@ struct SyntheticRenderer::Impl {
       many.resize(setup.boxes.size());
       cand = many.data();
     }
+    constexpr double kInf = std::numeric_limits<double>::infinity();
     int n_cand = 0;
     for (size_t i = 0; i < setup.boxes.size(); ++i) {
       const PixelRect& r = setup.rects[view][i];
       if (v < r.v0 || v > r.v1 || r.u0 > r.u1) continue;
       const Box& box = setup.boxes[i];
-      Candidate c{static_cast<int>(i), r.u0, r.u1, 0, 0, false};
+      Candidate c{static_cast<int>(i), r.u0, r.u1, 0, 0, 0, 0, false, 0, 0, 0, 0};
+      if (box.ellipsoid) {
+        const double os_y = -box.centre[1] * box.inv_r[1];
+        const double os_z = -box.centre[2] * box.inv_r[2];
+        c.os_x = (ox - box.centre[0]) * box.inv_r[0];
+        c.qc = c.os_x * c.os_x + os_y * os_y + os_z * os_z - 1.0;
+        if (c.qc <= 0.0) continue;  // the camera is inside: it sees nothing of it
+        const double by = b * box.inv_r[1], bz = dz * box.inv_r[2];
+        c.a_row = by * by + bz * bz;
+        c.b_row = os_y * by + os_z * bz;
+        cand[n_cand++] = c;
+        continue;
+      }
+      if (dz > 0.0) {
+        c.tz_min = box.lo[2] / dz;
+        c.tz_max = box.hi[2] / dz;
+      } else if (dz < 0.0) {
+        c.tz_min = box.hi[2] / dz;
+        c.tz_max = box.lo[2] / dz;
+      } else {
+        if (box.lo[2] > 0.0 || box.hi[2] < 0.0) continue;
+        c.tz_min = -kInf;
+        c.tz_max = kInf;
+      }
       if (b != 0.0) {
         const double t1 = box.lo[1] / b, t2 = box.hi[1] / b;
         c.ty_min = std::min(t1, t2);
@@ -365,8 +556,8 @@ struct SyntheticRenderer::Impl {
         c.y_enters_hi = b < 0.0;
       } else {
         if (box.lo[1] > 0.0 || box.hi[1] < 0.0) continue;
-        c.ty_min = -std::numeric_limits<double>::infinity();
-        c.ty_max = std::numeric_limits<double>::infinity();
+        c.ty_min = -kInf;
+        c.ty_max = kInf;
       }
       cand[n_cand++] = c;
     }
@@ -400,7 +591,7 @@ struct SyntheticRenderer::Impl {
       const PixelRect& r = g.rect[view];
       if (v < r.v0 || v > r.v1 || r.u0 > r.u1) continue;
       const double by = b * g.inv_r[1];
-      const double bz = g.inv_r[2];
+      const double bz = dz * g.inv_r[2];
       hill_cand[n_hill++] = HillCandidate{static_cast<int>(i), r.u0, r.u1, by * by + bz * bz,
                                           g.origin_s[view][1] * by + g.origin_s[view][2] * bz};
     }
@@ -411,16 +602,18 @@ struct SyntheticRenderer::Impl {
     MarkCandidate* mark_cand = mark_candidates;
     int n_mark = 0;
     const size_t n_paint = scene.marks.size() + scene.dashed_lines.size();
-    if (grey != nullptr && sees_ground && n_paint > 0) {
+    if (shading && sees_ground && n_paint > 0) {
       if (n_paint > 32) {
         many_marks.resize(n_paint);
         mark_cand = many_marks.data();
       }
-      // The row's footprint on the ground: depths seen by rays through v - 0.5 .. v + 0.5.
-      const double b_far = (v - 0.5 - cy) / f, b_near = (v + 0.5 - cy) / f;
-      const double z_near = scene.camera_height_m / b_near;
-      const double z_far =
-          b_far > 0.0 ? scene.camera_height_m / b_far : std::numeric_limits<double>::infinity();
+      // The row's footprint on the ground: world z seen by rays through vr - 0.5 .. vr + 0.5.
+      double b_far = 0.0, dz_far = 1.0, b_near = 0.0, dz_near = 1.0;
+      RowDirection(vr - 0.5, b_far, dz_far);
+      RowDirection(vr + 0.5, b_near, dz_near);
+      const double z_near = scene.camera_height_m * dz_near / b_near;
+      const double z_far = b_far > 0.0 ? scene.camera_height_m * dz_far / b_far
+                                       : std::numeric_limits<double>::infinity();
       for (const GroundMark& m : scene.marks) {
         const double mz0 = m.area_xz_m.y, mz1 = m.area_xz_m.y + m.area_xz_m.height;
         if (!std::isfinite(z_far)) continue;  // a finite mark covers none of an endless row
@@ -445,13 +638,28 @@ struct SyntheticRenderer::Impl {
       const double a = (u - cx) / f;  // ray x-direction
       double best_t = std::numeric_limits<double>::infinity();
       int best = -1;  // candidate index
-      int best_axis = 2;
+      int best_axis = 2;  // the box face's axis; -1 for an ellipsoid
       bool best_enters_hi = false;
       for (int k = 0; k < n_cand; ++k) {
         const Candidate& c = cand[k];
         if (u < c.u0 || u > c.u1) continue;
         const Box& box = setup.boxes[c.index];
-        double tmin = box.lo[2], tmax = box.hi[2];
+        if (box.ellipsoid) {
+          const double ax = a * box.inv_r[0];
+          const double qa = ax * ax + c.a_row;
+          const double qb = c.os_x * ax + c.b_row;
+          if (qb >= 0.0) continue;  // the camera is outside: both roots are behind
+          const double disc = qb * qb - qa * c.qc;
+          if (disc < 0.0) continue;
+          const double t_hit = c.qc / (-qb + std::sqrt(disc));
+          if (t_hit > kNearM && t_hit < best_t) {
+            best_t = t_hit;
+            best = k;
+            best_axis = -1;
+          }
+          continue;
+        }
+        double tmin = c.tz_min, tmax = c.tz_max;
         int axis = 2;
         bool enters_hi = false;
         if (c.ty_min > tmin) {
@@ -513,9 +721,9 @@ struct SyntheticRenderer::Impl {
           ids[u] = 0;
         } else if (best >= 0) {
           disparity[u] = static_cast<float>(fb / best_t);
-          const int index = cand[best].index;
-          ids[u] = setup.boxes[index].id;
-          RowStat& st = stats[index];
+          const Box& box = setup.boxes[cand[best].index];
+          ids[u] = box.id;
+          RowStat& st = stats[box.obstacle];
           st.min_u = std::min(st.min_u, u);
           st.max_u = std::max(st.max_u, u);
           ++st.count;
@@ -524,13 +732,13 @@ struct SyntheticRenderer::Impl {
           ids[u] = -1;
         }
       }
-      if (grey == nullptr) continue;
+      if (!shading) continue;
 
-      float value = sky;
+      float value = sky_px != nullptr ? sky_px[u] : sky;
       if (ground) {
         const double x = ox + a * ground_t;
         const float n = Texture(ground_seed, x + setup.rig_offset[0],
-                                ground_t + setup.rig_offset[2], scene.ground_texture_cell_m,
+                                dz * ground_t + setup.rig_offset[2], scene.ground_texture_cell_m,
                                 ground_footprint);
         value = ground_albedo + 2.0f * ground_contrast * n;
         if (n_mark > 0) {
@@ -547,24 +755,33 @@ struct SyntheticRenderer::Impl {
           }
         }
       } else if (best_hill >= 0) {
-        value = ShadeHill(hills[hill_cand[best_hill].index], ox + a * best_t, b * best_t, best_t);
+        value = ShadeHill(hills[hill_cand[best_hill].index], ox + a * best_t, b * best_t,
+                          dz * best_t);
       } else if (best >= 0) {
         const Box& box = setup.boxes[cand[best].index];
-        // Surface point in the box's own frame, so the texture moves with the box.
-        const double px = ox + a * best_t - box.centre[0];
-        const double py = b * best_t - box.centre[1];
-        const double pz = best_t - box.centre[2];
-        double s = px, t = py;
-        float shade = kShadeFront;
-        if (best_axis == 0) {
-          s = pz;
-          shade = kShadeSide;
-        } else if (best_axis == 1) {
-          t = pz;
-          shade = best_enters_hi ? kShadeBottom : kShadeTop;
+        if (best_axis < 0) {
+          value = ShadeEllipsoid(box, ox + a * best_t, b * best_t, dz * best_t, best_t);
+        } else {
+          // Surface point in the box's own frame, so the texture moves with the box.
+          const double px = ox + a * best_t - box.centre[0];
+          const double py = b * best_t - box.centre[1];
+          const double pz = dz * best_t - box.centre[2];
+          double s = px, t = py;
+          float shade = kShadeFront;
+          if (best_axis == 0) {
+            s = pz;
+            shade = kShadeSide;
+          } else if (best_axis == 1) {
+            t = pz;
+            shade = best_enters_hi ? kShadeBottom : kShadeTop;
+          }
+          const float n = Texture(box.seed[best_axis], s, t, box.cell_m, best_t / f);
+          value = shade * (box.albedo + 2.0f * box.contrast * n);
         }
-        const float n = Texture(box.seed[best_axis], s, t, box.cell_m, best_t / f);
-        value = shade * (box.albedo + 2.0f * box.contrast * n);
+      }
+      if (linear != nullptr) {
+        linear[u] = std::clamp(value, 0.0f, 1.0f) * 255.0f;
+        continue;
       }
       double level = std::clamp(value, 0.0f, 1.0f) * 255.0;
       if (sigma > 0.0) level += rng->gaussian(sigma);
@@ -572,17 +789,60 @@ struct SyntheticRenderer::Impl {
     }
   }
 
+  // The sensor effects on the linear images: blur, vignetting, the right gain, then the noise
+  // (per row from its own generator, as the plain path) and the 8-bit quantisation.
+  void ApplySensorEffects(cv::Mat1f lin[2], uint64_t frame_seed, cv::Mat1b& left,
+                          cv::Mat1b& right) const {
+    const int w = options.width, h = options.height;
+    for (int view = 0; view < 2; ++view) {
+      if (options.blur_sigma_px > 0.0) {
+        cv::GaussianBlur(lin[view], lin[view], cv::Size(0, 0), options.blur_sigma_px,
+                         options.blur_sigma_px, cv::BORDER_REFLECT_101);
+      }
+    }
+    const double r2_corner = cx * cx + cy * cy;
+    cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
+      std::vector<float> fall(static_cast<size_t>(w), 1.0f);
+      for (int v = rows.start; v < rows.end; ++v) {
+        if (options.vignetting > 0.0) {
+          const double dv = v + 0.5 - cy;
+          for (int u = 0; u < w; ++u) {
+            const double du = u + 0.5 - cx;
+            fall[static_cast<size_t>(u)] = static_cast<float>(
+                1.0 - options.vignetting * (du * du + dv * dv) / r2_corner);
+          }
+        }
+        for (int view = 0; view < 2; ++view) {
+          cv::RNG rng(Mix(frame_seed, static_cast<uint64_t>(v) * 2 + view));
+          const auto gain = static_cast<float>(view == 1 ? options.right_gain : 1.0);
+          const float* in = lin[view][v];
+          uint8_t* out = view == 0 ? left[v] : right[v];
+          for (int u = 0; u < w; ++u) {
+            double level = in[u] * fall[static_cast<size_t>(u)] * gain;
+            if (options.noise_sigma > 0.0) level += rng.gaussian(options.noise_sigma);
+            out[u] = cv::saturate_cast<uint8_t>(level);
+          }
+        }
+      }
+    });
+  }
+
   // Renders frame `index`: the images when `frame` is given, the truth when `truth` is.
   void RenderFrame(int64_t index, StereoFrame* frame, FrameTruth* truth) const {
     const double t_s = TimeOf(index);
     const FrameSetup setup = Setup(t_s);
     const int w = options.width, h = options.height;
-    const size_t n_obstacles = setup.boxes.size();
+    const size_t n_obstacles = options.scene.obstacles.size();
 
     cv::Mat1b left, right;
+    cv::Mat1f lin[2];
     if (frame != nullptr) {
       left.create(h, w);
       right.create(h, w);
+      if (effects) {
+        lin[0].create(h, w);
+        lin[1].create(h, w);
+      }
     }
     cv::Mat1f disparity;
     cv::Mat1i ids;
@@ -601,19 +861,26 @@ struct SyntheticRenderer::Impl {
         RowStat* st_row = truth != nullptr ? stats.data() + static_cast<size_t>(v) * n_obstacles
                                            : nullptr;
         if (frame == nullptr) {
-          RenderRow(setup, 0, v, nullptr, d_row, id_row, st_row, nullptr);
+          RenderRow(setup, 0, v, nullptr, nullptr, d_row, id_row, st_row, nullptr);
           continue;
         }
         for (int view = 0; view < 2; ++view) {
+          float* d = view == 0 ? d_row : nullptr;
+          int* i = view == 0 ? id_row : nullptr;
+          RowStat* st = view == 0 ? st_row : nullptr;
+          if (effects) {
+            RenderRow(setup, view, v, nullptr, lin[view][v], d, i, st, nullptr);
+            continue;
+          }
           // The noise of each row comes from its own generator: the result does not depend on
           // how rows are split between threads.
           cv::RNG rng(Mix(frame_seed, static_cast<uint64_t>(v) * 2 + view));
           uint8_t* out = view == 0 ? left[v] : right[v];
-          RenderRow(setup, view, v, out, view == 0 ? d_row : nullptr,
-                    view == 0 ? id_row : nullptr, view == 0 ? st_row : nullptr, &rng);
+          RenderRow(setup, view, v, out, nullptr, d, i, st, &rng);
         }
       }
     });
+    if (frame != nullptr && effects) ApplySensorEffects(lin, frame_seed, left, right);
 
     if (frame != nullptr) {
       frame->left = left;
@@ -630,11 +897,41 @@ struct SyntheticRenderer::Impl {
     truth->disparity_px = disparity;
     truth->object_id = ids;
     truth->obstacles.clear();
+
+    // The exact disparities of each obstacle's visible pixels, for their medians.
+    std::map<int, size_t> index_of_id;
+    for (size_t i = 0; i < n_obstacles; ++i) index_of_id[options.scene.obstacles[i].id] = i;
+    std::vector<std::vector<float>> visible(n_obstacles);
+    for (int v = 0; v < h; ++v) {
+      const int* id_row = ids[v];
+      const float* d_row = disparity[v];
+      for (int u = 0; u < w; ++u) {
+        if (id_row[u] <= 0) continue;
+        const auto it = index_of_id.find(id_row[u]);
+        if (it != index_of_id.end()) visible[it->second].push_back(d_row[u]);
+      }
+    }
+
+    // Per obstacle: the bounding box of its solids (world), for its reference point.
+    std::vector<cv::Vec3d> lo(n_obstacles, cv::Vec3d::all(std::numeric_limits<double>::max()));
+    std::vector<cv::Vec3d> hi(n_obstacles, cv::Vec3d::all(-std::numeric_limits<double>::max()));
+    std::vector<int> solids(n_obstacles, 0);
+    std::vector<cv::Vec3d> centre(n_obstacles);
+    for (const Box& box : setup.boxes) {
+      const auto i = static_cast<size_t>(box.obstacle);
+      for (int k = 0; k < 3; ++k) {
+        lo[i][k] = std::min(lo[i][k], box.lo[k]);
+        hi[i][k] = std::max(hi[i][k], box.hi[k]);
+      }
+      centre[i] = box.centre;
+      ++solids[i];
+    }
     for (size_t i = 0; i < n_obstacles; ++i) {
-      const Box& box = setup.boxes[i];
+      const Obstacle& ob = options.scene.obstacles[i];
       ObstacleTruth ot;
-      ot.id = box.id;
-      ot.name = options.scene.obstacles[i].name;
+      ot.id = ob.id;
+      ot.name = ob.name;
+      ot.kind = ob.kind;
       int u0 = std::numeric_limits<int>::max(), u1 = -1, v0 = -1, v1 = -1;
       for (int v = 0; v < h; ++v) {
         const RowStat& st = stats[static_cast<size_t>(v) * n_obstacles + i];
@@ -646,9 +943,19 @@ struct SyntheticRenderer::Impl {
         v1 = v;
       }
       if (ot.visible_px > 0) ot.bbox = cv::Rect(u0, v0, u1 - u0 + 1, v1 - v0 + 1);
-      ot.position_cam_m = cv::Vec3d(box.centre[0], box.centre[1], box.lo[2]);
-      ot.depth_m = box.lo[2];
+      // A single box: its own centre, exactly; a composite: its bounding box's.
+      const cv::Vec3d c = solids[i] == 1 ? centre[i] : (lo[i] + hi[i]) * 0.5;
+      cv::Vec3d p(c[0], c[1], lo[i][2]);
+      if (pitched) p = cv::Vec3d(p[0], p[1] * cp + p[2] * sp, p[2] * cp - p[1] * sp);
+      ot.position_cam_m = p;
+      ot.depth_m = p[2];
       ot.range_m = cv::norm(ot.position_cam_m);
+      std::vector<float>& d = visible[i];
+      if (!d.empty()) {
+        auto mid = d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2);
+        std::nth_element(d.begin(), mid, d.end());
+        ot.median_disparity_px = *mid;
+      }
       truth->obstacles.push_back(std::move(ot));
     }
   }
@@ -665,6 +972,19 @@ std::vector<std::string> SyntheticOptions::Validate() const {
   if (!(fps > 0.0) || !std::isfinite(fps)) problems.push_back("fps: must be > 0");
   if (!(noise_sigma >= 0.0) || !std::isfinite(noise_sigma)) {
     problems.push_back("noise_sigma: must be >= 0");
+  }
+  if (!(blur_sigma_px >= 0.0 && blur_sigma_px <= 10.0)) {
+    problems.push_back("blur_sigma_px: must be in 0..10" + Got(blur_sigma_px));
+  }
+  if (!(vignetting >= 0.0 && vignetting <= 0.9)) {
+    problems.push_back("vignetting: must be in 0..0.9" + Got(vignetting));
+  }
+  if (!(right_gain >= 0.5 && right_gain <= 2.0)) {
+    problems.push_back("right_gain: must be in 0.5..2" + Got(right_gain));
+  }
+  if (!(std::abs(right_vertical_shift_px) <= 2.0)) {
+    problems.push_back("right_vertical_shift_px: must be in -2..2" +
+                       Got(right_vertical_shift_px));
   }
   if (loop_frames < 0 || loop_frames > kMaxLoopFrames) {
     problems.push_back("loop_frames: must be in 0.." + std::to_string(kMaxLoopFrames) +

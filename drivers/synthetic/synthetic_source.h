@@ -23,6 +23,16 @@ struct SyntheticOptions {
   double fps = 10.0;         // the scene's clock: frame k is rendered at t = k / fps
   double noise_sigma = 2.0;  // Gaussian pixel noise, grey levels (0 disables)
   uint64_t seed = 1;         // seeds the pixel noise (frame k uses seed and k) and the textures
+  // Sensor effects, applied to the rendered (linear, 0..255) images before the noise and the
+  // 8-bit quantisation, in this order: blur (optics), vignetting, the right camera's gain. The
+  // defaults disable them all (and the images are then exactly as without these fields).
+  double blur_sigma_px = 0.0;  // Gaussian blur of both images, pixels (0 = none; <= 10)
+  double vignetting = 0.0;     // radial fall-off: grey x (1 - vignetting (r / r_corner)^2), 0..0.9
+  double right_gain = 1.0;     // right image = right_gain x image (a gain mismatch), 0.5..2
+  // Residual vertical misalignment: the right image is rendered moved down by this many pixels
+  // (sub-pixel, |shift| <= 2): right(u, v) = ideal_right(u, v - shift). The truth is of the left
+  // image and stays exact.
+  double right_vertical_shift_px = 0.0;
   Scene scene = DefaultScene();
   // SyntheticSource only. > 0: render frames 0..loop_frames-1 once (the first lap) and play them
   // again and again after that, with t_ns and index still counting up: a source that costs
@@ -37,11 +47,17 @@ struct SyntheticOptions {
 struct ObstacleTruth {
   int id = 0;                  // stable over the sequence
   std::string name;            // "tower", "hangar", "drone-1", ...
+  std::string kind;            // Obstacle::kind: "box", "aircraft", "drone", "balloon", ...
   cv::Rect bbox;               // visible pixels in the left image (empty when not visible)
   int visible_px = 0;          // visible pixel count in the left image
-  cv::Vec3d position_cam_m;    // centre of the face towards the camera, cam frame
-  double depth_m = 0;          // z of that face (fronto-parallel faces: every pixel of it)
+  // The centre of the face towards the camera (the box's, or the bounding box of a composite's
+  // parts), in the cam frame (pitched with the camera).
+  cv::Vec3d position_cam_m;
+  double depth_m = 0;          // z of that point (level camera: of every pixel of a box's front)
   double range_m = 0;          // |position_cam_m|
+  // The median of the exact disparity over the obstacle's visible left pixels (0 when none): a
+  // truth depth f B / median_disparity_px for any shape, where depth_m is the box's front face.
+  double median_disparity_px = 0;
 };
 
 struct FrameTruth {

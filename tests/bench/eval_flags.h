@@ -19,16 +19,49 @@ struct EvalFlags {
   // --max-width N: PipelineConfig::max_width_px (frames wider are binned; 0 = never). Unset: the
   // default.
   std::optional<int> max_width_px;
+  // stevi-eval only (allow_family): --family NAME|all, --seeds A-B, --json FILE, --dump DIR,
+  // --dump-scenes N (the random scene families; see eval_family.h).
+  std::string family;
+  std::string seeds;
+  std::string json;
+  std::string dump;
+  int dump_scenes = 3;
 };
 
 // Parses argv into `flags`; returns the problem ("--frames: expected ...", "unknown flag --x")
 // when there is one.
 inline std::optional<std::string> ParseEvalFlags(int argc, char** argv, bool allow_trace,
-                                                 bool allow_size, EvalFlags& flags) {
+                                                 bool allow_size, EvalFlags& flags,
+                                                 bool allow_family = false) {
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (allow_trace && flag == "--trace") {
       flags.trace = true;
+      continue;
+    }
+    if (allow_family && (flag == "--family" || flag == "--seeds" || flag == "--json" ||
+                         flag == "--dump" || flag == "--dump-scenes")) {
+      if (i + 1 >= argc) return flag + " needs a value";
+      const std::string value = argv[++i];
+      if (flag == "--family") {
+        flags.family = value;
+      } else if (flag == "--seeds") {
+        flags.seeds = value;
+      } else if (flag == "--json") {
+        flags.json = value;
+      } else if (flag == "--dump") {
+        flags.dump = value;
+      } else {
+        size_t used = 0;
+        try {
+          flags.dump_scenes = std::stoi(value, &used);
+        } catch (const std::exception&) {
+          used = 0;
+        }
+        if (used != value.size() || flags.dump_scenes < 0) {
+          return "--dump-scenes: expected a whole number >= 0, got '" + value + "'";
+        }
+      }
       continue;
     }
     if (flag != "--frames" && flag != "--scenario" && flag != "--algorithm" &&

@@ -13,6 +13,16 @@
 //   the square of the scale, disparity by the scale), so the same obstacles are expected.
 //   --max-width sets PipelineConfig::max_width_px (frames wider are binned; 0 = never bin), to
 //   compare binned and unbinned at --size.
+//
+// Family mode: stevi-eval --family sky|airfield|long_range|close|all --seeds A-B [--frames N]
+//   [--algorithm NAME] [--max-width N] [--json FILE] [--dump DIR] [--dump-scenes N]
+//   runs the detectors over the randomised scene families (drivers/synthetic/random_scenes.h) for
+//   seeds A..B of each family and prints a table per family and for all (see eval_family.cc and
+//   tests/bench/README.md). Seeds 1-999 are the TUNING split; seeds 1001 and up are the TEST
+//   split: report on it, never tune on it (no parameter, threshold or rule may be chosen by
+//   looking at test-split results or pictures). --dump writes the last frame of the first N
+//   scenes (default 3) of each family per algorithm as PNG: truth boxes green (dark green: not
+//   expected), detections red (orange: don't care) with their depth.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -22,7 +32,9 @@
 #include <vector>
 
 #include "core/pipeline/pipeline.h"
+#include "drivers/synthetic/random_scenes.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/bench/eval_family.h"
 #include "tests/bench/eval_flags.h"
 #include "tests/testing/truth_match.h"
 
@@ -123,13 +135,52 @@ int main(int argc, char** argv) {
   std::string only_scenario, only_algorithm;
   const auto usage = [](const std::string& problem) {
     std::fprintf(stderr, "stevi-eval: %s\nusage: stevi-eval [--frames N] [--scenario NAME] "
-                 "[--algorithm canonical|stevie|stevis|stevis-graph] [--size WxH] [--max-width N]\n",
+                 "[--algorithm canonical|stevie|stevis|stevis-graph] [--size WxH] [--max-width N]\n"
+                 "       stevi-eval --family sky|airfield|long_range|close|all --seeds A-B "
+                 "[--frames N] [--algorithm NAME] [--max-width N] [--json FILE] [--dump DIR] "
+                 "[--dump-scenes N]\n"
+                 "  seeds 1-999: the tuning split; seeds 1001 and up: the TEST split, never to be "
+                 "tuned on\n",
                  problem.c_str());
     return 2;
   };
   bench::EvalFlags flags;
-  if (std::optional<std::string> problem = bench::ParseEvalFlags(argc, argv, false, true, flags)) {
+  if (std::optional<std::string> problem =
+          bench::ParseEvalFlags(argc, argv, false, true, flags, true)) {
     return usage(*problem);
+  }
+  if (!flags.family.empty() || !flags.seeds.empty()) {
+    bench::FamilyEvalOptions fo;
+    const std::vector<std::string>& families = drivers::RandomSceneFamilies();
+    if (flags.family == "all") {
+      fo.families = families;
+    } else if (std::find(families.begin(), families.end(), flags.family) != families.end()) {
+      fo.families = {flags.family};
+    } else {
+      return usage("--family: expected sky, airfield, long_range, close or all, got '" +
+                   flags.family + "'");
+    }
+    if (flags.seeds.empty()) flags.seeds = "1-40";
+    if (!bench::ParseSeedRange(flags.seeds, fo.seed_first, fo.seed_last)) {
+      return usage("--seeds: expected A-B with A <= B, got '" + flags.seeds + "'");
+    }
+    if (!flags.scenario.empty() || flags.width > 0) {
+      return usage("--scenario and --size do not apply to --family");
+    }
+    fo.max_frames = flags.max_frames;
+    fo.max_width_px = flags.max_width_px;
+    fo.json_path = flags.json;
+    fo.dump_dir = flags.dump;
+    fo.dump_scenes = flags.dump_scenes;
+    std::vector<bench::EvalVariant> variants;
+    for (const Variant& v : Variants()) {
+      if (flags.algorithm.empty() || v.name == flags.algorithm) variants.push_back({v.name, v.config});
+    }
+    if (variants.empty()) return usage("unknown algorithm '" + flags.algorithm + "'");
+    return bench::RunFamilyEval(fo, variants);
+  }
+  if (!flags.json.empty() || !flags.dump.empty()) {
+    return usage("--json and --dump need --family");
   }
   max_frames = flags.max_frames;
   only_scenario = flags.scenario;

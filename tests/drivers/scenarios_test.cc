@@ -485,3 +485,47 @@ TEST(TowerOnGround, TheTowerStandsOnTheGround) {
 
 }  // namespace
 }  // namespace stevi::drivers
+
+namespace stevi::drivers {
+namespace {
+
+// Every evaluation and tracking scenario, and the flight, renders byte-identically to the renderer
+// before the pitch, composite obstacles, clouds and sensor effects were added (all of them default
+// to off). Frames 0 and 7 of each.
+TEST(EveryScenario, RendersAsBeforeTheRendererExtensions) {
+  // FNV-1a of left, right, truth disparity and truth ids, computed on the renderer before the
+  // extensions (RelWithDebInfo, g++ 12, x86-64).
+  const std::map<std::string, uint64_t> expected = {
+      {"clear_sky", 0x39BB9675D81BBF9Full},          {"low_over_ground", 0x64D00D860775A25Bull},
+      {"small_far", 0x3404099C835268CEull},          {"close_pair", 0xCD986D06B4B22478ull},
+      {"low_contrast", 0x5A366E621ACB004Full},       {"tower_on_ground", 0xE0390A2A7C8DC611ull},
+      {"crossing_occlusion", 0x7736AFE06846E8C1ull}, {"entries_exits", 0x787510FD6DE6FB81ull},
+      {"head_on", 0x9FBEA25253A5941ull},             {"departing", 0xD64FEFFC0AAD457Dull},
+      {"flight", 0x3941B1F4CE493CB6ull},
+  };
+  std::vector<Scenario> all = EvaluationScenarios();
+  for (Scenario& s : TrackingScenarios()) all.push_back(std::move(s));
+  all.push_back(FlightScenario());
+  for (const Scenario& s : all) {
+    const SyntheticRenderer renderer(s.options);
+    uint64_t h = 0xCBF29CE484222325ull;
+    for (int64_t index : {0, 7}) {
+      FrameTruth truth;
+      const StereoFrame f = renderer.Render(index, &truth);
+      h = Fnv1a(h, f.left);
+      h = Fnv1a(h, f.right);
+      h = Fnv1a(h, truth.disparity_px);
+      h = Fnv1a(h, truth.object_id);
+    }
+    const auto it = expected.find(s.name);
+    if (it == expected.end()) {
+      ADD_FAILURE() << "no expected hash for " << s.name << ": {\"" << s.name << "\", 0x"
+                    << std::hex << std::uppercase << h << "ull},";
+      continue;
+    }
+    EXPECT_EQ(h, it->second) << s.name;
+  }
+}
+
+}  // namespace
+}  // namespace stevi::drivers

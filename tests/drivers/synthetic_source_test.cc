@@ -14,6 +14,8 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "tests/testing/truth_match.h"
+
 namespace stevi::drivers {
 namespace {
 
@@ -539,6 +541,266 @@ TEST(Render, AMovingRigSeesStandingObstaclesComeNearer) {
   bool named = false;
   for (const std::string& p : hilly.Validate()) named |= p.find("rig_velocity_mps") != std::string::npos;
   EXPECT_TRUE(named);
+}
+
+}  // namespace
+}  // namespace stevi::drivers
+
+// ---- Renderer extensions: pitch, composite obstacles, clouds, sensor effects. ----
+
+namespace stevi::drivers {
+namespace {
+
+// A plain scene: uniform sky of grey `sky`, flat untextured ground, no obstacles, no noise.
+SyntheticOptions PlainOptions(double sky) {
+  SyntheticOptions o;
+  o.noise_sigma = 0.0;
+  o.scene = Scene{};
+  o.scene.sky_top = sky;
+  o.scene.sky_horizon = sky;
+  o.scene.camera_height_m = 10.0;
+  return o;
+}
+
+TEST(Pitch, HorizonIsAtTheRowTheGeometryPredictsAndTheGroundDisparityIsExact) {
+  for (double pitch_deg : {7.0, -4.0}) {
+    SCOPED_TRACE("pitch " + std::to_string(pitch_deg));
+    SyntheticOptions o = PlainOptions(0.7);
+    o.scene.camera_pitch_deg = pitch_deg;
+    const SyntheticRenderer renderer(o);
+    const FrameTruth truth = renderer.Truth(0);
+    const double th = pitch_deg * 3.14159265358979323846 / 180.0;
+    const double horizon = 240.0 + 700.0 * std::tan(th);  // the row where the ray is level
+    // Every column: sky (id -1, disparity 0) above the horizon, ground below it, and the
+    // ground's disparity is f B / Z with Z the depth of the plane y = h along the pitched ray.
+    int wrong = 0;
+    double worst = 0;
+    for (int v = 0; v < 480; ++v) {
+      const double b = (v - 240.0) / 700.0;
+      const double down = b * std::cos(th) - std::sin(th);  // world y of the ray (a, b, 1)
+      for (int u = 0; u < 640; u += 37) {
+        const int id = truth.object_id(v, u);
+        if (v < horizon) {
+          if (id != -1 || truth.disparity_px(v, u) != 0.0f) ++wrong;
+        } else {
+          if (id != 0) {
+            ++wrong;
+            continue;
+          }
+          const double z = 10.0 / down;
+          worst = std::max(worst, std::abs(truth.disparity_px(v, u) - kFB / z));
+        }
+      }
+    }
+    EXPECT_EQ(wrong, 0);
+    EXPECT_LT(worst, 1e-4);
+    // The first ground row is the first row below the horizon.
+    const int first_ground = static_cast<int>(std::ceil(horizon));
+    EXPECT_EQ(truth.object_id(first_ground, 320), 0);
+    EXPECT_EQ(truth.object_id(first_ground - 1, 320), -1);
+  }
+}
+
+TEST(Pitch, ABoxFaceHasDisparityFBOverTheCameraDepthOfEachPixel) {
+  SyntheticOptions o = PlaneOptions(30.0, 0.0);
+  o.scene.camera_pitch_deg = 6.0;
+  o.scene.camera_height_m = 1000.0;
+  const SyntheticRenderer renderer(o);
+  const FrameTruth truth = renderer.Truth(0);
+  // The face is the world plane z = 30: the ray (a, b, 1) reaches it at camera depth
+  // t = 30 / (b sin + cos).
+  const double th = 6.0 * 3.14159265358979323846 / 180.0;
+  double worst = 0;
+  for (int v = 0; v < 480; v += 7) {
+    const double dz = (v - 240.0) / 700.0 * std::sin(th) + std::cos(th);
+    for (int u = 0; u < 640; u += 11) {
+      ASSERT_EQ(truth.object_id(v, u), 1);
+      worst = std::max(worst, std::abs(truth.disparity_px(v, u) - kFB * dz / 30.0));
+    }
+  }
+  EXPECT_LT(worst, 1e-4);
+  // The reference point (the face's centre, straight ahead in the world) in the pitched camera.
+  EXPECT_NEAR(truth.obstacles[0].depth_m, 30.0 * std::cos(th), 1e-9);
+}
+
+TEST(Composite, AnEllipsoidHasTheAnalyticDiscAndDepth) {
+  SyntheticOptions o = PlainOptions(0.8);
+  o.scene.camera_height_m = 1000.0;
+  Obstacle balloon;
+  balloon.id = 3;
+  balloon.kind = "balloon";
+  balloon.albedo = 0.3;
+  ObstaclePart sphere;
+  sphere.shape = ObstaclePart::Shape::kEllipsoid;
+  sphere.size_m = {4.0, 4.0, 4.0};  // radius 2 m
+  balloon.parts.push_back(sphere);
+  balloon.path.start = {0.0, 0.0, 40.0};
+  o.scene.obstacles.push_back(balloon);
+  const SyntheticRenderer renderer(o);
+  const FrameTruth truth = renderer.Truth(0);
+  ASSERT_EQ(truth.obstacles.size(), 1u);
+  const ObstacleTruth& t = truth.obstacles[0];
+  EXPECT_EQ(t.kind, "balloon");
+  // The ray through the principal point hits the sphere at z = 40 - 2.
+  EXPECT_NEAR(truth.disparity_px(240, 320), kFB / 38.0, 1e-4);
+  // Its outline is the circle of angular radius asin(r / Z): pi R^2 pixels.
+  const double radius_px = 700.0 * std::tan(std::asin(2.0 / 40.0));
+  EXPECT_NEAR(t.visible_px, 3.14159265358979323846 * radius_px * radius_px,
+              0.02 * t.visible_px);
+  EXPECT_NEAR(t.bbox.width, 2 * radius_px, 2.0);
+  // The median over the disc: the depth of the sphere's surface at the disc's median radius.
+  EXPECT_DOUBLE_EQ(t.median_disparity_px,
+                   testing::MedianOverId(truth.object_id, truth.disparity_px, 3));
+  EXPECT_GT(t.median_disparity_px, kFB / 40.0);
+  EXPECT_LT(t.median_disparity_px, kFB / 38.0);
+}
+
+TEST(Composite, PartsShareOneIdAndOneBoundingBox) {
+  SyntheticOptions o = PlainOptions(0.8);
+  o.scene.camera_height_m = 1000.0;
+  Obstacle drone;
+  drone.id = 5;
+  drone.kind = "drone";
+  ObstaclePart body, arm;
+  body.size_m = {1.0, 0.4, 1.0};
+  arm.size_m = {4.0, 0.1, 0.2};
+  arm.offset_m = {0.0, -0.25, 0.0};
+  drone.parts = {body, arm};
+  drone.path.start = {0.0, 0.0, 20.0};
+  o.scene.obstacles.push_back(drone);
+  const SyntheticRenderer renderer(o);
+  const FrameTruth truth = renderer.Truth(0);
+  const ObstacleTruth& t = truth.obstacles[0];
+  // The arm is 4 m wide at a depth of 19.9 m (its front face): 140.7 px; the body 0.4 m tall
+  // below the arm's top at -0.3 m.
+  EXPECT_NEAR(t.bbox.width, 700.0 * 4.0 / 19.9, 2.0);
+  EXPECT_EQ(truth.object_id(240, 320), 5);                           // the body
+  EXPECT_EQ(truth.object_id(240 + static_cast<int>(700 * -0.25 / 19.9), 300), 5);  // the arm
+  // One id only: every obstacle pixel carries it.
+  int others = 0;
+  for (int v = 0; v < 480; ++v) {
+    for (int u = 0; u < 640; ++u) {
+      const int id = truth.object_id(v, u);
+      if (id > 0 && id != 5) ++others;
+    }
+  }
+  EXPECT_EQ(others, 0);
+}
+
+TEST(Clouds, AreAtInfinityAndShowInTheSkyGrey) {
+  SyntheticOptions o = PlainOptions(0.6);
+  o.scene.cloud_cover = 0.5;
+  o.scene.cloud_grey = 0.3;
+  o.scene.cloud_scale = 0.08;
+  o.scene.camera_height_m = 1000.0;
+  const SyntheticRenderer renderer(o);
+  FrameTruth truth;
+  const StereoFrame f = renderer.Render(0, &truth);
+  const cv::Rect sky(0, 0, 640, 200);
+  // Truth: sky, at infinity.
+  EXPECT_EQ(cv::countNonZero(truth.object_id(sky) != -1), 0);
+  EXPECT_EQ(cv::countNonZero(truth.disparity_px(sky)), 0);
+  // The clouds brighten part of the sky by up to 0.3 of the scale, the rest stays 0.6.
+  double lo = 0, hi = 0;
+  cv::minMaxLoc(f.left(sky), &lo, &hi);
+  EXPECT_NEAR(lo, 0.6 * 255, 1.0);
+  EXPECT_GT(hi, 0.8 * 255);
+  const double clear = cv::countNonZero(f.left(sky) <= 0.6 * 255 + 1) / double(sky.area());
+  EXPECT_GT(clear, 0.1);
+  EXPECT_LT(clear, 0.9);
+  // Zero disparity: both views see the same clouds (no noise, no misalignment).
+  EXPECT_EQ(CountDifferent(f.left(sky), f.right(sky)), 0);
+}
+
+TEST(SensorEffects, NoiseSigmaGainAndVignettingAreAsRequested) {
+  for (double sigma : {1.0, 6.0}) {
+    SyntheticOptions o = PlainOptions(0.5);
+    o.scene.camera_height_m = 1000.0;
+    o.noise_sigma = sigma;
+    o.right_gain = 1.12;
+    o.blur_sigma_px = 1.0;  // optics: before the noise, so it does not change the noise
+    const SyntheticRenderer renderer(o);
+    const StereoFrame f = renderer.Render(3);
+    const cv::Rect flat(0, 0, 640, 200);  // uniform sky of grey 127.5
+    cv::Scalar mean_l, sd_l, mean_r, sd_r;
+    cv::meanStdDev(f.left(flat), mean_l, sd_l);
+    cv::meanStdDev(f.right(flat), mean_r, sd_r);
+    // The 8-bit rounding adds 1/12 grey level^2 of variance.
+    const double expected = std::sqrt(sigma * sigma + 1.0 / 12.0);
+    EXPECT_NEAR(sd_l[0], expected, 0.1 * sigma) << "sigma " << sigma;
+    EXPECT_NEAR(sd_r[0], expected, 0.1 * sigma) << "sigma " << sigma;
+    EXPECT_NEAR(mean_r[0] / mean_l[0], 1.12, 0.005) << "sigma " << sigma;
+  }
+  SyntheticOptions o = PlainOptions(0.8);
+  o.scene.camera_height_m = 1000.0;
+  o.scene.camera_pitch_deg = 40.0;  // sky everywhere
+  o.vignetting = 0.3;
+  const StereoFrame f = SyntheticRenderer(o).Render(0);
+  const double centre = cv::mean(f.left(cv::Rect(310, 230, 20, 20)))[0];
+  const double corner = cv::mean(f.left(cv::Rect(0, 0, 4, 4)))[0];
+  EXPECT_NEAR(centre, 0.8 * 255, 1.0);
+  EXPECT_NEAR(corner / centre, 0.7, 0.02);  // 30 % at the corners
+}
+
+TEST(SensorEffects, VerticalMisalignmentMovesTheRightImageBySubPixelAmounts) {
+  // A textured wall at 25 m (a smooth texture, cells of 28 px, that cubic interpolation follows).
+  SyntheticOptions o = PlaneOptions(25.0, 0.0);
+  o.scene.obstacles[0].texture_cell_m = 1.0;
+  const StereoFrame aligned = SyntheticRenderer(o).Render(0);
+  cv::Mat1f a;
+  aligned.right.convertTo(a, CV_32F);
+  for (double shift : {0.3, -0.45}) {
+    o.right_vertical_shift_px = shift;
+    FrameTruth truth;
+    const StereoFrame moved = SyntheticRenderer(o).Render(0, &truth);
+    // The left image does not move (up to the rounding of the sensor-effects path), nor the
+    // truth.
+    cv::Mat diff;
+    cv::absdiff(moved.left, aligned.left, diff);
+    double max_diff = 0;
+    cv::minMaxLoc(diff, nullptr, &max_diff);
+    EXPECT_LE(max_diff, 1.0);
+    EXPECT_FLOAT_EQ(truth.disparity_px(240, 320), static_cast<float>(kFB / 25.0));
+    cv::Mat1f b;
+    moved.right.convertTo(b, CV_32F);
+    // Correlation: the vertical shift of the aligned right image (cubic interpolation) that
+    // best matches the moved one, searched in 0.01 px steps, refined by a parabola.
+    const cv::Rect inner(64, 64, 512, 352);
+    // The aligned image moved down by s: a(u, v - s), Lanczos-4 interpolated along v (in
+    // double; cv::warpAffine quantises the sub-pixel position).
+    auto ssd = [&](double s) {
+      double sum = 0;
+      for (int v = inner.y; v < inner.y + inner.height; ++v) {
+        const double y = v - s;
+        const int y0 = static_cast<int>(std::floor(y));
+        double w[8], w_sum = 0;
+        for (int k = 0; k < 8; ++k) {
+          const double x = y - (y0 - 3 + k);
+          const double px = 3.14159265358979323846 * x;
+          w[k] = std::abs(x) < 1e-12 ? 1.0 : 4.0 * std::sin(px) * std::sin(px / 4.0) / (px * px);
+          w_sum += w[k];
+        }
+        for (int u = inner.x; u < inner.x + inner.width; ++u) {
+          double value = 0;
+          for (int k = 0; k < 8; ++k) value += w[k] * a(y0 - 3 + k, u);
+          const double e = value / w_sum - b(v, u);
+          sum += e * e;
+        }
+      }
+      return sum;
+    };
+    double best_s = 0, best = std::numeric_limits<double>::infinity();
+    for (int k = -60; k <= 60; ++k) {
+      const double e = ssd(k * 0.01);
+      if (e < best) {
+        best = e;
+        best_s = k * 0.01;
+      }
+    }
+    const double em = ssd(best_s - 0.01), ep = ssd(best_s + 0.01);
+    const double measured = best_s + 0.01 * 0.5 * (em - ep) / (em - 2 * best + ep);
+    EXPECT_NEAR(measured, shift, 0.02) << "shift " << shift;
+  }
 }
 
 }  // namespace
