@@ -42,6 +42,8 @@ constexpr int kMinRefinePatches = 5;
 constexpr double kRefineSystematicPx = 0.03;
 // Hypotheses whose disparity's 1-sigma exceeds this fraction of it (10 % of the range) are dropped.
 constexpr double kMaxRelativeDisparitySigma = 0.1;
+// Hypotheses within this many pixels of the top of the matcher's search range are dropped.
+constexpr double kSearchTopMarginPx = 2.0;
 
 struct Piece {
   cv::Rect box;
@@ -620,6 +622,13 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     const cv::Mat1b mask = labels(group.box) == g;
     Summarise(group, disparity.block_size);
     const double median_px = static_cast<double>(group.median) / kScale;
+    if (!geometry::IsTrustedDisparity(median_px, rig.f_px(), rig.baseline_m(), range)) continue;
+    // At the top of the search range the matcher has run out of disparities: what is nearer than
+    // it can see matches there by chance.
+    if (disparity.num_disparities > 0 &&
+        median_px > disparity.min_disparity + disparity.num_disparities - 1 - kSearchTopMarginPx) {
+      continue;
+    }
     if (options.max_depth_per_height > 0 &&
         LeanBack(disparity, labels, g, group.box, median_px, rig, min_rows) > options.max_depth_per_height) {
       continue;  // terrain leaning back, or level ground
