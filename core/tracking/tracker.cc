@@ -122,6 +122,7 @@ constexpr double kAnchorSigmaPerPx = 0.1;
 // A shared (merged) detection must cover this fraction of the track's predicted box, and one of its
 // edges must agree with the predicted edge within max(kEdgeAgreePx, kEdgeAgreeSigmas sigma).
 constexpr double kSharedCover = 0.5;
+constexpr double kSharedMinFraction = 0.25;
 constexpr double kEdgeAgreePx = 3.0;
 constexpr double kEdgeAgreeSigmas = 2.0;
 // A detection is inside a track's box (a fragment of it) when at least this fraction of its area
@@ -414,7 +415,13 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
           continue;
         }
       }
-      allowed_.push_back({.row = t, .col = k, .cost = std::sqrt(distance2)});
+      // Cost: the distance, plus half the size difference of a re-anchored blob: of two blobs
+      // that both fit, the one of the obstacle's own size (not a sliver or a merge) wins.
+      double cost = std::sqrt(distance2);
+      if (m.anchored) {
+        cost += 0.5 * (std::abs(d.bbox.width - p.size.width) + std::abs(d.bbox.height - p.size.height));
+      }
+      allowed_.push_back({.row = t, .col = k, .cost = cost});
     }
   }
   solver_.SolveSparse(num_tracks, num_detections, allowed_, track_to_detection_);
@@ -459,6 +466,9 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
                                               std::max(kSizeTolerancePx, kSizeTolerance * p.size.width);
         const double error = std::min(lo_error, hi_error);
         if (!wider || error > tol_u || error >= best_error) continue;
+        // Each obstacle of a merged blob is a substantial part of it; a sliver along its edge (a
+        // side face seen at another depth, a speck) is not measured by it.
+        if (p.size.width < kSharedMinFraction * d.bbox.width) continue;
         best_error = error;
         k = j;
       }
@@ -537,7 +547,13 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
       Entry& a = tracks_[i];
       Entry& b = tracks_[j];
       if (a.id == 0 || b.id == 0) continue;
-      if (IoURect(a.box, b.box) < options_.merge_iou) continue;
+      // One obstacle: the boxes overlap at merge_iou, or one lies mostly inside the other (a
+      // fragment that started a track of its own, e.g. in the first frame).
+      const double inter = Area(a.box & b.box);
+      if (IoURect(a.box, b.box) < options_.merge_iou &&
+          inter < kInsideFraction * std::min(Area(a.box), Area(b.box))) {
+        continue;
+      }
       const double za = a.kalman.position().z(), zb = b.kalman.position().z();
       const double floor = gates.min_depth_sigma_fraction * std::max(za, zb);
       const double var = a.kalman.covariance()(2, 2) + b.kalman.covariance()(2, 2) + floor * floor;
