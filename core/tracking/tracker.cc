@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <utility>
 
@@ -106,11 +107,29 @@ void Tracker::Reset() {
 namespace {
 
 // A nearer detection cuts another when it is at least this much nearer (depth ratio) and their
-// boxes touch (within kTouchPx).
+// boxes touch (within kTouchPx: blobs of the detectors are separated by a few pixels of morphology).
 constexpr double kNearerRatio = 1.15;
-constexpr int kTouchPx = 2;
-// A cut blob narrower (shorter) than this fraction of the track's full size is re-centred.
-constexpr double kCutFraction = 0.9;
+constexpr int kTouchPx = 4;
+// A detection's size agrees with the track's when it differs by at most this fraction of the
+// track's size or kSizeTolerancePx, whichever is larger; otherwise it is re-anchored on an edge.
+constexpr double kSizeTolerance = 0.15;
+constexpr double kSizeTolerancePx = 3.0;
+// Variance of a centroid whose blob changed size by s pixels: the centroid may have moved by up to
+// s / 2 with the change (one side moved), so (s / 2)^2. A re-anchored centre: the edge is located
+// to about a pixel, and the anchoring itself may be wrong by a fraction of the size difference.
+constexpr double kAnchorVariancePx2 = 1.0;
+constexpr double kAnchorSigmaPerPx = 0.1;
+// A shared (merged) detection must cover this fraction of the track's predicted box, and one of its
+// edges must agree with the predicted edge within max(kEdgeAgreePx, kEdgeAgreeSigmas sigma).
+constexpr double kSharedCover = 0.5;
+constexpr double kSharedMinFraction = 0.25;
+constexpr double kEdgeAgreePx = 3.0;
+constexpr double kEdgeAgreeSigmas = 2.0;
+// A detection is inside a track's box (a fragment of it) when at least this fraction of its area
+// lies in the track's predicted box.
+constexpr double kInsideFraction = 0.5;
+// Depth sigma (as a fraction of the depth) of a position-only measurement: no depth information.
+constexpr double kNoDepthSigmaFraction = 1e3;
 
 double DepthOf(const detection::Detection& d) {
   return std::isfinite(d.depth_m) && d.depth_m > 0 ? d.depth_m : d.position_cam_m[2];
@@ -120,6 +139,37 @@ double DepthSigmaOf(const detection::Detection& d) {
   const double range = RawRange(d);
   if (!(std::isfinite(d.range_sigma_m) && d.range_sigma_m > 0 && range > 0)) return 0;
   return d.range_sigma_m * DepthOf(d) / range;
+}
+
+double Area(const cv::Rect& r) { return static_cast<double>(r.width) * r.height; }
+
+double IoURect(const cv::Rect& a, const cv::Rect& b) {
+  const double inter = Area(a & b);
+  const double uni = Area(a) + Area(b) - inter;
+  return uni > 0 ? inter / uni : 0.0;
+}
+
+cv::Rect RectAround(double u, double v, double w, double h) {
+  // Clamped: a prediction near the camera plane must not overflow an int.
+  const auto px = [](double x) { return static_cast<int>(std::lround(std::clamp(x, -1e6, 1e6))); };
+  const int x0 = px(u - 0.5 * w), y0 = px(v - 0.5 * h);
+  return {x0, y0, std::max(1, px(u + 0.5 * w) - x0), std::max(1, px(v + 0.5 * h) - y0)};
+}
+
+// The largest of the four strips of a that lie outside b (a itself when they do not overlap).
+cv::Rect Subtract(const cv::Rect& a, const cv::Rect& b) {
+  const cv::Rect overlap = a & b;
+  if (overlap.empty()) return a;
+  const cv::Rect strips[] = {
+      {a.x, a.y, overlap.x - a.x, a.height},
+      {overlap.br().x, a.y, a.br().x - overlap.br().x, a.height},
+      {a.x, a.y, a.width, overlap.y - a.y},
+      {a.x, overlap.br().y, a.width, a.br().y - overlap.br().y}};
+  cv::Rect best;
+  for (const cv::Rect& r : strips) {
+    if (r.width > 0 && r.height > 0 && r.area() > best.area()) best = r;
+  }
+  return best.empty() ? a : best;
 }
 
 }  // namespace
@@ -158,32 +208,117 @@ void Tracker::FindCuts(const std::vector<detection::Detection>& detections,
   }
 }
 
-cv::Point2d Tracker::MeasuredCentre(const Entry& e, const detection::Detection& d,
-                                    const Cut& cut) const {
-  cv::Point2d c = d.centroid_px;
-  if (!cut.any() || !(e.full_size.width > 0)) return c;
-  const double w = e.full_size.width, h = e.full_size.height;
-  if (d.bbox.width < kCutFraction * w && cut.left != cut.right) {
-    c.x = (cut.left ? d.bbox.x + d.bbox.width - 0.5 * w : d.bbox.x + 0.5 * w) + e.centroid_offset.x;
-  }
-  if (d.bbox.height < kCutFraction * h && cut.top != cut.bottom) {
-    c.y = (cut.top ? d.bbox.y + d.bbox.height - 0.5 * h : d.bbox.y + 0.5 * h) + e.centroid_offset.y;
-  }
-  return c;
+Tracker::Prediction Tracker::Predict(const Entry& e, double dt, const CameraModel& camera) const {
+  Prediction p;
+  p.kalman = e.kalman;
+  p.kalman.PredictAngleDepth(dt, options_.kalman.process_noise);
+  const ConstantVelocityKalman::State& x = p.kalman.state();
+  const ConstantVelocityKalman::Covariance& P = p.kalman.covariance();
+  p.z = x(2);
+  p.valid = p.z > kMinDepthM;
+  if (!p.valid) return p;
+  p.u = camera.cx + camera.f_px * x(0);
+  p.v = camera.cy + camera.f_px * x(1);
+  p.sigma_u = camera.f_px * std::sqrt(std::max(P(0, 0), 0.0));
+  p.sigma_v = camera.f_px * std::sqrt(std::max(P(1, 1), 0.0));
+  p.var_z = std::max(P(2, 2), 0.0);
+  const double scale = e.full_depth_m > 0 ? e.full_depth_m / p.z : 1.0;
+  p.size = cv::Size2d(e.full_size.width * scale, e.full_size.height * scale);
+  return p;
 }
 
-void Tracker::Correct(Entry& e, const detection::Detection& d, const Cut& cut,
-                      const CameraModel& camera) {
-  if (!cut.any() || !(e.full_size.width > 0)) {
+cv::Rect Tracker::PredictedBox(const Prediction& p, double grow_u, double grow_v) {
+  return RectAround(p.u, p.v, p.size.width + 2 * grow_u, p.size.height + 2 * grow_v);
+}
+
+Tracker::Measured Tracker::Measure(const Entry& e, const Prediction& p,
+                                   const detection::Detection& d, const Cut& cut,
+                                   bool merged) const {
+  Measured m;
+  m.centre = d.centroid_px;
+  const double base = options_.kalman.measurement_noise;
+  // One axis: the detection's extent [lo, lo + size), the track's expected size and predicted
+  // centre, which sides are cut, and the centroid's offset from the box centre.
+  const auto axis = [&](double lo, double size, double expected, double predicted, bool cut_lo,
+                        bool cut_hi, double offset, double& centre, double& variance) {
+    const double difference = std::abs(size - expected);
+    // A larger blob is re-anchored only when it is a merge of several tracks' obstacles; otherwise
+    // the obstacle grew (entering the image, coming out from behind another, closing in).
+    if (!(expected > 0) || difference <= std::max(kSizeTolerancePx, kSizeTolerance * expected) ||
+        (size > expected && !merged)) {
+      variance = base + 0.25 * difference * difference;
+      return false;
+    }
+    const double hi = lo + size;
+    bool anchor_lo;
+    if (cut_lo != cut_hi) {
+      anchor_lo = cut_hi;  // the uncut edge
+    } else {
+      anchor_lo = std::abs(lo - (predicted - 0.5 * expected)) <=
+                  std::abs(hi - (predicted + 0.5 * expected));
+    }
+    centre = (anchor_lo ? lo + 0.5 * expected : hi - 0.5 * expected) + offset;
+    variance = base + kAnchorVariancePx2 + std::pow(kAnchorSigmaPerPx * difference, 2);
+    return true;
+  };
+  if (!p.valid) {
+    m.var_u = m.var_v = base;
+    return m;
+  }
+  const bool ax = axis(d.bbox.x, d.bbox.width, p.size.width, p.u, cut.left, cut.right,
+                       e.centroid_offset.x, m.centre.x, m.var_u);
+  const bool ay = axis(d.bbox.y, d.bbox.height, p.size.height, p.v, cut.top, cut.bottom,
+                       e.centroid_offset.y, m.centre.y, m.var_v);
+  m.anchored = ax || ay;
+  return m;
+}
+
+bool Tracker::DepthConsistent(const Prediction& p, const detection::Detection& d) const {
+  const GateOptions& gates = options_.gates;
+  const double z = DepthOf(d);
+  if (!WithinRatio(z, p.z, gates.max_depth_ratio)) return false;
+  const double sigma = std::max(DepthSigmaOf(d), gates.min_depth_sigma_fraction * z);
+  const double difference = z - p.z;
+  return difference * difference <=
+         gates.depth_sigmas * gates.depth_sigmas * (sigma * sigma + p.var_z);
+}
+
+void Tracker::Correct(Entry& e, const Prediction& p, const detection::Detection& d,
+                      const Cut& cut, bool merged, const CameraModel& camera) {
+  const Measured measured = Measure(e, p, d, cut, merged);
+  e.kalman = p.kalman;
+  const AngleDepth m = MeasureAngleDepth(camera, measured.centre.x, measured.centre.y, DepthOf(d),
+                                         DepthSigmaOf(d), options_.kalman.measurement_noise);
+  Eigen::Matrix3d covariance = m.covariance;
+  const double f2 = camera.f_px * camera.f_px;
+  covariance(0, 0) = measured.var_u / f2;
+  covariance(1, 1) = measured.var_v / f2;
+  e.kalman.Update(m.s, covariance);
+  // The full size follows a detection that nothing cut and whose size agrees with the track's (or
+  // any uncut one while the track is young: its first boxes may have been partial).
+  if (!cut.any() && (!measured.anchored || e.hits < options_.confirm_hits)) {
     e.full_size = cv::Size2d(d.bbox.width, d.bbox.height);
+    e.full_depth_m = DepthOf(d);
     e.centroid_offset = cv::Point2d(d.centroid_px.x - (d.bbox.x + 0.5 * d.bbox.width),
                                     d.centroid_px.y - (d.bbox.y + 0.5 * d.bbox.height));
+  } else if (cut.any() && e.full_depth_m > 0) {
+    // A cut blob larger than the full size says the obstacle is at least that large (it is entering
+    // the image, or was first seen partly hidden).
+    const double scale = DepthOf(d) / e.full_depth_m;
+    if (!cut.left && !cut.right) e.full_size.width = std::max(e.full_size.width, d.bbox.width * scale);
+    if (!cut.top && !cut.bottom) {
+      e.full_size.height = std::max(e.full_size.height, d.bbox.height * scale);
+    }
   }
-  e.last_cut = cut.any();
-  const cv::Point2d centre = MeasuredCentre(e, d, cut);
-  const AngleDepth m = MeasureAngleDepth(camera, centre.x, centre.y, DepthOf(d), DepthSigmaOf(d),
-                                         options_.kalman.measurement_noise);
-  e.kalman.Update(m.s, m.covariance);
+  e.last_cut = cut.any() || measured.anchored;
+  e.box = d.bbox;
+  if (measured.anchored && !cut.any() &&
+      (d.bbox.width > p.size.width || d.bbox.height > p.size.height)) {
+    // A larger blob than the obstacle (merged with another): the track's box is its full box at
+    // the new centre, within the blob.
+    const cv::Rect full = PredictedBox(Predict(e, 0, camera), 0, 0) & d.bbox;
+    if (!full.empty()) e.box = full;
+  }
 }
 
 Tracker::Entry Tracker::NewEntry(const detection::Detection& d, const CameraModel& camera) {
@@ -197,8 +332,12 @@ Tracker::Entry Tracker::NewEntry(const detection::Detection& d, const CameraMode
           .range_filter = FadingMemoryFilter(options_.fading_beta),
           .since_measured_s = 0,
           .full_size = cv::Size2d(d.bbox.width, d.bbox.height),
+          .full_depth_m = DepthOf(d),
           .centroid_offset = cv::Point2d(d.centroid_px.x - (d.bbox.x + 0.5 * d.bbox.width),
-                                         d.centroid_px.y - (d.bbox.y + 0.5 * d.bbox.height))};
+                                         d.centroid_px.y - (d.bbox.y + 0.5 * d.bbox.height)),
+          .last_cut = false,
+          .child = false,
+          .box = d.bbox};
   const double z = DepthOf(d);
   const AngleDepth m = MeasureAngleDepth(camera, d.centroid_px.x, d.centroid_px.y, z,
                                          DepthSigmaOf(d), options_.kalman.measurement_noise);
@@ -228,30 +367,61 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
   const int num_detections = static_cast<int>(usable_.size());
   FindCuts(detections, camera);
 
-  // Cost: pixel distance between the detection's centre (re-centred when cut) and the track's
-  // predicted centre. Only the pairs inside every gate are listed; all others are forbidden and
-  // never assigned.
+  // Every track predicted once, with its covariance: the gates use it, and a track that gets a
+  // detection is updated from it.
+  predictions_.resize(num_tracks);
+  for (int t = 0; t < num_tracks; ++t) predictions_[t] = Predict(tracks_[t], dt, camera);
+
+  // How many tracks' predicted boxes each detection covers (a blob covering two is a merge).
+  merged_.assign(num_detections, 0);
+  for (int t = 0; t < num_tracks; ++t) {
+    const Prediction& p = predictions_[t];
+    if (!p.valid || tracks_[t].state == TrackState::kTentative) continue;
+    const cv::Rect box = PredictedBox(p, 0, 0);
+    for (int k = 0; k < num_detections; ++k) {
+      if (Area(box & detections[usable_[k]].bbox) >= kSharedCover * Area(box)) ++merged_[k];
+    }
+  }
+
+  // Cost: pixel distance between the detection's centre (re-anchored when its size differs) and
+  // the track's predicted centre. Only the pairs inside every gate are listed; all others are
+  // forbidden and never assigned.
   const GateOptions& gates = options_.gates;
   const double max_distance2 = gates.max_distance_px * gates.max_distance_px;
   allowed_.clear();
   for (int t = 0; t < num_tracks; ++t) {
     const Entry& e = tracks_[t];
-    const Eigen::Vector3d s = e.kalman.PredictedAngleDepth(dt);
-    if (!(s.z() > kMinDepthM)) continue;
-    const double u = camera.cx + camera.f_px * s.x(), v = camera.cy + camera.f_px * s.y();
+    const Prediction& p = predictions_[t];
+    if (!p.valid) continue;
+    const cv::Rect gate_box =
+        PredictedBox(p, gates.position_sigmas * p.sigma_u, gates.position_sigmas * p.sigma_v);
     for (int k = 0; k < num_detections; ++k) {
       const detection::Detection& d = detections[usable_[k]];
-      const cv::Point2d c = MeasuredCentre(e, d, cuts_[k]);
-      const double dx = c.x - u, dy = c.y - v;
+      if ((gate_box & d.bbox).empty()) continue;
+      if (!DepthConsistent(p, d)) continue;
+      const Measured m = Measure(e, p, d, cuts_[k], merged_[k] > 1);
+      const double dx = m.centre.x - p.u, dy = m.centre.y - p.v;
       const double distance2 = dx * dx + dy * dy;
       if (!(distance2 <= max_distance2)) continue;
-      if (!WithinRatio(DepthOf(d), s.z(), gates.max_depth_ratio)) continue;
-      // A cut blob's area and perimeter are partial: the shape gates compare uncut blobs only.
-      if (!cuts_[k].any() && !e.last_cut) {
-        if (!WithinRatio(d.area_px, e.last.area_px, gates.max_area_ratio)) continue;
-        if (!WithinRatio(d.perimeter_px, e.last.perimeter_px, gates.max_perimeter_ratio)) continue;
+      // A larger blob than the last on a track measured last frame, neither cut: another obstacle
+      // (or several) when it is much larger. A smaller one is a partial view and passes.
+      if (e.misses == 0 && !cuts_[k].any() && !e.last_cut) {
+        if (d.area_px > e.last.area_px &&
+            !WithinRatio(d.area_px, e.last.area_px, gates.max_area_ratio)) {
+          continue;
+        }
+        if (d.perimeter_px > e.last.perimeter_px &&
+            !WithinRatio(d.perimeter_px, e.last.perimeter_px, gates.max_perimeter_ratio)) {
+          continue;
+        }
       }
-      allowed_.push_back({.row = t, .col = k, .cost = std::sqrt(distance2)});
+      // Cost: the distance, plus half the size difference of a re-anchored blob: of two blobs
+      // that both fit, the one of the obstacle's own size (not a sliver or a merge) wins.
+      double cost = std::sqrt(distance2);
+      if (m.anchored) {
+        cost += 0.5 * (std::abs(d.bbox.width - p.size.width) + std::abs(d.bbox.height - p.size.height));
+      }
+      allowed_.push_back({.row = t, .col = k, .cost = cost});
     }
   }
   solver_.SolveSparse(num_tracks, num_detections, allowed_, track_to_detection_);
@@ -259,15 +429,17 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
   const KalmanOptions& kalman = options_.kalman;
   detection_used_.assign(num_detections, 0);
   for (int t = 0; t < num_tracks; ++t) {
+    if (track_to_detection_[t] >= 0) detection_used_[track_to_detection_[t]] = 1;
+  }
+  for (int t = 0; t < num_tracks; ++t) {
     Entry& e = tracks_[t];
-    const int k = track_to_detection_[t];
+    const Prediction& p = predictions_[t];
+    int k = track_to_detection_[t];
     ++e.age_frames;
     e.since_measured_s += dt;
     if (k >= 0) {
       const detection::Detection& d = detections[usable_[k]];
-      detection_used_[k] = 1;
-      e.kalman.PredictAngleDepth(dt, kalman.process_noise);
-      Correct(e, d, cuts_[k], camera);
+      Correct(e, p, d, cuts_[k], merged_[k] > 1, camera);
       e.range_filter.Update(RawRange(d), e.since_measured_s);
       e.since_measured_s = 0;
       e.last = d;
@@ -276,29 +448,140 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
       if (e.state != TrackState::kTentative || e.hits >= options_.confirm_hits) {
         e.state = TrackState::kConfirmed;
       }
-    } else {
-      // Occluded (or missed): free prediction with the occlusion noises. The pseudo-measurement is
-      // the prediction itself, so it leaves the state and only (barely) shrinks the covariance.
-      e.kalman.PredictAngleDepth(dt, kalman.occluded_process_noise);
-      const Eigen::Vector3d s = e.kalman.position();
-      if (s.z() > kMinDepthM) {
-        const AngleDepth pseudo = MeasureAngleDepth(
-            camera, camera.cx + camera.f_px * s.x(), camera.cy + camera.f_px * s.y(), s.z(), 0,
-            kalman.occluded_measurement_noise);
-        e.kalman.Update(pseudo.s, pseudo.covariance);
+      continue;
+    }
+    // No detection of its own. A confirmed track whose predicted box lies in a larger blob that
+    // shares one of its edges (two obstacles merged into one blob, whose depth is the other's) is
+    // measured there in position only: the blob says where its edge is, not how far it is.
+    if (e.state != TrackState::kTentative && p.valid && p.size.width > 0) {
+      const cv::Rect predicted = PredictedBox(p, 0, 0);
+      double best_error = std::numeric_limits<double>::infinity();
+      for (int j = 0; j < num_detections; ++j) {
+        const detection::Detection& d = detections[usable_[j]];
+        if (Area(predicted & d.bbox) < kSharedCover * Area(predicted)) continue;
+        const double tol_u = std::max(kEdgeAgreePx, kEdgeAgreeSigmas * p.sigma_u);
+        const double lo_error = std::abs(d.bbox.x - predicted.x);
+        const double hi_error = std::abs(d.bbox.br().x - predicted.br().x);
+        const bool wider = d.bbox.width > p.size.width +
+                                              std::max(kSizeTolerancePx, kSizeTolerance * p.size.width);
+        const double error = std::min(lo_error, hi_error);
+        if (!wider || error > tol_u || error >= best_error) continue;
+        // Each obstacle of a merged blob is a substantial part of it; a sliver along its edge (a
+        // side face seen at another depth, a speck) is not measured by it.
+        if (p.size.width < kSharedMinFraction * d.bbox.width) continue;
+        best_error = error;
+        k = j;
       }
-      ++e.misses;
-      if (e.state == TrackState::kConfirmed) e.state = TrackState::kCoasting;
+    }
+    if (k >= 0) {
+      const detection::Detection& d = detections[usable_[k]];
+      Measured m = Measure(e, p, d, cuts_[k], true);
+      e.kalman = p.kalman;
+      const AngleDepth pseudo = MeasureAngleDepth(camera, m.centre.x, m.centre.y, p.z,
+                                                  kNoDepthSigmaFraction * p.z, kalman.measurement_noise);
+      Eigen::Matrix3d covariance = pseudo.covariance;
+      const double f2 = camera.f_px * camera.f_px;
+      covariance(0, 0) = m.var_u / f2;
+      covariance(1, 1) = m.var_v / f2;
+      e.kalman.Update(pseudo.s, covariance);
+      // Its box: the full box at the new centre within the blob, less what the track that took the
+      // blob covers (the nearer obstacle hides that part).
+      e.box = PredictedBox(Predict(e, 0, camera), 0, 0) & d.bbox;
+      for (int o = 0; o < num_tracks; ++o) {
+        if (o != t && track_to_detection_[o] == k && predictions_[o].valid) {
+          e.box = Subtract(e.box, PredictedBox(predictions_[o], 0, 0));
+        }
+      }
+      ++e.hits;
+      e.misses = 0;
+      e.state = TrackState::kConfirmed;
+      continue;
+    }
+    // Occluded (or missed): free prediction with the occlusion noises. The pseudo-measurement is
+    // the prediction itself, so it leaves the state and only (barely) shrinks the covariance.
+    e.kalman.PredictAngleDepth(dt, kalman.occluded_process_noise);
+    const Eigen::Vector3d s = e.kalman.position();
+    if (s.z() > kMinDepthM) {
+      const AngleDepth pseudo = MeasureAngleDepth(
+          camera, camera.cx + camera.f_px * s.x(), camera.cy + camera.f_px * s.y(), s.z(), 0,
+          kalman.occluded_measurement_noise);
+      e.kalman.Update(pseudo.s, pseudo.covariance);
+      if (e.full_size.width > 0) {
+        const double scale = e.full_depth_m > 0 ? e.full_depth_m / s.z() : 1.0;
+        e.box = RectAround(camera.cx + camera.f_px * s.x(), camera.cy + camera.f_px * s.y(),
+                           e.full_size.width * scale, e.full_size.height * scale);
+      }
+    }
+    ++e.misses;
+    if (e.state == TrackState::kConfirmed) e.state = TrackState::kCoasting;
+  }
+
+  // A detection no track took: inside a track's predicted box at a depth that track allows, it is
+  // a fragment of that obstacle (its box joins the track's); at a depth the track rules out, it
+  // starts a child track, deleted at its first miss while tentative; elsewhere a new track.
+  for (int k = 0; k < num_detections; ++k) {
+    if (detection_used_[k]) continue;
+    const detection::Detection& d = detections[usable_[k]];
+    bool fragment = false, inside = false;
+    for (int t = 0; t < num_tracks && !fragment; ++t) {
+      const Prediction& p = predictions_[t];
+      if (!p.valid) continue;
+      const cv::Rect region = PredictedBox(p, 0, 0) | tracks_[t].box;
+      if (Area(region & d.bbox) < kInsideFraction * Area(d.bbox)) continue;
+      if (DepthConsistent(p, d)) {
+        fragment = true;
+        if (tracks_[t].misses == 0) tracks_[t].box |= d.bbox;
+      } else {
+        inside = true;
+      }
+    }
+    if (fragment) continue;
+    tracks_.push_back(NewEntry(d, camera));
+    tracks_.back().child = inside;
+  }
+
+  // Two tracks on one obstacle (their boxes overlap at merge_iou, depths consistent): the younger
+  // is merged into the older, which takes its measurement when it had none of its own.
+  for (size_t i = 0; i < tracks_.size(); ++i) {
+    for (size_t j = i + 1; j < tracks_.size(); ++j) {
+      Entry& a = tracks_[i];
+      Entry& b = tracks_[j];
+      if (a.id == 0 || b.id == 0) continue;
+      // One obstacle: the boxes overlap at merge_iou, or one lies mostly inside the other (a
+      // fragment that started a track of its own, e.g. in the first frame).
+      const double inter = Area(a.box & b.box);
+      if (IoURect(a.box, b.box) < options_.merge_iou &&
+          inter < kInsideFraction * std::min(Area(a.box), Area(b.box))) {
+        continue;
+      }
+      const double za = a.kalman.position().z(), zb = b.kalman.position().z();
+      const double floor = gates.min_depth_sigma_fraction * std::max(za, zb);
+      const double var = a.kalman.covariance()(2, 2) + b.kalman.covariance()(2, 2) + floor * floor;
+      if ((za - zb) * (za - zb) > gates.depth_sigmas * gates.depth_sigmas * var) continue;
+      Entry& older = a.id < b.id ? a : b;
+      Entry& younger = a.id < b.id ? b : a;
+      if (older.misses > 0 && younger.misses == 0 && older.state != TrackState::kTentative) {
+        older.kalman = younger.kalman;
+        older.last = younger.last;
+        older.box = younger.box;
+        older.range_filter.Update(RawRange(younger.last), older.since_measured_s);
+        older.since_measured_s = 0;
+        older.misses = 0;
+        ++older.hits;
+        older.state = TrackState::kConfirmed;
+      }
+      younger.id = 0;  // merged: removed below
     }
   }
 
-  // Deleted: after too many misses, or predicted wholly out of the image (nothing can be seen
-  // there; an obstacle that left the view is gone).
+  // Deleted: merged, after too many misses, or predicted wholly out of the image (nothing can be
+  // seen there; an obstacle that left the view is gone).
   std::erase_if(tracks_, [&](const Entry& e) {
-    if (e.misses >= (e.state == TrackState::kTentative ? options_.tentative_delete_misses
-                                                       : options_.delete_misses)) {
-      return true;
-    }
+    if (e.id == 0) return true;
+    const int limit = e.state == TrackState::kTentative
+                          ? (e.child ? 1 : options_.tentative_delete_misses)
+                          : options_.delete_misses;
+    if (e.misses >= limit) return true;
     if (e.misses == 0 || camera.width <= 0 || camera.height <= 0) return false;
     const Eigen::Vector3d s = e.kalman.position();
     const double u = camera.cx + camera.f_px * s.x(), v = camera.cy + camera.f_px * s.y();
@@ -306,9 +589,6 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
            u - 0.5 * e.full_size.width > camera.width || v + 0.5 * e.full_size.height < 0 ||
            v - 0.5 * e.full_size.height > camera.height;
   });
-  for (int k = 0; k < num_detections; ++k) {
-    if (!detection_used_[k]) tracks_.push_back(NewEntry(detections[usable_[k]], camera));
-  }
 
   std::vector<Track> out;
   out.reserve(tracks_.size());
@@ -340,17 +620,12 @@ Track Tracker::Output(const Entry& e, const CameraModel& camera) const {
   const Eigen::Matrix<double, 6, 1> variance =
       (J * e.kalman.covariance() * J.transpose()).diagonal();
   if (e.misses > 0 && z > kMinDepthM) {
-    // Not measured this frame: the box follows the prediction, keeping its size.
-    const Eigen::Vector2d centre(camera.cx + camera.f_px * a, camera.cy + camera.f_px * b);
-    const cv::Point2d shift(centre.x() - e.last.centroid_px.x, centre.y() - e.last.centroid_px.y);
-    track.detection.centroid_px = cv::Point2d(centre.x(), centre.y());
-    // Clamped so that a prediction that nears the camera plane cannot overflow an int.
-    constexpr double kMaxPx = 1e6;
-    track.detection.bbox.x =
-        static_cast<int>(std::lround(std::clamp(e.last.bbox.x + shift.x, -kMaxPx, kMaxPx)));
-    track.detection.bbox.y =
-        static_cast<int>(std::lround(std::clamp(e.last.bbox.y + shift.y, -kMaxPx, kMaxPx)));
+    // Not measured this frame: the centre is the prediction's.
+    track.detection.centroid_px = cv::Point2d(camera.cx + camera.f_px * a, camera.cy + camera.f_px * b);
   }
+  // Measured: the detection's box with the fragments that joined it; measured in a shared blob:
+  // the full box at the new centre within the blob; coasting: the full box at the prediction.
+  if (!e.box.empty()) track.detection.bbox = e.box;
   track.position_cam_m = ToCv(p);
   track.velocity_cam_mps = ToCv(v);
   track.position_sigma_m = ToCv(variance.head<3>().cwiseMax(0.0).cwiseSqrt());

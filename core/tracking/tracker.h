@@ -20,19 +20,33 @@
 
 namespace stevi::tracking {
 
-// A detection and a track are paired only when every gate passes. A ratio gate compares the larger
-// of two values with the smaller; a value <= 0 on either side (unknown) passes it. To disable a
-// gate, make it very large.
+// A detection and a track are paired only when every gate passes (README.md, "Assignment and
+// gates"). A ratio gate compares the larger of two values with the smaller; a value <= 0 on either
+// side (unknown) passes it. To disable a gate, make it very large.
 struct GateOptions {
-  // Detection depth against the track's predicted depth (depth ratio = disparity ratio), >= 1.
-  // 1.3 separates obstacles whose depths differ by 30 %, while the depth noise of a trusted
-  // disparity (>= 3 px at 0.25 px sigma) is at most 8 %.
+  // Hard cap on the detection depth against the track's predicted depth (depth ratio = disparity
+  // ratio), >= 1. The depth gate proper is depth_sigmas below.
   double max_depth_ratio = 1.3;
-  // Detection area against the track's last measured area (pixels^2 ratio), >= 1.
+  // Depth gate: |detection depth - predicted depth| <= depth_sigmas * sqrt(sigma_d^2 + P_zz), with
+  // sigma_d the detection's depth sigma (from range_sigma_m) floored at min_depth_sigma_fraction
+  // of its depth and P_zz the variance of the track's predicted depth. > 0.
+  double depth_sigmas = 3.0;
+  // Floor of a detection's depth sigma as a fraction of its depth, >= 0: the disparity's own
+  // spread understates a blob's error (a fragment, a cut blob, a mixed median).
+  double min_depth_sigma_fraction = 0.05;
+  // Position gate: the detection's box must overlap the track's predicted box (its full size at
+  // the predicted centre) grown by this many sigmas of the predicted centre on each side, > 0. The
+  // box follows the prediction's covariance, which grows while a track coasts.
+  double position_sigmas = 3.0;
+  // Detection area against the track's last measured area (pixels^2 ratio), >= 1. Applied only
+  // to a detection larger than the last one, on a track measured in the previous frame, neither
+  // cut: a smaller blob is a partial view (a fragment, a partly hidden obstacle), not another
+  // obstacle.
   double max_area_ratio = 3.0;
-  // Detection perimeter against the track's last measured perimeter, >= 1.
+  // Detection perimeter against the track's last measured perimeter, >= 1 (as max_area_ratio).
   double max_perimeter_ratio = 2.5;
-  // Distance (pixels) between the detection's centroid and the track's predicted centre, > 0.
+  // Distance (pixels) between the detection's centre (re-anchored when its size differs from the
+  // track's) and the track's predicted centre, > 0.
   double max_distance_px = 80;
 
   std::vector<std::string> Validate() const;
@@ -59,6 +73,9 @@ struct TrackerOptions {
   // Frame intervals longer than this (seconds, > 0) are predicted as this long: a stalled source
   // or a clock jump must not fling the predictions away (the gates then decide).
   double max_dt_s = 1.0;
+  // Two tracks whose boxes overlap at this IoU or more, at depths consistent within the depth gate,
+  // are one obstacle: the younger is merged into the older, in (0, 1].
+  double merge_iou = 0.5;
 
   // Every problem, as "field: problem" ("gates.max_depth_ratio: must be >= 1 (got 0.5)").
   std::vector<std::string> Validate() const;
@@ -142,12 +159,19 @@ class Tracker {
     ConstantVelocityKalman kalman;  // on s = (a, b, z): see MeasureAngleDepth
     FadingMemoryFilter range_filter;
     double since_measured_s = 0;  // (clamped) time since the last detection
-    // The obstacle's whole size in the image and its centroid's offset from the box centre, from
-    // the last detection that nothing cut: a blob cut by a nearer obstacle or the image border is
-    // centred from its uncut edge with this size.
+    // The obstacle's whole size in the image, at depth full_depth_m, and its centroid's offset from
+    // the box centre, from the last detection that nothing cut and whose size agreed with the
+    // track's: a blob whose size differs (cut, partly hidden, merged with another) is centred from
+    // its edge that agrees with the prediction, with this size.
     cv::Size2d full_size;
+    double full_depth_m = 0;
     cv::Point2d centroid_offset;
     bool last_cut = false;  // the last detection was cut (its area and perimeter are partial)
+    // Born inside another track's box at a depth that track rules out (a fragment that took its
+    // disparity from something else, or a nearer obstacle): deleted at its first miss while
+    // tentative.
+    bool child = false;
+    cv::Rect box;  // the box reported this frame
   };
 
   // Which sides of a detection are cut by a nearer detection or by the image border.
@@ -155,11 +179,33 @@ class Tracker {
     bool left = false, right = false, top = false, bottom = false;
     bool any() const { return left || right || top || bottom; }
   };
+  // A track predicted to this frame, for gating and the update.
+  struct Prediction {
+    ConstantVelocityKalman kalman;  // predicted with the measured process noise
+    double u = 0, v = 0;            // predicted centre, pixels
+    double sigma_u = 0, sigma_v = 0;  // its 1-sigma, pixels
+    double z = 0, var_z = 0;        // predicted depth (metres) and its variance
+    cv::Size2d size;                // the full size expected at depth z
+    bool valid = false;             // in front of the camera
+  };
+  // The centre a detection gives a track, and the variance of that centre on u and v (px^2).
+  struct Measured {
+    cv::Point2d centre;
+    double var_u = 0, var_v = 0;
+    bool anchored = false;  // the size differed: centred from the edge that agrees
+  };
   void FindCuts(const std::vector<detection::Detection>& detections, const CameraModel& camera);
-  // The detection's centre as the track sees it: its centroid, or, when the blob is cut and
-  // narrower (shorter) than the track's full size, the centre of the full box on its uncut edge.
-  cv::Point2d MeasuredCentre(const Entry& entry, const detection::Detection& d, const Cut& cut) const;
-  void Correct(Entry& entry, const detection::Detection& d, const Cut& cut, const CameraModel& camera);
+  Prediction Predict(const Entry& entry, double dt, const CameraModel& camera) const;
+  // The detection's centre as the track sees it: its centroid when its size agrees with the
+  // track's; else the centre of the full box on its edge that agrees with the prediction (or that
+  // nothing cuts).
+  // `merged`: the detection covers several tracks' predicted boxes.
+  Measured Measure(const Entry& entry, const Prediction& p, const detection::Detection& d,
+                   const Cut& cut, bool merged) const;
+  bool DepthConsistent(const Prediction& p, const detection::Detection& d) const;
+  static cv::Rect PredictedBox(const Prediction& p, double grow_u, double grow_v);
+  void Correct(Entry& entry, const Prediction& p, const detection::Detection& d, const Cut& cut,
+               bool merged, const CameraModel& camera);
 
   Entry NewEntry(const detection::Detection& detection, const CameraModel& camera);
   Track Output(const Entry& entry, const CameraModel& camera) const;
@@ -175,6 +221,8 @@ class Tracker {
   std::vector<int> track_to_detection_;  // index into usable_, or -1
   std::vector<char> detection_used_;
   std::vector<Cut> cuts_;                // per usable detection
+  std::vector<Prediction> predictions_;  // per track
+  std::vector<int> merged_;              // per usable detection: tracks' boxes it covers
   AssignmentSolver solver_;
 };
 

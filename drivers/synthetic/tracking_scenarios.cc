@@ -154,6 +154,71 @@ Scenario Departing() {
   return s;
 }
 
+// Camera 12 m above the ground, as on the user's airfield: the ground fills the image below the
+// horizon (row 240); the obstacles fly above it, against the sky.
+Scene AirfieldScene() {
+  Scene scene;
+  scene.camera_height_m = 12.0;
+  return scene;
+}
+
+Scenario Crossing() {
+  Scene scene = AirfieldScene();
+  const double length_s = 8.0;
+  // aircraft-near: 10 x 2 x 3 m, front face at 40 m (10.5 px of disparity), ~175 x 35 px, rows
+  // 170..205, its front-face centre from u 100 to 540 (3.14 m/s, 5.5 px per frame).
+  scene.obstacles.push_back(MakeObstacle(1, "aircraft-near", {10.0, 2.0, 3.0},
+                                         Straight({-12.571, -3.0, 41.5}, {3.1429, 0.0, 0.0}), 0.3,
+                                         0.45, 0.2));
+  // aircraft-far: 10 x 2 x 3 m, front face at 50 m (8.4 px; the scoring floor is 8 px, 52.5 m),
+  // ~140 x 28 px, rows 176..204, from u 540 to 100 (3.93 m/s).
+  scene.obstacles.push_back(MakeObstacle(2, "aircraft-far", {10.0, 2.0, 3.0},
+                                         Straight({15.714, -3.6, 51.5}, {-3.9286, 0.0, 0.0}), 0.6,
+                                         0.4, 0.25));
+  Scenario s;
+  s.name = "crossing";
+  s.description =
+      "Camera 12 m above the ground (ground below the horizon). Two aircraft-like boxes (10 x 2 x "
+      "3 m) cross in the image on nearly the same rows: aircraft-near (front face at 40 m, "
+      "10.5 px of disparity, ~175 x 35 px) flies left to right (u 100 -> 540) and aircraft-far "
+      "(50 m, 8.4 px, ~140 x 28 px) right to left (u 540 -> 100); they cross at frame 40, their "
+      "boxes overlap for ~28 frames (the far one cut by the near one) and the far one is wholly "
+      "covered for ~3. Depth ratio 1.25: inside the old fixed depth gate (1.3), so only the "
+      "depths' own uncertainties tell the two apart. 8 s, 80 frames. Hard: the far blob falls "
+      "into pieces while cut, some pieces take the near one's disparity, and the two must keep "
+      "their ids.";
+  s.options = ScenarioOptions(205, std::move(scene));
+  s.frames = static_cast<int>(length_s * 10);
+  return s;
+}
+
+Scenario Occlusion() {
+  Scene scene = AirfieldScene();
+  // billboard: 5 x 4 x 0.5 m, floating, front face at 25 m (16.8 px), columns 250..390, rows
+  // 142..254 (its bottom below the horizon, against distant ground).
+  scene.obstacles.push_back(
+      MakeObstacle(1, "billboard", {5.0, 4.0, 0.5}, Fixed({0.0, -1.5, 25.25}), 0.55, 0.45, 0.3));
+  // aircraft-c: 6 x 1.2 x 2 m, front face at 45 m (9.3 px), ~93 x 19 px, rows 200..218, left to
+  // right at 7.71 m/s (12 px per frame) from u 60: behind the billboard's columns from frame 12
+  // (its right edge) to frame 36 (its left edge); wholly hidden at frames 20..23.
+  scene.obstacles.push_back(MakeObstacle(2, "aircraft-c", {6.0, 1.2, 2.0},
+                                         Straight({-16.714, -1.8, 46.0}, {7.7143, 0.0, 0.0}), 0.3,
+                                         0.45, 0.15));
+  Scenario s;
+  s.name = "occlusion";
+  s.description =
+      "Camera 12 m above the ground. A billboard (5 x 4 x 0.5 m, front face at 25 m, 16.8 px, "
+      "columns 250..390, rows 142..254) floats in front of the horizon; aircraft-c (6 x 1.2 x 2 m, "
+      "front at 45 m, 9.3 px, ~93 x 19 px, rows 200..218) flies left to right behind it at "
+      "12 px per frame: partly hidden at frames 12..19 (its box shrinks from the right), wholly "
+      "hidden at 20..23, partly hidden at 24..35 (growing from the left), then in the clear. "
+      "4.5 s, 45 frames. Hard: the track must coast through the occlusion and take the "
+      "re-emerging aircraft back under its old id while its box is a sliver of the full size.";
+  s.options = ScenarioOptions(206, std::move(scene));
+  s.frames = 45;
+  return s;
+}
+
 }  // namespace
 
 std::vector<Scenario> TrackingScenarios() {
@@ -162,6 +227,8 @@ std::vector<Scenario> TrackingScenarios() {
   scenarios.push_back(EntriesExits());
   scenarios.push_back(HeadOn());
   scenarios.push_back(Departing());
+  scenarios.push_back(Crossing());
+  scenarios.push_back(Occlusion());
   return scenarios;
 }
 

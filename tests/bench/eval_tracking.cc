@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <string>
 #include <vector>
@@ -109,6 +110,20 @@ void PrintTrace(const std::string& scenario, const testing::TrackingRun& run,
                       static_cast<unsigned long long>(t.id), t.position_cam_m[2], measured_z);
         diverged += text;
       }
+    }
+    if (std::getenv("STEVI_TRACE_ALL") != nullptr) {
+      std::printf("%s %s frame %zu detections:", scenario.c_str(), run.algorithm.c_str(), k);
+      for (const detection::Detection& d : f.detections) {
+        std::printf(" %s z %.1f (c %.0f,%.0f)", Box(d.bbox).c_str(), d.depth_m, d.centroid_px.x,
+                    d.centroid_px.y);
+      }
+      std::printf("\n  tracks:");
+      for (const tracking::Track& t : f.tracks) {
+        std::printf(" %llu%s %s z %.1f vx %.2f vz %.2f;", static_cast<unsigned long long>(t.id),
+                    t.misses > 0 ? "c" : "", Box(t.detection.bbox).c_str(), t.position_cam_m[2],
+                    t.velocity_cam_mps[0], t.velocity_cam_mps[2]);
+      }
+      std::printf("\n");
     }
     if (m.misses.empty() && m.false_positives.empty() && m.id_switches.empty() &&
         m.fragmentations.empty() && m.dont_care.empty() && diverged.empty()) {

@@ -167,6 +167,7 @@ TEST(Tracker, OccludedTargetKeepsItsIdAndCoastsThroughTheGap) {
   std::uint64_t id = 0;
   int hits_before_gap = 0;
   cv::Size box_size;
+  double depth_before_gap = 0;
   for (int k = 0; k < 75; ++k) {
     const bool occluded = k >= kGapStart && k < kGapEnd;
     std::vector<detection::Detection> detections;
@@ -181,6 +182,7 @@ TEST(Tracker, OccludedTargetKeepsItsIdAndCoastsThroughTheGap) {
       EXPECT_EQ(t.state, TrackState::kConfirmed);
       hits_before_gap = t.hits;
       box_size = t.detection.bbox.size();
+      depth_before_gap = t.detection.depth_m;
     }
     if (occluded) {
       EXPECT_EQ(t.state, TrackState::kCoasting) << "frame " << k;
@@ -192,7 +194,10 @@ TEST(Tracker, OccludedTargetKeepsItsIdAndCoastsThroughTheGap) {
       const cv::Point2d truth_px(kCamera.cx + kCamera.f_px * truth.x() / truth.z(),
                                  kCamera.cy + kCamera.f_px * truth.y() / truth.z());
       EXPECT_LT(cv::norm(t.detection.centroid_px - truth_px), 1.5) << "frame " << k;
-      EXPECT_EQ(t.detection.bbox.size(), box_size);
+      // The full size, scaled with the predicted depth (the obstacle closes in).
+      EXPECT_NEAR(t.detection.bbox.width, box_size.width * depth_before_gap / t.position_cam_m[2], 1.5);
+      EXPECT_NEAR(t.detection.bbox.height, box_size.height * depth_before_gap / t.position_cam_m[2],
+                  1.5);
       const cv::Point2d box_centre(t.detection.bbox.x + t.detection.bbox.width / 2.0,
                                    t.detection.bbox.y + t.detection.bbox.height / 2.0);
       EXPECT_LT(cv::norm(box_centre - truth_px), 2.5) << "frame " << k;
@@ -314,8 +319,9 @@ TEST(Tracker, IdsStrictlyIncreaseAndAreNeverReused) {
 }
 
 // Confirms a track on a stationary obstacle at 30 m (3 frames), then offers one detection changed
-// by `change`. True when it went to the existing track; false when a new track was started for it
-// and the existing one missed.
+// by `change`. True when it went to the existing track; false when the existing one missed (the
+// detection then started a new track, or, inside the track's box at a depth it allows, was taken
+// for a fragment of it and started none).
 bool AssignedAfterChange(const std::function<void(detection::Detection&)>& change) {
   Tracker tracker;
   const Eigen::Vector3d p(0.5, 0.2, 30);
@@ -337,9 +343,11 @@ bool AssignedAfterChange(const std::function<void(detection::Detection&)>& chang
     return true;
   }
   EXPECT_EQ(old_track->state, TrackState::kCoasting);
-  EXPECT_EQ(tracks.size(), 2u);
-  EXPECT_GT(tracks.back().id, id);
-  EXPECT_EQ(tracks.back().state, TrackState::kTentative);
+  EXPECT_LE(tracks.size(), 2u);
+  if (tracks.size() == 2) {
+    EXPECT_GT(tracks.back().id, id);
+    EXPECT_EQ(tracks.back().state, TrackState::kTentative);
+  }
   return false;
 }
 
@@ -355,23 +363,34 @@ std::function<void(detection::Detection&)> AtDepth(double depth_m) {
 }
 
 TEST(Tracker, DepthGateRejectsADetectionAtAnotherDepth) {
-  // max_depth_ratio 1.3: 30 m -> 39.6 m (1.32) is another obstacle; 30 m -> 38.4 m (1.28) is not.
+  // The depth gate: 3 sigmas of sqrt(sigma_d^2 + P_zz), sigma_d floored at 5 % of the depth. At
+  // 30 m: sigma_d = max(0.54, 1.5) m, and the predicted depth of a three-hit track (its velocity
+  // barely known) has a sigma of about 1 m: about 5.4 m. 30 -> 38.4 m (the old fixed ratio gate,
+  // 1.3, let it through) is another obstacle; 30 -> 33.6 m is not. The ratio cap holds too.
   EXPECT_FALSE(AssignedAfterChange(AtDepth(30 * 1.32)));
   EXPECT_FALSE(AssignedAfterChange(AtDepth(30 / 1.32)));
-  EXPECT_TRUE(AssignedAfterChange(AtDepth(30 * 1.28)));
-  EXPECT_TRUE(AssignedAfterChange(AtDepth(30 / 1.28)));
+  EXPECT_FALSE(AssignedAfterChange(AtDepth(30 * 1.28)));
+  EXPECT_FALSE(AssignedAfterChange(AtDepth(30 / 1.28)));
+  EXPECT_TRUE(AssignedAfterChange(AtDepth(30 * 1.12)));
+  EXPECT_TRUE(AssignedAfterChange(AtDepth(30 / 1.12)));
+  // A detection at half the range inside the track's box starts a (child) track of its own.
+  EXPECT_FALSE(AssignedAfterChange(AtDepth(15)));
 }
 
 TEST(Tracker, AreaPerimeterAndDistanceGates) {
-  // max_area_ratio 3, max_perimeter_ratio 2.5, max_distance_px 80.
+  // max_area_ratio 3, max_perimeter_ratio 2.5: a larger blob is refused beyond them; a smaller
+  // one is a partial view and passes. Position: the detection's box must overlap the predicted
+  // box (grown by 3 sigmas), and its centre be within max_distance_px 80.
   EXPECT_FALSE(AssignedAfterChange(
       [](detection::Detection& d) { d.area_px = static_cast<int>(d.area_px * 3.2); }));
   EXPECT_TRUE(AssignedAfterChange(
       [](detection::Detection& d) { d.area_px = static_cast<int>(d.area_px * 2.8); }));
-  EXPECT_FALSE(AssignedAfterChange([](detection::Detection& d) { d.perimeter_px /= 2.6; }));
-  EXPECT_TRUE(AssignedAfterChange([](detection::Detection& d) { d.perimeter_px /= 2.4; }));
-  // A move of 82 px (and 3.5 m at 30 m) is too far; 78 px is not.
-  for (const auto& [shift_px, assigned] : {std::pair{82.0, false}, std::pair{78.0, true}}) {
+  EXPECT_FALSE(AssignedAfterChange([](detection::Detection& d) { d.perimeter_px *= 2.6; }));
+  EXPECT_TRUE(AssignedAfterChange([](detection::Detection& d) { d.perimeter_px *= 2.4; }));
+  EXPECT_TRUE(AssignedAfterChange([](detection::Detection& d) { d.perimeter_px /= 2.6; }));
+  EXPECT_TRUE(AssignedAfterChange([](detection::Detection& d) { d.area_px /= 4; }));
+  // The box is 47 px wide: a move of 30 px still overlaps the prediction, 60 px does not.
+  for (const auto& [shift_px, assigned] : {std::pair{60.0, false}, std::pair{30.0, true}}) {
     EXPECT_EQ(AssignedAfterChange([shift = shift_px](detection::Detection& d) {
                 d.centroid_px.x += shift;
                 d.bbox.x += static_cast<int>(shift);
