@@ -248,12 +248,16 @@ void ToProto(const tracking::TrackerOptions& o, v1::TrackingConfig* p) {
   g->set_max_area_ratio(o.gates.max_area_ratio);
   g->set_max_perimeter_ratio(o.gates.max_perimeter_ratio);
   g->set_max_distance_px(o.gates.max_distance_px);
+  g->set_depth_sigmas(o.gates.depth_sigmas);
+  g->set_min_depth_sigma_fraction(o.gates.min_depth_sigma_fraction);
+  g->set_position_sigmas(o.gates.position_sigmas);
   p->set_confirm_hits(o.confirm_hits);
   p->set_tentative_delete_misses(o.tentative_delete_misses);
   p->set_delete_misses(o.delete_misses);
   p->set_fading_beta(o.fading_beta);
   p->set_min_score(o.min_score);
   p->set_max_dt_s(o.max_dt_s);
+  p->set_merge_iou(o.merge_iou);
 }
 
 void MergeTracking(const v1::TrackingConfig& p, tracking::TrackerOptions& o) {
@@ -266,12 +270,16 @@ void MergeTracking(const v1::TrackingConfig& p, tracking::TrackerOptions& o) {
   STEVI_MERGE(p.gates(), max_area_ratio, o.gates.max_area_ratio);
   STEVI_MERGE(p.gates(), max_perimeter_ratio, o.gates.max_perimeter_ratio);
   STEVI_MERGE(p.gates(), max_distance_px, o.gates.max_distance_px);
+  STEVI_MERGE(p.gates(), depth_sigmas, o.gates.depth_sigmas);
+  STEVI_MERGE(p.gates(), min_depth_sigma_fraction, o.gates.min_depth_sigma_fraction);
+  STEVI_MERGE(p.gates(), position_sigmas, o.gates.position_sigmas);
   STEVI_MERGE(p, confirm_hits, o.confirm_hits);
   STEVI_MERGE(p, tentative_delete_misses, o.tentative_delete_misses);
   STEVI_MERGE(p, delete_misses, o.delete_misses);
   STEVI_MERGE(p, fading_beta, o.fading_beta);
   STEVI_MERGE(p, min_score, o.min_score);
   STEVI_MERGE(p, max_dt_s, o.max_dt_s);
+  STEVI_MERGE(p, merge_iou, o.merge_iou);
 }
 
 void ToProto(const geo::MountOptions& o, v1::MountConfig* p) {

@@ -41,7 +41,7 @@ constexpr int kMinRefinePatches = 5;
 // boxes, whose errors it leaves at 1 sigma rms).
 constexpr double kRefineSystematicPx = 0.03;
 // Hypotheses whose disparity's 1-sigma exceeds this fraction of it (10 % of the range) are dropped.
-constexpr double kMaxRelativeDisparitySigma = 0.1;
+constexpr double kMaxRelativeDisparitySigma = 0.035;
 // Hypotheses within this many pixels of the top of the matcher's search range are dropped.
 constexpr double kSearchTopMarginPx = 2.0;
 
@@ -529,11 +529,12 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
       ++p.area;
       p.sum_x += x;
       p.sum_y += y;
+      if (c[x] == 0) continue;
+      // The box is the candidates': linking only holds them together.
       lo[k].x = std::min(lo[k].x, x);
       lo[k].y = std::min(lo[k].y, y);
       hi[k].x = std::max(hi[k].x, x);
       hi[k].y = std::max(hi[k].y, y);
-      if (c[x] == 0) continue;
       out_label[x] = k;
       p.disparities.push_back(d[x]);
     }
@@ -613,7 +614,10 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     Piece& group = groups[g];
     const int n = static_cast<int>(group.disparities.size());
     if (group.area < options.min_area_px || group.box.width > max_width_px) continue;
-    if (n < std::max(options.min_valid_px, kMinPieceDisparities)) continue;
+    // At least the trusted disparities of one independent matcher window (half a block square):
+    // fewer are one coherent mismatch as often as an object.
+    const int block = std::max(1, disparity.block_size);
+    if (n < std::max({options.min_valid_px, kMinPieceDisparities, block * block / 4})) continue;
     const double box_area = static_cast<double>(group.box.area());
     const double valid_fraction = n / box_area;
     if (static_cast<double>(n) / group.area < options.min_valid_fraction) continue;
@@ -653,7 +657,8 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     d.disparity_px = median_px;
     d.valid_disparities = n;
     d.valid_fraction = std::clamp(valid_fraction, 0.0, 1.0);
-    d.disparity_sigma_px = range.disparity_sigma_px;
+    // Without a fit: the median's own uncertainty and the matcher's sub-pixel bias.
+    d.disparity_sigma_px = std::hypot(group.median_sigma / kScale, kMatcherBiasPx);
     bool refined_ok = false;
     if (full != nullptr && !full->left.empty()) {
       const int k = std::max(1, full->binning);
@@ -662,7 +667,7 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
                                 cv::Rect(0, 0, full->left.cols, full->left.rows);
       // The fit runs over the pixels at the hypothesis' own range (a box's oblique faces and a
       // halo at other disparities would pull it off its nearest face).
-      const int band = std::max(kScale / 2, static_cast<int>(std::lround(0.03 * median_px * kScale)));
+      const int band = std::max(kScale * 3 / 8, static_cast<int>(std::lround(0.02 * median_px * kScale)));
       const int median_fixed = static_cast<int>(std::lround(median_px * kScale));
       cv::Mat1b at_range(mask.size());
       for (int y = 0; y < mask.rows; ++y) {

@@ -42,7 +42,9 @@ Score Evaluate(const drivers::Scenario& scenario, pipeline::Algorithm algorithm)
     for (const drivers::ObstacleTruth& o : truth.obstacles) {
       if (o.visible_px < 100 || fB / o.depth_m < 8) continue;
       truth_boxes.push_back(o.bbox);
-      depths.push_back(o.depth_m);
+      // The obstacle's depth: of the median of its visible pixels' disparities (a box seen from
+      // below shows its underside too, beyond its front face).
+      depths.push_back(o.median_disparity_px > 0 ? fB / o.median_disparity_px : o.depth_m);
     }
     score.expected += static_cast<int>(truth_boxes.size());
     score.detections += static_cast<int>(boxes.size());
