@@ -65,6 +65,15 @@ std::vector<std::string> GateOptions::Validate() const {
   if (!(max_distance_px > 0)) {
     problems.push_back("max_distance_px: must be > 0 pixels" + Got(max_distance_px));
   }
+  if (!(depth_sigmas > 0 && depth_sigmas <= 100)) {
+    problems.push_back("depth_sigmas: must be in (0, 100]" + Got(depth_sigmas));
+  }
+  if (!(min_depth_sigma_fraction >= 0 && min_depth_sigma_fraction <= 1)) {
+    problems.push_back("min_depth_sigma_fraction: must be in [0, 1]" + Got(min_depth_sigma_fraction));
+  }
+  if (!(position_sigmas > 0 && position_sigmas <= 100)) {
+    problems.push_back("position_sigmas: must be in (0, 100]" + Got(position_sigmas));
+  }
   return problems;
 }
 
@@ -86,6 +95,9 @@ std::vector<std::string> TrackerOptions::Validate() const {
   }
   if (!(std::isfinite(max_dt_s) && max_dt_s > 0)) {
     problems.push_back("max_dt_s: must be > 0 seconds and finite" + Got(max_dt_s));
+  }
+  if (!(merge_iou > 0 && merge_iou <= 1)) {
+    problems.push_back("merge_iou: must be in (0, 1]" + Got(merge_iou));
   }
   return problems;
 }
@@ -311,6 +323,7 @@ void Tracker::Correct(Entry& e, const Prediction& p, const detection::Detection&
     }
   }
   e.last_cut = cut.any() || measured.anchored;
+  e.position_only = false;
   e.box = d.bbox;
   if (measured.anchored && !cut.any() &&
       (d.bbox.width > p.size.width || d.bbox.height > p.size.height)) {
@@ -486,6 +499,7 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
       e.kalman.Update(pseudo.s, covariance);
       // Its box: the full box at the new centre within the blob, less what the track that took the
       // blob covers (the nearer obstacle hides that part).
+      e.position_only = true;
       e.box = PredictedBox(Predict(e, 0, camera), 0, 0) & d.bbox;
       for (int o = 0; o < num_tracks; ++o) {
         if (o != t && track_to_detection_[o] == k && predictions_[o].valid) {
@@ -555,6 +569,7 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
         continue;
       }
       const double za = a.kalman.position().z(), zb = b.kalman.position().z();
+      if (!WithinRatio(za, zb, gates.max_depth_ratio)) continue;  // the hard cap, as for a pair
       const double floor = gates.min_depth_sigma_fraction * std::max(za, zb);
       const double var = a.kalman.covariance()(2, 2) + b.kalman.covariance()(2, 2) + floor * floor;
       if ((za - zb) * (za - zb) > gates.depth_sigmas * gates.depth_sigmas * var) continue;
@@ -623,9 +638,21 @@ Track Tracker::Output(const Entry& e, const CameraModel& camera) const {
     // Not measured this frame: the centre is the prediction's.
     track.detection.centroid_px = cv::Point2d(camera.cx + camera.f_px * a, camera.cy + camera.f_px * b);
   }
+  if (e.misses == 0 && e.position_only && z > kMinDepthM) {
+    // Measured in position only: the depth is the filter's, not the shared blob's.
+    track.detection.depth_m = z;
+    track.detection.range_m = p.norm();
+    track.detection.disparity_px = camera.f_px * camera.baseline_m / z;
+    track.detection.position_cam_m = ToCv(p);
+  }
   // Measured: the detection's box with the fragments that joined it; measured in a shared blob:
   // the full box at the new centre within the blob; coasting: the full box at the prediction.
   if (!e.box.empty()) track.detection.bbox = e.box;
+  // What is reported lies in the image (a full box predicted across the border does not).
+  if (camera.width > 0 && camera.height > 0) {
+    const cv::Rect clipped = track.detection.bbox & cv::Rect(0, 0, camera.width, camera.height);
+    if (!clipped.empty()) track.detection.bbox = clipped;
+  }
   track.position_cam_m = ToCv(p);
   track.velocity_cam_mps = ToCv(v);
   track.position_sigma_m = ToCv(variance.head<3>().cwiseMax(0.0).cwiseSqrt());

@@ -172,6 +172,9 @@ class Tracker {
     // tentative.
     bool child = false;
     cv::Rect box;  // the box reported this frame
+    // Measured this frame in position only (from a blob shared with a nearer obstacle, whose
+    // depth is the other's): depth and range are reported from the filter, not the blob.
+    bool position_only = false;
   };
 
   // Which sides of a detection are cut by a nearer detection or by the image border.

@@ -63,7 +63,11 @@ inline void CheckFrame(const v1::TrackFrame& frame, const drivers::FrameTruth& t
   for (const auto& [d, t] : MatchByIoU(boxes, truth_boxes, 0.3)) {
     ++check.matched;
     ++check.ids[expected[t]->id][tracks[d]->track_id()];
-    const double truth_depth = expected[t]->depth_m;
+    // The obstacle's depth: of the median disparity of its visible pixels (a box seen from below
+    // shows its underside beyond its front face).
+    const double truth_depth = expected[t]->median_disparity_px > 0
+                                   ? fB / expected[t]->median_disparity_px
+                                   : expected[t]->depth_m;
     const double error = std::abs(tracks[d]->depth_m() - truth_depth) / truth_depth;
     check.worst_relative_error = std::max(check.worst_relative_error, error);
     if (error <= max_relative_error) {

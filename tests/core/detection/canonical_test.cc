@@ -80,7 +80,7 @@ TEST(DetectCanonical, AnalyticMapGivesTheRectanglesAndTheirDepths) {
     EXPECT_GT(det->range_sigma_m, 0.0);
     EXPECT_NEAR(det->score, 1.0, 1e-12);  // one surface, every pixel valid
     EXPECT_EQ(det->extractor, "canonical");
-    EXPECT_NEAR(det->perimeter_px, 2.0 * (rect.width + rect.height - 2), 1e-6);
+    EXPECT_NEAR(det->perimeter_px, 2.0 * (rect.width + rect.height), 1e-6);  // the box's
   }
 }
 
