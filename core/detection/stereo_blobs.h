@@ -1,5 +1,5 @@
-// The stereo half of every detector: blobs of a candidate mask, each given the median disparity
-// of its interior, a range, an uncertainty and a score.
+// The options of the stereo half of every detector (hypotheses, their filters and their range:
+// RangeRegions in regions.h), and the range fields of a detection from its disparity.
 #pragma once
 
 #include <optional>
@@ -56,23 +56,6 @@ struct StereoBlobOptions {
 
   std::vector<std::string> Validate() const;
 };
-
-// Blobs of `candidates` (non-zero pixels; with max_disparity_step_px > 0 they must hold valid
-// disparities), filtered (width, area, valid fraction, trusted range) and ranged. `extractor` names
-// the detector in each Detection. `ground` (the detector's ground model, if any) tells where terrain
-// can be, for the test of short blobs against their surroundings.
-std::vector<Detection> RangeBlobs(const cv::Mat1b& candidates, const stereo::DisparityMap& disparity,
-                                  const geometry::StereoRig& rig,
-                                  const geometry::RangeOptions& range,
-                                  const StereoBlobOptions& options, std::string_view extractor,
-                                  const std::optional<GroundModel>& ground = std::nullopt);
-
-// The stereo test of a candidate pixel: non-zero in `appearance` (every pixel when it is empty),
-// with a trusted disparity (range options) that stands out from the ground model (when there is
-// one). 255 where all hold.
-cv::Mat1b StereoCandidates(const cv::Mat1b& appearance, const stereo::DisparityMap& disparity,
-                           const geometry::StereoRig& rig, const geometry::RangeOptions& range,
-                           const std::optional<GroundModel>& ground, const GroundOptions& ground_options);
 
 // Fills the fields derived from d.disparity_px (depth, range, sigma, position) from the rig.
 void FillRange(Detection& d, const geometry::StereoRig& rig, const geometry::RangeOptions& range);

@@ -1,4 +1,5 @@
 #include "core/detection/ground.h"
+#include "core/detection/regions.h"
 #include "core/detection/stereo_blobs.h"
 
 #include <gmock/gmock.h>
@@ -104,7 +105,7 @@ TEST(GroundOptions, ValidateNamesEveryProblem) {
                     HasSubstr("margin_fraction")));
 }
 
-// RangeBlobs' test of short blobs against their surroundings (stereo_blobs.h), on an analytic map:
+// RangeRegions' test of short hypotheses against their surroundings (regions.h), on an analytic map:
 // a camera 3 m over flat ground, a hillside band at 9 px (46.7 m) standing out from the ground
 // rows 250..300, and candidate patches the same size cut out of it or standing free.
 class ShortBlobSurroundings : public ::testing::Test {
@@ -130,6 +131,13 @@ class ShortBlobSurroundings : public ::testing::Test {
     for (const cv::Rect& r : {hill_patch, aircraft, sky_patch}) candidates(r).setTo(255);
   }
 
+  std::vector<Detection> Hypotheses(const StereoBlobOptions& options,
+                                    const std::optional<GroundModel>& model) const {
+    const geometry::RangeOptions range;
+    const cv::Mat1b classes = ClassifyPixels(map, rig, range, model, GroundOptions{});
+    return RangeRegions(candidates, classes, map, rig, range, options, "test", model, nullptr);
+  }
+
   bool Found(const std::vector<Detection>& detections, const cv::Rect& r) {
     for (const Detection& d : detections) {
       if (d.bbox == r) return true;
@@ -140,22 +148,23 @@ class ShortBlobSurroundings : public ::testing::Test {
 
 TEST_F(ShortBlobSurroundings, APatchOfAContinuousSurfaceBelowTheHorizonIsTerrain) {
   const StereoBlobOptions options;
-  const std::vector<Detection> found =
-      RangeBlobs(candidates, map, rig, geometry::RangeOptions{}, options, "test", ground);
+  const std::vector<Detection> found = Hypotheses(options, ground);
   EXPECT_FALSE(Found(found, hill_patch)) << "the hillside continues at its range all around it";
   EXPECT_TRUE(Found(found, aircraft)) << "it stands out in depth from the ground around it";
   EXPECT_TRUE(Found(found, sky_patch)) << "above the horizon there is no terrain to be part of";
   EXPECT_EQ(found.size(), 2u);
 }
 
-TEST_F(ShortBlobSurroundings, DisabledOrWithoutAGroundModelEveryPatchStays) {
+TEST_F(ShortBlobSurroundings, DisabledEveryPatchStaysWithoutAGroundModelThePrincipalRowIsTheHorizon) {
   StereoBlobOptions off;
   off.max_attached_fraction = 1.0;
-  EXPECT_EQ(RangeBlobs(candidates, map, rig, geometry::RangeOptions{}, off, "test", ground).size(), 3u);
-  EXPECT_EQ(RangeBlobs(candidates, map, rig, geometry::RangeOptions{}, StereoBlobOptions{}, "test",
-                       std::nullopt)
-                .size(),
-            3u);
+  EXPECT_EQ(Hypotheses(off, ground).size(), 3u);
+  // Without a ground model, the principal point's row (a level camera's horizon) says where
+  // terrain can be: the hillside patch below it is still terrain, the sky patch above it stays.
+  const std::vector<Detection> found = Hypotheses(StereoBlobOptions{}, std::nullopt);
+  EXPECT_FALSE(Found(found, hill_patch));
+  EXPECT_TRUE(Found(found, aircraft));
+  EXPECT_TRUE(Found(found, sky_patch));
 }
 
 TEST(StereoBlobOptions, ValidateNamesTheAttachedFraction) {
