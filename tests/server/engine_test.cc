@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <condition_variable>
+#include <future>
 #include <mutex>
 
 #include "drivers/synthetic/synthetic_source.h"
@@ -34,11 +35,21 @@ class FlakySource : public drivers::StereoSource {
       --failures_;
       return Error{ErrorCode::kUnavailable, "camera unplugged"};
     }
-    if (next_ >= frames_) return Error{ErrorCode::kOutOfRange, "end of the recording"};
+    if (next_ >= frames_) {
+      if (!ended_told_) ended_.set_value();  // the capture thread marks the source ENDED next
+      ended_told_ = true;
+      return Error{ErrorCode::kOutOfRange, "end of the recording"};
+    }
     return renderer_->Render(next_++);
   }
 
+  // Ready once Next() has said the recording ended.
+  std::shared_future<void> Ended() const { return ended_future_; }
+
  private:
+  std::promise<void> ended_;
+  std::shared_future<void> ended_future_ = ended_.get_future().share();
+  bool ended_told_ = false;
   int failures_, frames_, next_ = 0;
   std::unique_ptr<drivers::SyntheticRenderer> renderer_;
   std::shared_ptr<const geometry::StereoRig> rig_;
@@ -67,12 +78,17 @@ struct Collector {
 TEST(Engine, RecoversFromADownSourceAndAccountsForEveryFrame) {
   constexpr int kFrames = 40;
   Collector collector;
-  Result<std::unique_ptr<Engine>> engine = Engine::Create(
-      std::make_unique<FlakySource>(2, kFrames), pipeline::PipelineConfig{}, collector.Sink());
+  auto source = std::make_unique<FlakySource>(2, kFrames);
+  const std::shared_future<void> ended = source->Ended();
+  Result<std::unique_ptr<Engine>> engine =
+      Engine::Create(std::move(source), pipeline::PipelineConfig{}, collector.Sink());
   ASSERT_TRUE(engine.ok()) << engine.error().message;
   (*engine)->Start();
   // The last frame is never replaced, so the pipeline always gets it.
   ASSERT_TRUE(collector.WaitForSourceIndex(kFrames - 1));
+  // The source said it ended; Stop() joins the capture thread, which marks it ENDED first (the
+  // last frame can be processed before the capture thread asks for the next one).
+  ASSERT_EQ(ended.wait_for(std::chrono::seconds(60)), std::future_status::ready);
   (*engine)->Stop();
 
   const EngineStatus status = (*engine)->Status();
