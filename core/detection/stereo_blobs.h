@@ -36,6 +36,11 @@ struct StereoBlobOptions {
   // Pieces at one range join when the gap between their boxes is at most this fraction of the
   // larger box's largest side (fragments of one low-contrast object). 0 never joins.
   double join_gap_fraction = 0.25;
+  // Pieces at one range that lie in one region of the appearance cue join whatever the gap: the
+  // region says they are one object (a uniform fuselage between a matched nose and tail). For
+  // cues whose regions are object outlines (SteViE's closed contours); a cue whose regions can
+  // span several objects (saliency blobs) leaves it off.
+  bool join_within_region = false;
   // The blob's disparity is the median over its interior: the mask eroded by this many pixels
   // (0 = the whole mask), unless fewer than 30 interior pixels remain. Block matching spreads an
   // object's disparity a few pixels into its surroundings.
@@ -55,6 +60,12 @@ struct StereoBlobOptions {
   double max_attached_fraction = 0.5;
 
   std::vector<std::string> Validate() const;
+  // The defaults, with join_within_region on.
+  static StereoBlobOptions JoiningWithinRegions() {
+    StereoBlobOptions o;
+    o.join_within_region = true;
+    return o;
+  }
 };
 
 // Fills the fields derived from d.disparity_px (depth, range, sigma, position) from the rig.

@@ -42,6 +42,8 @@ struct Totals {
   int expected = 0, matched = 0, detections = 0, false_positives = 0, dont_care = 0;
   int found_boxes = 0;   // sum over matched obstacles of 1 + the fragments inside their box
   int fragmented = 0;    // matched obstacles with more than one box
+  int missed_none = 0, missed_small = 0, missed_large = 0;  // misses: no box touches it; the
+                                                            // box most on it is smaller; larger
   std::vector<double> rel_error[kNumBands];  // (depth - truth) / truth, per band
   std::vector<double> normalised;            // (depth - truth) / depth_sigma
   std::map<std::string, double> stage_ms;
@@ -57,6 +59,9 @@ struct Totals {
     dont_care += o.dont_care;
     found_boxes += o.found_boxes;
     fragmented += o.fragmented;
+    missed_none += o.missed_none;
+    missed_small += o.missed_small;
+    missed_large += o.missed_large;
     for (int b = 0; b < kNumBands; ++b) {
       rel_error[b].insert(rel_error[b].end(), o.rel_error[b].begin(), o.rel_error[b].end());
     }
@@ -128,6 +133,30 @@ FrameScore Score(const pipeline::FrameResult& result, const drivers::FrameTruth&
     s.verdict[static_cast<size_t>(d)] = 1;
     ++totals.matched;
     ++totals.by_kind[s.expected[static_cast<size_t>(t)]->kind].second;
+  }
+  // Why each missed obstacle was missed.
+  {
+    std::vector<bool> found(s.expected.size(), false);
+    for (const auto& [d, t] : matches) found[static_cast<size_t>(t)] = true;
+    for (size_t t = 0; t < s.expected.size(); ++t) {
+      if (found[t]) continue;
+      const cv::Rect& truth_box = s.expected[t]->bbox;
+      int best = -1, best_overlap = 0;
+      for (size_t d = 0; d < s.boxes.size(); ++d) {
+        const int overlap = (s.boxes[d] & truth_box).area();
+        if (overlap > best_overlap) {
+          best_overlap = overlap;
+          best = static_cast<int>(d);
+        }
+      }
+      if (best < 0) {
+        ++totals.missed_none;
+      } else if (s.boxes[static_cast<size_t>(best)].area() < truth_box.area()) {
+        ++totals.missed_small;
+      } else {
+        ++totals.missed_large;
+      }
+    }
   }
   // Unmatched detections on an obstacle that is not expected: don't care.
   for (size_t d = 0; d < s.boxes.size(); ++d) {
@@ -209,7 +238,8 @@ void PrintHeader() {
   std::printf("%-11s %-13s %6s %6s %6s %7s %6s %5s %5s %7s %5s", "family", "algorithm", "scenes",
               "frames", "expect", "recall", "prec", "FP", "dc", "box/obj", "frag");
   for (const Band& b : kBands) std::printf(" %14s", (std::string("err ") + b.name).c_str());
-  std::printf(" %7s %8s %8s %8s\n", "err/sig", "disp ms", "extr ms", "total ms");
+  std::printf(" %7s %8s %8s %8s %s\n", "err/sig", "disp ms", "extr ms", "total ms",
+              "missed: none/smaller/larger");
 }
 
 void PrintRow(const std::string& family, const std::string& variant, const Totals& t) {
@@ -226,8 +256,9 @@ void PrintRow(const std::string& family, const std::string& variant, const Total
       std::printf(" %14s", cell);
     }
   }
-  std::printf(" %7.2f %8.1f %8.1f %8.1f\n", Rms(t.normalised), t.StageMs("disparity"),
-              t.StageMs("extract"), t.StageMs("total"));
+  std::printf(" %7.2f %8.1f %8.1f %8.1f %d/%d/%d\n", Rms(t.normalised), t.StageMs("disparity"),
+              t.StageMs("extract"), t.StageMs("total"), t.missed_none, t.missed_small,
+              t.missed_large);
 }
 
 std::string JsonTotals(const Totals& t) {
