@@ -34,6 +34,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/detection/ground.h"
 #include "core/pipeline/pipeline.h"
 #include "tests/bench/eval_flags.h"
 #include "tests/testing/data.h"
@@ -288,11 +289,15 @@ void PrintDisparityRow(const std::string& pair, const std::string& widths, int b
                        const cv::Size& grid, double evaluated, double matched, double b1r,
                        double b1m, double b3r, double b3m, double d1r, double d1m, double maem,
                        double maer) {
-  char size[16];
-  std::snprintf(size, sizeof size, "%dx%d", grid.width, grid.height);
-  std::printf("%-16s %-8s %3d %8s %7.0f %6.1f %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f\n",
-              pair.c_str(), widths.c_str(), binning, size, evaluated, matched, b1r, b1m, b3r, b3m,
-              d1r, d1m, maem, maer);
+  // binning 0: a mean over pairs (no one grid).
+  char size[32] = "-", bin[16] = "-";
+  if (binning > 0) {
+    std::snprintf(size, sizeof size, "%dx%d", grid.width, grid.height);
+    std::snprintf(bin, sizeof bin, "%d", binning);
+  }
+  std::printf("%-16s %-8s %3s %8s %7.0f %6.1f %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f\n",
+              pair.c_str(), widths.c_str(), bin, size, evaluated, matched, b1r, b1m, b3r, b3m, d1r,
+              d1m, maem, maer);
 }
 
 }  // namespace
@@ -457,11 +462,20 @@ int main(int argc, char** argv) {
                           s.MaeRaw());
         for (int w : r.width_list) by_width[w].push_back(&r);
       }
+      // One mean row per distinct set of rows (the max widths that give the same maps share it).
+      std::vector<std::pair<std::vector<const DisparityRow*>, std::string>> means;
       for (const auto& [w, list] : by_width) {
-        double v[11] = {};
+        if (!means.empty() && means.back().first == list) {
+          means.back().second += "," + std::to_string(w);
+        } else {
+          means.emplace_back(list, std::to_string(w));
+        }
+      }
+      for (const auto& [list, text] : means) {
+        double v[10] = {};
         for (const DisparityRow* r : list) {
           const testing::DisparityScore& s = r->score;
-          const double x[11] = {static_cast<double>(s.evaluated),
+          const double x[10] = {static_cast<double>(s.evaluated),
                                 s.MatchedPct(),
                                 s.Bad1RawPct(),
                                 s.Bad1MatchedPct(),
@@ -470,14 +484,12 @@ int main(int argc, char** argv) {
                                 s.D1RawPct(),
                                 s.D1MatchedPct(),
                                 s.MaeMatched(),
-                                s.MaeRaw(),
-                                0};
+                                s.MaeRaw()};
           for (int i = 0; i < 10; ++i) v[i] += x[i] / static_cast<double>(list.size());
         }
-        PrintDisparityRow(std::string(kitti ? "mean KITTI" : "mean Middlebury") + "(" +
-                              std::to_string(list.size()) + ")",
-                          std::to_string(w), 0, cv::Size(), v[0], v[1], v[2], v[3], v[4], v[5],
-                          v[6], v[7], v[8], v[9]);
+        PrintDisparityRow(
+            std::string(kitti ? "mean KITTI " : "mean Midd. ") + std::to_string(list.size()), text,
+            0, cv::Size(), v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9]);
       }
     }
   }
@@ -520,6 +532,29 @@ int main(int argc, char** argv) {
           o.pixels, o.median_disparity_px, o.median_depth_m, o.depth_p10_m, o.depth_p90_m,
           o.height_top_m);
     }
+    // The detectors' own ground model (SteViE and SteViS fit it to the pipeline's disparity), to
+    // set beside the truth's plane.
+    for (int w : widths) {
+      for (const Run& run : runs[pair.name]) {
+        if (run.max_width_px != w) continue;
+        const std::optional<detection::GroundModel> model =
+            detection::FitGround(run.result.disparity, defaults.stevie.ground);
+        const int bin = std::max(1, run.result.binning);
+        if (model) {
+          std::printf(
+              "  detectors' ground model (max width %d): camera %.2f m up, horizon row %.1f "
+              "(camera px), %d support rows\n",
+              w, model->CameraHeight(pair.baseline_m), model->horizon_row * bin + (bin - 1) / 2.0,
+              model->support_rows);
+        } else {
+          std::printf(
+              "  detectors' ground model (max width %d): none found (every disparity "
+              "stands out)\n",
+              w);
+        }
+        break;
+      }
+    }
     if (!flags.dump.empty()) DumpTruth(pair, scene, flags.dump + "/" + pair.name + "-truth.png");
     scenes[pair.name] = std::move(scene);
   }
@@ -539,9 +574,9 @@ int main(int argc, char** argv) {
         "is ground, struct = on above-ground truth at its depth (+-15 %%: a real thing not "
         "kept, e.g. far, small, a wall), wrongZ = on above-ground truth at another depth, "
         "noGT = < 10 %% of the box has truth\n");
-    std::printf("%-16s %-9s %5s %3s %4s %4s %5s %5s %4s %4s %6s %6s %4s %11s\n", "pair",
+    std::printf("%-16s %-9s %5s %3s %4s %4s %5s %5s %4s %4s %5s %6s %4s %4s %10s\n", "pair",
                 "algorithm", "max_w", "bin", "dets", "GT", "found", "<5%", "frag", "FP", "free",
-                "struct", "wrZ", "|err| med");
+                "struct", "wrZ", "noGT", "|err| med");
   }
   for (const testing::RealPair& pair : pairs) {
     if (!pair.kitti) continue;
@@ -568,10 +603,10 @@ int main(int argc, char** argv) {
       t.fp_wrong_depth += s.fp_wrong_depth;
       t.fp_no_truth += s.fp_no_truth;
       t.errors.insert(t.errors.end(), errors.begin(), errors.end());
-      std::printf("%-16s %-9s %5d %3d %4zu %4zu %5d %5d %4d %4d %6d %6d %4d %10s%%\n",
+      std::printf("%-16s %-9s %5d %3d %4zu %4zu %5d %5d %4d %4d %5d %6d %4d %4d %9s%%\n",
                   pair.name.c_str(), Name(run.algorithm).c_str(), run.max_width_px,
                   run.result.binning, run.boxes.size(), scene.obstacles.size(), s.found, found5,
-                  s.fragments, s.fp, s.fp_free, s.fp_structure, s.fp_wrong_depth,
+                  s.fragments, s.fp, s.fp_free, s.fp_structure, s.fp_wrong_depth, s.fp_no_truth,
                   MedianText(errors).c_str());
       if (!flags.dump.empty()) {
         DumpDetections(pair, scene, run,
@@ -581,12 +616,12 @@ int main(int argc, char** argv) {
     }
   }
   if (any_kitti) {
-    std::printf("%-16s\n", "all KITTI pairs");
+    std::printf("all KITTI pairs (|err| med: median |range error| of the found obstacles)\n");
     for (const auto& [key, t] : totals) {
-      std::printf("%-16s %-9s %5d %3s %4d %4d %5d %5d %4d %4d %6d %6d %4d %10s%%  (noGT FP %d)\n",
-                  "  total", Name(static_cast<pipeline::Algorithm>(key.first)).c_str(), key.second,
-                  "", t.detections, t.truth, t.found, t.found5, t.fragments, t.fp, t.fp_free,
-                  t.fp_structure, t.fp_wrong_depth, MedianText(t.errors).c_str(), t.fp_no_truth);
+      std::printf("%-16s %-9s %5d %3s %4d %4d %5d %5d %4d %4d %5d %6d %4d %4d %9s%%\n", "  total",
+                  Name(static_cast<pipeline::Algorithm>(key.first)).c_str(), key.second, "",
+                  t.detections, t.truth, t.found, t.found5, t.fragments, t.fp, t.fp_free,
+                  t.fp_structure, t.fp_wrong_depth, t.fp_no_truth, MedianText(t.errors).c_str());
     }
     // Per obstacle: one column per run.
     std::printf(
