@@ -97,10 +97,6 @@ double MedianAbs(std::vector<double> v) {
   return *mid;
 }
 
-double InsideFraction(const cv::Rect& inner, const cv::Rect& outer) {
-  return inner.area() > 0 ? static_cast<double>((inner & outer).area()) / inner.area() : 0.0;
-}
-
 // One frame's verdict, also used to draw it.
 struct FrameScore {
   std::vector<cv::Rect> boxes;          // detections, camera pixels
@@ -163,7 +159,7 @@ FrameScore Score(const pipeline::FrameResult& result, const drivers::FrameTruth&
     if (s.verdict[d] == 1) continue;
     for (const drivers::ObstacleTruth* o : s.ignored) {
       if (testing::IoU(s.boxes[d], o->bbox) >= kMinIoU ||
-          InsideFraction(s.boxes[d], o->bbox) >= kInsideFraction) {
+          testing::InsideFraction(s.boxes[d], o->bbox) >= kInsideFraction) {
         s.verdict[d] = 0;
         break;
       }
@@ -179,7 +175,7 @@ FrameScore Score(const pipeline::FrameResult& result, const drivers::FrameTruth&
     int boxes = 1;
     for (size_t k = 0; k < s.boxes.size(); ++k) {
       if (s.verdict[k] == 1) continue;  // matched to an obstacle (this one or another)
-      if (InsideFraction(s.boxes[k], o.bbox) >= kInsideFraction) ++boxes;
+      if (testing::InsideFraction(s.boxes[k], o.bbox) >= kInsideFraction) ++boxes;
     }
     totals.found_boxes += boxes;
     if (boxes > 1) ++totals.fragmented;

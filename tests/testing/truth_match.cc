@@ -11,6 +11,10 @@ double IoU(const cv::Rect& a, const cv::Rect& b) {
   return uni > 0 ? inter / uni : 0;
 }
 
+double InsideFraction(const cv::Rect& inner, const cv::Rect& outer) {
+  return inner.area() > 0 ? static_cast<double>((inner & outer).area()) / inner.area() : 0.0;
+}
+
 std::vector<std::pair<int, int>> MatchByIoU(const std::vector<cv::Rect>& detections,
                                             const std::vector<cv::Rect>& truths, double min_iou) {
   std::vector<std::tuple<double, int, int>> candidates;

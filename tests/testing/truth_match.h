@@ -10,6 +10,9 @@ namespace stevi::testing {
 
 double IoU(const cv::Rect& a, const cv::Rect& b);
 
+// The fraction of `inner`'s area that lies inside `outer` (0 for an empty `inner`).
+double InsideFraction(const cv::Rect& inner, const cv::Rect& outer);
+
 // Greedy one-to-one assignment by decreasing IoU; returns (detection index, truth index) pairs
 // whose IoU is at least min_iou.
 std::vector<std::pair<int, int>> MatchByIoU(const std::vector<cv::Rect>& detections,

@@ -3,60 +3,24 @@
 // "raw" counts unmatched pixels as bad; "filled" first fills holes along each row from the left
 // neighbour's disparity; "matched" is the fraction of evaluated pixels with a disparity.
 #include <cstdio>
-#include <filesystem>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
-#include <opencv2/imgcodecs.hpp>
 
 #include "core/stereo/matcher.h"
 #include "tests/testing/data.h"
+#include "tests/testing/real_pairs.h"
 
 namespace stevi::stereo {
 namespace {
 
-struct MiddleburyPair {
-  std::string name;
-  std::string folder;  // under the data directory
-  std::string left, right, truth;
-  double truth_scale;  // ground-truth value / scale = disparity in pixels
-  cv::Mat1b left_image, right_image;
-  cv::Mat1f truth_px;    // 0 = unknown
-  cv::Mat1b evaluated;   // non-occluded and known
-};
+// The pairs and their truth come from the shared loader (tests/testing/real_pairs.h).
+using MiddleburyPair = testing::RealPair;
 
 struct Score {
   double raw_bad = 0, filled_bad = 0, matched = 0;  // percent of evaluated pixels
 };
-
-// Loads the four pairs; on a missing file, returns the path in `missing`.
-std::vector<MiddleburyPair> LoadPairs(const std::string& data_dir, std::string& missing) {
-  std::vector<MiddleburyPair> pairs = {
-      {"tsukuba", "middlebury2001/tsukuba", "scene1.row3.col3.ppm", "scene1.row3.col4.ppm",
-       "truedisp.row3.col3.pgm", 16.0, {}, {}, {}, {}},
-      {"venus", "middlebury2001/venus", "im2.ppm", "im6.ppm", "disp2.pgm", 8.0, {}, {}, {}, {}},
-      {"teddy", "middlebury2003/teddy", "im2.png", "im6.png", "disp2.png", 4.0, {}, {}, {}, {}},
-      {"cones", "middlebury2003/cones", "im2.png", "im6.png", "disp2.png", 4.0, {}, {}, {}, {}},
-  };
-  for (MiddleburyPair& p : pairs) {
-    const std::string dir = data_dir + "/" + p.folder + "/";
-    for (const std::string& name : {p.left, p.right, p.truth, std::string("nonocc.png")}) {
-      if (!std::filesystem::exists(dir + name)) {
-        missing = dir + name;
-        return {};
-      }
-    }
-    p.left_image = cv::imread(dir + p.left, cv::IMREAD_GRAYSCALE);
-    p.right_image = cv::imread(dir + p.right, cv::IMREAD_GRAYSCALE);
-    const cv::Mat truth = cv::imread(dir + p.truth, cv::IMREAD_GRAYSCALE);
-    // Some masks are palette PNGs: IMREAD_GRAYSCALE gives the grey level, 255 = evaluated.
-    const cv::Mat mask = cv::imread(dir + "nonocc.png", cv::IMREAD_GRAYSCALE);
-    truth.convertTo(p.truth_px, CV_32F, 1.0 / p.truth_scale);
-    p.evaluated = (mask > 128) & (truth > 0);
-  }
-  return pairs;
-}
 
 // Fills unmatched pixels along each row from the nearest matched pixel to the left (from the
 // right for a row's leading hole).
@@ -111,7 +75,7 @@ Row RunConfig(const Config& config, const std::vector<MiddleburyPair>& pairs) {
   std::unique_ptr<DisparityMatcher> matcher = MakeMatcher(config.options);
   Row row;
   for (const MiddleburyPair& pair : pairs) {
-    row.per_pair.push_back(Evaluate(matcher->Compute(pair.left_image, pair.right_image), pair));
+    row.per_pair.push_back(Evaluate(matcher->Compute(pair.left, pair.right), pair));
     row.average.raw_bad += row.per_pair.back().raw_bad / pairs.size();
     row.average.filled_bad += row.per_pair.back().filled_bad / pairs.size();
     row.average.matched += row.per_pair.back().matched / pairs.size();
@@ -134,7 +98,7 @@ class Middlebury : public ::testing::Test {
                    << " (set STEVI_DATA_DIR)";
     }
     std::string missing;
-    pairs_ = LoadPairs(*data, missing);
+    pairs_ = testing::LoadRealPairs(*data, testing::MiddleburyPairNames(false), missing);
     if (pairs_.empty()) GTEST_SKIP() << "Middlebury data not found: " << missing;
     std::printf("%-34s", "bad %: raw, filled; matched %");
     for (const MiddleburyPair& p : pairs_) std::printf(" | %-17s", p.name.c_str());
@@ -172,7 +136,7 @@ TEST_F(Middlebury, GroundTruthFitsTheSearchRange) {
     double top = 0;
     cv::minMaxLoc(p.truth_px, nullptr, &top);
     EXPECT_LT(top, 64.0) << p.name;
-    EXPECT_EQ(p.left_image.size(), p.truth_px.size()) << p.name;
+    EXPECT_EQ(p.left.size(), p.truth_px.size()) << p.name;
   }
 }
 
