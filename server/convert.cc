@@ -43,6 +43,7 @@ void ToProto(const detection::StereoBlobOptions& o, v1::BlobConfig* p) {
   p->set_min_valid_px(o.min_valid_px);
   p->set_join_gap_fraction(o.join_gap_fraction);
   p->set_join_within_region(o.join_within_region);
+  p->set_region_gap_fraction(o.region_gap_fraction);
 }
 
 void MergeBlobs(const v1::BlobConfig& p, detection::StereoBlobOptions& o) {
@@ -57,6 +58,7 @@ void MergeBlobs(const v1::BlobConfig& p, detection::StereoBlobOptions& o) {
   STEVI_MERGE(p, min_valid_px, o.min_valid_px);
   STEVI_MERGE(p, join_gap_fraction, o.join_gap_fraction);
   STEVI_MERGE(p, join_within_region, o.join_within_region);
+  STEVI_MERGE(p, region_gap_fraction, o.region_gap_fraction);
 }
 
 // "<path>: unknown value <n>", the problem of an enum value the schema does not know.

@@ -578,7 +578,13 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
         const int gap_y = std::max(0, std::max(a.box.y, b.box.y) - std::min(a.box.br().y, b.box.br().y));
         const int size = std::max({a.box.width, a.box.height, b.box.width, b.box.height});
         const bool one_region = a.region != 0 && a.region == b.region;
-        if (!one_region && std::max(gap_x, gap_y) > join_fraction * size) continue;
+        // In one region, the gap is measured against the smaller piece: a region that holds a
+        // large object and a small one at its range (a drone beside a hangar) is not one object.
+        const int smaller = std::min(std::max(a.box.width, a.box.height), std::max(b.box.width, b.box.height));
+        const double allowed = one_region ? (options.region_gap_fraction > 0 ? options.region_gap_fraction * smaller
+                                                                             : static_cast<double>(width + height))
+                                          : join_fraction * size;
+        if (std::max(gap_x, gap_y) > allowed) continue;
         parent[Find(parent, i)] = Find(parent, j);
       }
     }

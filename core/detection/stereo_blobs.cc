@@ -36,6 +36,9 @@ std::vector<std::string> StereoBlobOptions::Validate() const {
   if (!(min_terrain_height_m >= 0 && min_terrain_height_m <= 1000)) {
     problems.push_back("min_terrain_height_m: must be in [0, 1000]" + Got(min_terrain_height_m));
   }
+  if (!(region_gap_fraction >= 0 && region_gap_fraction <= 100)) {
+    problems.push_back("region_gap_fraction: must be in [0, 100]" + Got(region_gap_fraction));
+  }
   if (!(max_attached_fraction >= 0 && max_attached_fraction <= 1)) {
     problems.push_back("max_attached_fraction: must be in [0, 1]" + Got(max_attached_fraction));
   }

@@ -24,7 +24,7 @@ struct SteViEOptions {
   extraction::EdgeOptions edges;            // Gaussian + Canny
   extraction::MorphologyOptions morphology; // close the contours, fill, open to separate
   GroundOptions ground;                     // the ground and what lies on it are not obstacles
-  StereoBlobOptions blobs = StereoBlobOptions::JoiningWithinRegions();
+  StereoBlobOptions blobs = StereoBlobOptions::JoiningWithinRegions(0.0);
 
   // Every problem, prefixed with the sub-struct ("edges.canny_low: ...").
   std::vector<std::string> Validate() const;

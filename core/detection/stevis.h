@@ -39,7 +39,7 @@ struct SteViSOptions {
   extraction::GraphSegmentationOptions graph;
   int graph_level = 1;
   GroundOptions ground;
-  StereoBlobOptions blobs;
+  StereoBlobOptions blobs = StereoBlobOptions::JoiningWithinRegions(2.0);
 
   std::vector<std::string> Validate() const;
 };
