@@ -124,6 +124,8 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryStevieAndStevisField) {
   s.blobs.max_depth_per_height = 0;
   e.blobs.min_terrain_height_m = 5;
   e.blobs.max_attached_fraction = 0.7;
+  e.blobs.join_within_region = false;  // non-defaults: SteViE joins within regions, at any gap
+  s.blobs.region_gap_fraction = 3.5;
   original.tracking.kalman.process_noise = 0.5;
   original.tracking.kalman.occluded_measurement_noise = 1e5;
   original.tracking.gates.max_depth_ratio = 1.5;
@@ -161,6 +163,8 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryStevieAndStevisField) {
   EXPECT_DOUBLE_EQ(copy.stevis.blobs.max_depth_per_height, 0);
   EXPECT_DOUBLE_EQ(copy.stevie.blobs.min_terrain_height_m, 5);
   EXPECT_DOUBLE_EQ(copy.stevie.blobs.max_attached_fraction, 0.7);
+  EXPECT_FALSE(copy.stevie.blobs.join_within_region);
+  EXPECT_DOUBLE_EQ(copy.stevis.blobs.region_gap_fraction, 3.5);
   EXPECT_TRUE(copy.tracking == original.tracking);
   EXPECT_DOUBLE_EQ(copy.tracking.min_score, 0.25);
   EXPECT_TRUE(copy.mount == original.mount);

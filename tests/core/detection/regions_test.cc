@@ -94,6 +94,69 @@ TEST(RangeRegions, PiecesAtOneRangeJoinAcrossGapsThatScaleWithTheirSize) {
   EXPECT_EQ(Hypotheses(appearance, map, never).size(), 4u);
 }
 
+TEST(RangeRegions, PiecesInOneAppearanceRegionJoinAcrossItsGaps) {
+  DisparityMap map = EmptyMap(cv::Size(640, 480));
+  cv::Mat1b appearance(map.fixed.size(), uchar{0});
+  // A uniform fuselage, 300 x 30 px, matched only at its nose and tail (30 x 30 each, 240 px
+  // apart: eight times their size), at 10 px. The appearance region covers it whole.
+  const cv::Rect fuselage(100, 100, 300, 30), nose(100, 100, 30, 30), tail(370, 100, 30, 30);
+  appearance(fuselage).setTo(255);
+  Paint(map, nose, 10.0);
+  Paint(map, tail, 10.0);
+  // In a second region, a large piece and a small one at one range, 100 px apart.
+  const cv::Rect hangar(100, 300, 200, 60), drone(400, 300, 20, 10), strip(100, 300, 320, 60);
+  appearance(strip).setTo(255);
+  Paint(map, hangar, 8.0);
+  Paint(map, drone, 8.0);
+  // In a third, two pieces at different ranges (12 and 6 px), 100 px apart.
+  const cv::Rect near(100, 400, 30, 30), far(230, 400, 30, 30), band(100, 400, 160, 30);
+  appearance(band).setTo(255);
+  Paint(map, near, 12.0);
+  Paint(map, far, 6.0);
+  const auto count_box = [](const std::vector<Detection>& detections, const cv::Rect& box) {
+    int n = 0;
+    for (const Detection& d : detections) n += d.bbox == box;
+    return n;
+  };
+
+  // The gap rule alone keeps every piece apart: six hypotheses.
+  const std::vector<Detection> apart = Hypotheses(appearance, map);
+  EXPECT_EQ(apart.size(), 6u);
+
+  // SteViE's rule (any gap within a region): the fuselage is one object, and so are the hangar
+  // and the drone; pieces at different ranges stay apart.
+  const std::vector<Detection> any_gap =
+      Hypotheses(appearance, map, StereoBlobOptions::JoiningWithinRegions(0.0));
+  EXPECT_EQ(any_gap.size(), 4u);
+  EXPECT_EQ(count_box(any_gap, fuselage), 1);
+  EXPECT_EQ(count_box(any_gap, strip), 1);
+  EXPECT_EQ(count_box(any_gap, near), 1);
+  EXPECT_EQ(count_box(any_gap, far), 1);
+
+  // SteViS's rule (twice the smaller piece): the drone is 100 px from the hangar, five times its
+  // own size, and stays apart; so do the nose and the tail (eight times theirs).
+  const std::vector<Detection> scaled =
+      Hypotheses(appearance, map, StereoBlobOptions::JoiningWithinRegions(2.0));
+  EXPECT_EQ(scaled.size(), 6u);
+  EXPECT_EQ(count_box(scaled, drone), 1);
+  // ... and with ten times, both join.
+  const std::vector<Detection> wide =
+      Hypotheses(appearance, map, StereoBlobOptions::JoiningWithinRegions(10.0));
+  EXPECT_EQ(count_box(wide, fuselage), 1);
+  EXPECT_EQ(count_box(wide, strip), 1);
+}
+
+TEST(StereoBlobOptions, ABadRegionGapFractionIsNamed) {
+  for (double bad : {-0.5, 101.0, std::nan("")}) {
+    StereoBlobOptions options = StereoBlobOptions::JoiningWithinRegions(bad);
+    const std::vector<std::string> problems = options.Validate();
+    ASSERT_EQ(problems.size(), 1u) << bad;
+    EXPECT_NE(problems[0].find("region_gap_fraction: must be in [0, 100]"), std::string::npos)
+        << problems[0];
+  }
+  EXPECT_TRUE(StereoBlobOptions::JoiningWithinRegions(2.0).Validate().empty());
+}
+
 TEST(RangeRegions, PiecesAtDifferentRangesStayApartAndARegionSplitsAtItsDepthModes) {
   DisparityMap map = EmptyMap(cv::Size(640, 480));
   cv::Mat1b appearance(map.fixed.size(), uchar{0});
