@@ -11,10 +11,17 @@
 namespace stevi::detection {
 namespace {
 
+// A constant disparity that explains this share of a ground line's supporting rows makes them a
+// wall (see FitGround).
+constexpr double kWallShare = 0.8;
+// ... unless the rows are filled across at least this fraction of the width, as ground fills them.
+constexpr double kGroundSpread = 0.6;
+
 struct RowMode {
   double row;
   double disparity_px;  // the mode bin's mean disparity
   int count;
+  double spread;  // the mode's pixels' extent across the row, as a fraction of the width
 };
 
 }  // namespace
@@ -72,7 +79,8 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
       if (*best >= options.min_row_fraction * matched / (rank + 1) &&
           last_x[bin] - first_x[bin] >= options.min_row_spread * fixed.cols) {
         const double mode_px = static_cast<double>(sums[bin]) / *best / stereo::DisparityMap::kScale;
-        if (mode_px >= options.min_mode_px) modes.push_back({static_cast<double>(y), mode_px, *best});
+        const double spread = static_cast<double>(last_x[bin] - first_x[bin]) / fixed.cols;
+        if (mode_px >= options.min_mode_px) modes.push_back({static_cast<double>(y), mode_px, *best, spread});
       }
       *best = 0;
     }
@@ -121,6 +129,35 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
     hi = std::max(hi, m->disparity_px);
   }
   if (hi - lo < options.min_span_px) return std::nullopt;
+  // Model selection against the other surface that fills rows at one disparity per row: a
+  // fronto-parallel wall (a building front, a hangar) is a line of slope 0 in v-disparity. When
+  // one constant disparity explains nearly as many of the supporting rows as the slanted line
+  // does, and those rows are filled only across part of the view (the ground fills its rows from
+  // edge to edge, bar what stands on it), the rows are a wall seen where the ground went
+  // unmatched, and no ground is modelled: taking the wall for ground would drop the obstacle as
+  // terrain. (Far ground seen from high up also spans little disparity, but fills its rows.)
+  {
+    std::vector<double> ds, spreads;
+    ds.reserve(inliers.size());
+    spreads.reserve(inliers.size());
+    for (const RowMode* m : inliers) {
+      ds.push_back(m->disparity_px);
+      spreads.push_back(m->spread);
+    }
+    std::nth_element(ds.begin(), ds.begin() + static_cast<std::ptrdiff_t>(ds.size() / 2), ds.end());
+    std::nth_element(spreads.begin(), spreads.begin() + static_cast<std::ptrdiff_t>(spreads.size() / 2),
+                     spreads.end());
+    const double wall_d = ds[ds.size() / 2];
+    const double median_spread = spreads[spreads.size() / 2];
+    double wall_score = 0, last_row = -1;
+    for (const RowMode* m : inliers) {
+      if (std::abs(m->disparity_px - wall_d) <= options.inlier_px && m->row != last_row) {
+        wall_score += 1;
+        last_row = m->row;
+      }
+    }
+    if (wall_score >= kWallShare * best_score && median_spread < kGroundSpread) return std::nullopt;
+  }
 
   // Least squares d = s * row + c over the inlier rows.
   double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;

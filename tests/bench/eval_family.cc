@@ -29,6 +29,30 @@ constexpr int kMinVisiblePx = 100;
 constexpr double kMinDisparityPx = 3.0;
 constexpr double kMinIoU = 0.3;
 constexpr double kInsideFraction = 0.5;
+// A missed obstacle "had disparities" when at least this fraction of its truth box holds
+// disparities within max(0.5 px, 5 %) of its truth median disparity: the matcher saw it, and the
+// detector lost it.
+constexpr double kMatchedBoxFraction = 0.05;
+
+// The fraction of `box` (camera pixels) whose disparity lies within max(0.5 px, 5 %) of
+// `truth_px` (camera pixels), in a map binned by `bin`.
+double MatchedFraction(const stereo::DisparityMap& disparity, const cv::Rect& box, int bin,
+                       double truth_px) {
+  const cv::Rect b = cv::Rect(box.x / bin, box.y / bin, std::max(1, box.width / bin),
+                              std::max(1, box.height / bin)) &
+                     cv::Rect(0, 0, disparity.fixed.cols, disparity.fixed.rows);
+  if (b.area() == 0) return 0.0;
+  const double d = truth_px / bin, tolerance = std::max(0.5, 0.05 * d);
+  int near = 0;
+  for (int y = b.y; y < b.br().y; ++y) {
+    const int16_t* row = disparity.fixed[y];
+    for (int x = b.x; x < b.br().x; ++x) {
+      near += row[x] >= 0 &&
+              std::abs(static_cast<double>(row[x]) / stereo::DisparityMap::kScale - d) <= tolerance;
+    }
+  }
+  return static_cast<double>(near) / b.area();
+}
 
 struct Band {
   const char* name;
@@ -44,6 +68,7 @@ struct Totals {
   int fragmented = 0;    // matched obstacles with more than one box
   int missed_none = 0, missed_small = 0, missed_large = 0;  // misses: no box touches it; the
                                                             // box most on it is smaller; larger
+  int missed_with_disparity = 0;  // misses whose truth box the matcher covered (kMatchedBoxFraction)
   std::vector<double> rel_error[kNumBands];  // (depth - truth) / truth, per band
   std::vector<double> normalised;            // (depth - truth) / depth_sigma
   std::map<std::string, double> stage_ms;
@@ -62,6 +87,7 @@ struct Totals {
     missed_none += o.missed_none;
     missed_small += o.missed_small;
     missed_large += o.missed_large;
+    missed_with_disparity += o.missed_with_disparity;
     for (int b = 0; b < kNumBands; ++b) {
       rel_error[b].insert(rel_error[b].end(), o.rel_error[b].begin(), o.rel_error[b].end());
     }
@@ -144,6 +170,10 @@ FrameScore Score(const pipeline::FrameResult& result, const drivers::FrameTruth&
           best_overlap = overlap;
           best = static_cast<int>(d);
         }
+      }
+      if (MatchedFraction(result.disparity, truth_box, bin, s.expected[t]->median_disparity_px) >=
+          kMatchedBoxFraction) {
+        ++totals.missed_with_disparity;
       }
       if (best < 0) {
         ++totals.missed_none;
@@ -235,7 +265,7 @@ void PrintHeader() {
               "frames", "expect", "recall", "prec", "FP", "dc", "box/obj", "frag");
   for (const Band& b : kBands) std::printf(" %14s", (std::string("err ") + b.name).c_str());
   std::printf(" %7s %8s %8s %8s %s\n", "err/sig", "disp ms", "extr ms", "total ms",
-              "missed: none/smaller/larger");
+              "missed: none/smaller/larger (with disparity)");
 }
 
 void PrintRow(const std::string& family, const std::string& variant, const Totals& t) {
@@ -252,9 +282,9 @@ void PrintRow(const std::string& family, const std::string& variant, const Total
       std::printf(" %14s", cell);
     }
   }
-  std::printf(" %7.2f %8.1f %8.1f %8.1f %d/%d/%d\n", Rms(t.normalised), t.StageMs("disparity"),
+  std::printf(" %7.2f %8.1f %8.1f %8.1f %d/%d/%d (%d)\n", Rms(t.normalised), t.StageMs("disparity"),
               t.StageMs("extract"), t.StageMs("total"), t.missed_none, t.missed_small,
-              t.missed_large);
+              t.missed_large, t.missed_with_disparity);
 }
 
 std::string JsonTotals(const Totals& t) {
@@ -264,7 +294,9 @@ std::string JsonTotals(const Totals& t) {
     << ", \"detections\": " << t.detections << ", \"false_positives\": " << t.false_positives
     << ", \"dont_care\": " << t.dont_care << ", \"recall_pct\": " << t.Recall()
     << ", \"precision_pct\": " << t.Precision() << ", \"boxes_per_found\": " << t.BoxesPerFound()
-    << ", \"fragmented\": " << t.fragmented << ", \"range_error\": {";
+    << ", \"fragmented\": " << t.fragmented << ", \"missed\": {\"none\": " << t.missed_none
+    << ", \"smaller\": " << t.missed_small << ", \"larger\": " << t.missed_large
+    << ", \"with_disparity\": " << t.missed_with_disparity << "}, \"range_error\": {";
   for (int b = 0; b < kNumBands; ++b) {
     j << (b ? ", " : "") << "\"" << kBands[b].name << "\": {\"n\": " << t.rel_error[b].size()
       << ", \"median_abs_pct\": " << 100 * MedianAbs(t.rel_error[b])

@@ -69,6 +69,35 @@ TEST(FitGround, AWallFillingManyRowsIsNotGround) {
   EXPECT_FALSE(FitGround(map, GroundOptions()).has_value());
 }
 
+// Where the ground went unmatched (smooth, noisy grass), a stepped building (a farther upper
+// storey above a nearer front) fills rows at disparities that grow downwards, as the ground's do:
+// a slanted line fits them. A constant fits them as well, and they fill part of the view only:
+// a wall, and taking it for ground would drop the building as terrain.
+TEST(FitGround, ASteppedBuildingWhereTheGroundWentUnmatchedIsNotGround) {
+  stereo::DisparityMap map;
+  map.num_disparities = 64;
+  map.fixed = cv::Mat1s(480, 640, stereo::DisparityMap::kInvalid);
+  cv::RNG rng(5);
+  for (int v = 100; v < 160; ++v) {
+    if (v >= 125 && v < 135) continue;  // the ledge, unmatched
+    const double d = v < 125 ? 8.5 : 9.5;
+    for (int u = 300; u < 590; ++u) {  // 45 % of the width
+      if (rng.uniform(0.0, 1.0) < 0.5) continue;
+      map.fixed(v, u) = static_cast<int16_t>(std::lround((d + rng.gaussian(0.1)) * 16));
+    }
+  }
+  EXPECT_FALSE(FitGround(map, GroundOptions()).has_value());
+}
+
+// Far ground, seen from 40 m up, spans under 4 px of disparity from the horizon to the bottom
+// row, so a constant explains most of its rows too; but it fills them from edge to edge.
+TEST(FitGround, FarGroundThatFillsItsRowsIsStillGround) {
+  const stereo::DisparityMap map = GroundScene(40.0, 300, 9);
+  const std::optional<GroundModel> ground = FitGround(map, GroundOptions());
+  ASSERT_TRUE(ground.has_value());
+  EXPECT_NEAR(ground->CameraHeight(kB), 40.0, 4.0);
+}
+
 TEST(StandsOutFromGround, ObstaclePixelsDoGroundPixelsDoNot) {
   const double height = 3;
   const stereo::DisparityMap map = GroundScene(height, 30, 11);
