@@ -418,6 +418,50 @@ std::optional<RefinedDisparity> RefineDisparity(const cv::Mat1b& left, const cv:
   return out;
 }
 
+// The appearance region a detection's group lies in (0: none, -1: several) and the group's label.
+struct RegionOf {
+  int region = 0;
+  int group = 0;
+};
+
+// Step 4 of RangeRegions: a detection alone in its region, where no other trusted disparity (of
+// another group, or of the ground) lies, takes the region's box. A few stray disparities
+// (kStrayShare of the detection's own) do not stop it.
+void ExtendToRegions(const cv::Mat1i& region_labels, const cv::Mat1i& region_stats,
+                     const cv::Mat1i& group_labels, const cv::Mat1b& classes,
+                     const std::vector<RegionOf>& region_of, std::vector<Detection>& detections) {
+  constexpr double kStrayShare = 0.05;
+  std::vector<int> per_region(static_cast<size_t>(region_stats.rows), 0);
+  for (const RegionOf& r : region_of) {
+    if (r.region > 0) ++per_region[static_cast<size_t>(r.region)];
+  }
+  for (size_t i = 0; i < detections.size(); ++i) {
+    const int r = region_of[i].region;
+    if (r <= 0 || per_region[static_cast<size_t>(r)] != 1) continue;
+    const cv::Rect box(region_stats(r, cv::CC_STAT_LEFT), region_stats(r, cv::CC_STAT_TOP),
+                       region_stats(r, cv::CC_STAT_WIDTH), region_stats(r, cv::CC_STAT_HEIGHT));
+    int own = 0, other = 0;
+    for (int y = box.y; y < box.br().y; ++y) {
+      const int* region = region_labels[y];
+      const int* group = group_labels[y];
+      const uchar* c = classes[y];
+      for (int x = box.x; x < box.br().x; ++x) {
+        if (region[x] != r) continue;
+        if (group[x] == region_of[i].group) {
+          ++own;
+        } else if (c[x] == kCandidate || c[x] == kGround) {
+          ++other;
+        }
+      }
+    }
+    if (other > kStrayShare * own) continue;
+    Detection& d = detections[i];
+    d.bbox |= box;
+    d.perimeter_px = 2.0 * (d.bbox.width + d.bbox.height);
+    d.valid_fraction = std::clamp(static_cast<double>(d.valid_disparities) / d.bbox.area(), 0.0, 1.0);
+  }
+}
+
 std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b& classes,
                                     const stereo::DisparityMap& disparity,
                                     const geometry::StereoRig& rig,
@@ -426,6 +470,7 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
                                     const std::optional<GroundModel>& ground,
                                     const FullResolutionPair* full) {
   std::vector<Detection> out;
+  std::vector<RegionOf> out_region;  // per detection
   const cv::Mat1s& fixed = disparity.fixed;
   if (fixed.empty() || appearance.size() != fixed.size() || classes.size() != fixed.size()) return out;
   const int width = fixed.cols, height = fixed.rows;
@@ -513,7 +558,9 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   }
   // The appearance regions, when pieces in one of them join whatever their gap.
   thread_local cv::Mat1i region_labels;
-  if (options.join_within_region) cv::connectedComponents(appearance, region_labels, 8, CV_32S);
+  thread_local cv::Mat1i region_stats;
+  thread_local cv::Mat1d region_centroids;
+  if (options.join_within_region) cv::connectedComponentsWithStats(appearance, region_labels, region_stats, region_centroids, 8, CV_32S);
   std::vector<cv::Point> lo(pieces.size(), cv::Point(INT32_MAX, INT32_MAX));
   std::vector<cv::Point> hi(pieces.size(), cv::Point(-1, -1));
   piece_labels.create(fixed.size());
@@ -606,6 +653,7 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     if (pieces[i].area == 0) continue;
     Piece& g = groups[group_of[i]];
     const Piece& p = pieces[i];
+    g.region = g.area == 0 ? p.region : (g.region == p.region ? g.region : -1);
     g.box = g.area == 0 ? p.box : (g.box | p.box);
     g.area += p.area;
     g.sum_x += p.sum_x;
@@ -738,6 +786,14 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
               (static_cast<double>(consistent) / n);
     d.extractor = std::string(extractor);
     out.push_back(std::move(d));
+    out_region.push_back({group.region, g});
+  }
+  // 4. A closed outline is one object (region_gap_fraction 0): a hypothesis alone in its region,
+  //    with no other trusted disparity in it, takes the region's extent. The stereo matched only
+  //    part of the object (a fuselage, the tips of thin wings whose horizontal edges give no
+  //    disparity); the outline says how far the object reaches.
+  if (options.join_within_region && options.region_gap_fraction == 0) {
+    ExtendToRegions(region_labels, region_stats, labels, classes, out_region, out);
   }
   return out;
 }

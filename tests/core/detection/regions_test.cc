@@ -146,6 +146,40 @@ TEST(RangeRegions, PiecesInOneAppearanceRegionJoinAcrossItsGaps) {
   EXPECT_EQ(count_box(wide, strip), 1);
 }
 
+// An aircraft seen from the front: a closed outline 400 px wide (wings) whose stereo matched only
+// the fuselage (horizontal wing edges give block matching nothing to match). SteViE's outline is
+// one object, so the hypothesis takes the outline's extent; not when the outline also holds
+// disparities at another range (then it is not one object as far as the stereo can tell), and
+// not with SteViS's rule (a salient blob may hold neighbours).
+TEST(RangeRegions, AHypothesisAloneInAClosedOutlineTakesTheOutlinesExtent) {
+  DisparityMap map = EmptyMap(cv::Size(640, 480));
+  cv::Mat1b appearance(map.fixed.size(), uchar{0});
+  const cv::Rect wings(100, 100, 400, 20), fuselage(270, 90, 60, 40);
+  appearance(wings).setTo(255);
+  appearance(fuselage).setTo(255);
+  Paint(map, fuselage, 10.0);
+
+  const std::vector<Detection> outline =
+      Hypotheses(appearance, map, StereoBlobOptions::JoiningWithinRegions(0.0));
+  ASSERT_EQ(outline.size(), 1u);
+  EXPECT_EQ(outline[0].bbox, wings | fuselage);
+  EXPECT_NEAR(outline[0].disparity_px, 10.0, 0.2);
+  // The box's share of disparities is the new box's.
+  EXPECT_NEAR(outline[0].valid_fraction,
+              static_cast<double>(outline[0].valid_disparities) / (wings | fuselage).area(), 1e-9);
+
+  const std::vector<Detection> salient =
+      Hypotheses(appearance, map, StereoBlobOptions::JoiningWithinRegions(2.0));
+  ASSERT_EQ(salient.size(), 1u);
+  EXPECT_TRUE((fuselage & salient[0].bbox) == salient[0].bbox) << salient[0].bbox;
+
+  // A wingtip matched at another range (a tower behind it, 6 px): the outline holds two ranges.
+  Paint(map, cv::Rect(460, 100, 40, 20), 6.0);
+  const std::vector<Detection> two_ranges =
+      Hypotheses(appearance, map, StereoBlobOptions::JoiningWithinRegions(0.0));
+  for (const Detection& d : two_ranges) EXPECT_NE(d.bbox, wings | fuselage);
+}
+
 TEST(StereoBlobOptions, ABadRegionGapFractionIsNamed) {
   for (double bad : {-0.5, 101.0, std::nan("")}) {
     StereoBlobOptions options = StereoBlobOptions::JoiningWithinRegions(bad);
