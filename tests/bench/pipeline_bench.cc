@@ -22,12 +22,17 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/detection/canonical.h"
+#include "core/detection/ground.h"
+#include "core/detection/regions.h"
 #include "core/detection/stevie.h"
 #include "core/detection/stevis.h"
+#include "core/extraction/edges.h"
+#include "core/extraction/morphology.h"
 #include "core/extraction/saliency.h"
 #include "core/extraction/segmentation.h"
 #include "core/pipeline/pipeline.h"
 #include "core/stereo/block_matcher.h"
+#include "core/stereo/matcher.h"
 #include "core/tracking/tracker.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/bench/naive_baseline.h"
@@ -209,6 +214,50 @@ BENCHMARK(BM_Extract)
     ->ArgNames({"alg", "size"})
     ->ArgsProduct({{0, 1, 2, 3}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
+
+// SteViE's extraction step by step at 640x480 (issue 15's speed floor: where the stage's time
+// goes). step: 0 noise estimate, 1 Canny edges, 2 close-fill-open, 3 ground fit, 4 pixel classes,
+// 5 RangeRegions without the sub-pixel range, 6 RangeRegions with it (the pipeline's case).
+void BM_SteViESteps(benchmark::State& state) {
+  const Scene& scene = SceneAt(0);
+  const pipeline::PipelineConfig config = ConfigFor(1, 0, 64);
+  std::unique_ptr<stereo::DisparityMatcher> matcher = stereo::MakeMatcher(config.matcher);
+  const stereo::DisparityMap disparity = matcher->Compute(scene.frame.left, scene.frame.right);
+  const cv::Mat1b left = scene.frame.left, right = scene.frame.right;
+  const detection::SteViEOptions& o = config.stevie;
+  extraction::MorphologyOptions morphology = o.morphology;
+  morphology.close_size = detection::ScaledKernel(morphology.close_size, left.cols);
+  morphology.open_size = detection::ScaledKernel(morphology.open_size, left.cols);
+  const cv::Mat1b edges = extraction::DetectEdges(left, o.edges);
+  const cv::Mat1b regions = extraction::CloseFillOpen(edges, morphology);
+  const std::optional<detection::GroundModel> ground = detection::FitGround(disparity, o.ground);
+  const cv::Mat1b classes =
+      detection::ClassifyPixels(disparity, *scene.rig, config.range, ground, o.ground);
+  const detection::FullResolutionPair full{left, right, 1};
+  static const char* const kSteps[] = {"noise estimate", "Canny edges", "close-fill-open",
+                                       "ground fit", "pixel classes", "RangeRegions",
+                                       "RangeRegions + sub-pixel range"};
+  const int64_t step = state.range(0);
+  for (auto _ : state) {
+    switch (step) {
+      case 0: benchmark::DoNotOptimize(stereo::EstimateNoiseSigma(left)); break;
+      case 1: benchmark::DoNotOptimize(extraction::DetectEdges(left, o.edges)); break;
+      case 2: benchmark::DoNotOptimize(extraction::CloseFillOpen(edges, morphology)); break;
+      case 3: benchmark::DoNotOptimize(detection::FitGround(disparity, o.ground)); break;
+      case 4:
+        benchmark::DoNotOptimize(
+            detection::ClassifyPixels(disparity, *scene.rig, config.range, ground, o.ground));
+        break;
+      default:
+        benchmark::DoNotOptimize(detection::RangeRegions(regions, classes, disparity, *scene.rig,
+                                                         config.range, o.blobs, "stevie", ground,
+                                                         step == 6 ? &full : nullptr));
+        break;
+    }
+  }
+  state.SetLabel(Label(0, kSteps[step]));
+}
+BENCHMARK(BM_SteViESteps)->ArgName("step")->DenseRange(0, 6)->Unit(benchmark::kMillisecond);
 
 // Kept from the first version of this file: canonical extraction at 640x480 with default options.
 void BM_Canonical(benchmark::State& state) {
