@@ -15,12 +15,18 @@ using ::testing::HasSubstr;
 
 constexpr double kF = 700, kB = 0.6;
 
-// A level camera `height_m` above flat ground (rows below cy = 240), noisy like a matcher, with a
-// fronto-parallel obstacle standing on it and an empty sky.
-stereo::DisparityMap GroundScene(double height_m, double obstacle_depth_m, uint64_t seed) {
+// A 640x480 map with nothing matched.
+stereo::DisparityMap EmptyMap() {
   stereo::DisparityMap map;
   map.num_disparities = 64;
   map.fixed = cv::Mat1s(480, 640, stereo::DisparityMap::kInvalid);
+  return map;
+}
+
+// A level camera `height_m` above flat ground (rows below cy = 240), noisy like a matcher, with a
+// fronto-parallel obstacle standing on it and an empty sky.
+stereo::DisparityMap GroundScene(double height_m, double obstacle_depth_m, uint64_t seed) {
+  stereo::DisparityMap map = EmptyMap();
   cv::RNG rng(seed);
   for (int v = 241; v < 480; ++v) {
     const double d = kB / height_m * (v - 240);
@@ -50,18 +56,14 @@ TEST(FitGround, RecoversTheLineAndTheCameraHeight) {
 }
 
 TEST(FitGround, NoGroundInAClearSky) {
-  stereo::DisparityMap map;
-  map.num_disparities = 64;
-  map.fixed = cv::Mat1s(480, 640, stereo::DisparityMap::kInvalid);
+  stereo::DisparityMap map = EmptyMap();
   map.fixed(cv::Rect(100, 100, 80, 30)).setTo(14 * 16);  // an aircraft
   EXPECT_FALSE(FitGround(map, GroundOptions()).has_value());
 }
 
 TEST(FitGround, AWallFillingManyRowsIsNotGround) {
   // A building at one disparity filling the lower half: constant modes, no ground line.
-  stereo::DisparityMap map;
-  map.num_disparities = 64;
-  map.fixed = cv::Mat1s(480, 640, stereo::DisparityMap::kInvalid);
+  stereo::DisparityMap map = EmptyMap();
   cv::RNG rng(3);
   for (int v = 280; v < 480; ++v) {
     for (int u = 100; u < 500; ++u) map.fixed(v, u) = static_cast<int16_t>(std::lround((8.75 + rng.gaussian(0.1)) * 16));
@@ -74,9 +76,7 @@ TEST(FitGround, AWallFillingManyRowsIsNotGround) {
 // a slanted line fits them. A constant fits them as well, and they fill part of the view only:
 // a wall, and taking it for ground would drop the building as terrain.
 TEST(FitGround, ASteppedBuildingWhereTheGroundWentUnmatchedIsNotGround) {
-  stereo::DisparityMap map;
-  map.num_disparities = 64;
-  map.fixed = cv::Mat1s(480, 640, stereo::DisparityMap::kInvalid);
+  stereo::DisparityMap map = EmptyMap();
   cv::RNG rng(5);
   for (int v = 100; v < 160; ++v) {
     if (v >= 125 && v < 135) continue;  // the ledge, unmatched
