@@ -30,10 +30,11 @@ struct PipelineConfig {
   // Frames wider than this (pixels) are binned after rectification: each k x k block of pixels
   // averaged into one, with the smallest whole k that brings the width to this or less. Matching,
   // detection, tracking and the published images, boxes and rig are then those of the binned
-  // images. The detectors' pixel parameters (areas, kernels, row counts, the disparity range) are
-  // tuned for images about 640 pixels across: at 1280x1024 unbinned, SteViE's precision falls from
-  // 98 % to 15 % (stevi-eval --size 1280x1024 --max-width 0). 0 = never bin (then retune those
-  // parameters).
+  // images. Binning stops where the rig's disparity floor would fall under
+  // geometry::kMinBinnedDisparityPx (BinningFactor): it is chosen for what it costs in range. The
+  // detectors' kernels and rings scale with the image width, but areas are counted in processed
+  // pixels and the matcher searches a fixed number of disparities, so binning is also the cheap
+  // way to see a wide frame: see the README's configuration section for the figures. 0 = never bin.
   int max_width_px = 800;
   stereo::MatcherOptions matcher;
   geometry::RangeOptions range;
