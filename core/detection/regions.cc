@@ -557,10 +557,16 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     }
   }
   // The appearance regions, when pieces in one of them join whatever their gap.
+  // Their boxes (the stats) only when a lone hypothesis takes its region's extent (step 4).
   thread_local cv::Mat1i region_labels;
   thread_local cv::Mat1i region_stats;
   thread_local cv::Mat1d region_centroids;
-  if (options.join_within_region) cv::connectedComponentsWithStats(appearance, region_labels, region_stats, region_centroids, 8, CV_32S);
+  const bool extend_to_regions = options.join_within_region && options.region_gap_fraction == 0;
+  if (extend_to_regions) {
+    cv::connectedComponentsWithStats(appearance, region_labels, region_stats, region_centroids, 8, CV_32S);
+  } else if (options.join_within_region) {
+    cv::connectedComponents(appearance, region_labels, 8, CV_32S);
+  }
   std::vector<cv::Point> lo(pieces.size(), cv::Point(INT32_MAX, INT32_MAX));
   std::vector<cv::Point> hi(pieces.size(), cv::Point(-1, -1));
   piece_labels.create(fixed.size());
@@ -792,7 +798,7 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   //    with no other trusted disparity in it, takes the region's extent. The stereo matched only
   //    part of the object (a fuselage, the tips of thin wings whose horizontal edges give no
   //    disparity); the outline says how far the object reaches.
-  if (options.join_within_region && options.region_gap_fraction == 0) {
+  if (extend_to_regions) {
     ExtendToRegions(region_labels, region_stats, labels, classes, out_region, out);
   }
   return out;
