@@ -177,7 +177,13 @@ TEST(RangeRegions, AHypothesisAloneInAClosedOutlineTakesTheOutlinesExtent) {
   Paint(map, cv::Rect(460, 100, 40, 20), 6.0);
   const std::vector<Detection> two_ranges =
       Hypotheses(appearance, map, StereoBlobOptions::JoiningWithinRegions(0.0));
-  for (const Detection& d : two_ranges) EXPECT_NE(d.bbox, wings | fuselage);
+  ASSERT_FALSE(two_ranges.empty());
+  int fuselages = 0;
+  for (const Detection& d : two_ranges) {
+    EXPECT_NE(d.bbox, wings | fuselage);
+    fuselages += d.bbox == fuselage && std::abs(d.disparity_px - 10.0) < 0.2;
+  }
+  EXPECT_EQ(fuselages, 1);  // the fuselage keeps its own box
 }
 
 TEST(StereoBlobOptions, ABadRegionGapFractionIsNamed) {
