@@ -6,8 +6,13 @@
 #include <cstring>
 #include <limits>
 #include <thread>
+#include <type_traits>
 
 #include <opencv2/calib3d.hpp>
+
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#endif
 
 #include "core/common/error.h"
 
@@ -68,7 +73,32 @@ void PrefilterXSobel(const cv::Mat& src, cv::Mat& dst, int cap) {
     const uint8_t* down = src.ptr<uint8_t>(y + 1 < h ? y + 1 : y - 1);
     out[0] = edge;
     out[w - 1] = edge;
-    for (int x = 1; x < w - 1; ++x) {
+    // 16 pixels at a time in 16-bit lanes (|v| <= 4 * 255 + 63), then the rest one by one.
+    using Px = uint8_t __attribute__((vector_size(16)));
+    using Wide = int16_t __attribute__((vector_size(32)));
+    const auto load = [](Wide& v, const uint8_t* p) {  // by reference: no vector ABI question
+      Px b;
+      std::memcpy(&b, p, sizeof b);
+      v = __builtin_convertvector(b, Wide);
+    };
+    const Wide lo = Wide{} + static_cast<int16_t>(0);
+    const Wide hi = Wide{} + static_cast<int16_t>(2 * cap);
+    int x = 1;
+    for (; x + 16 < w; x += 16) {
+      Wide a, b, c, d, e, f;
+      load(a, up + x + 1);
+      load(b, up + x - 1);
+      load(c, mid + x + 1);
+      load(d, mid + x - 1);
+      load(e, down + x + 1);
+      load(f, down + x - 1);
+      Wide v = (a - b) + 2 * (c - d) + (e - f) + static_cast<int16_t>(cap);
+      v = v < lo ? lo : v;
+      v = v > hi ? hi : v;
+      const Px bytes = __builtin_convertvector(v, Px);
+      std::memcpy(out + x, &bytes, sizeof bytes);
+    }
+    for (; x < w - 1; ++x) {
       const int v = (up[x + 1] - up[x - 1]) + 2 * (mid[x + 1] - mid[x - 1]) +
                     (down[x + 1] - down[x - 1]) + cap;
       out[x] = static_cast<uint8_t>(std::clamp(v, 0, 2 * cap));
@@ -220,9 +250,134 @@ template <typename T, int kBytes, typename P>
   *texture += std::abs(a - job.cap) - std::abs(b - job.cap);
 }
 
+#if defined(__x86_64__) || defined(__i386__)
+__attribute__((target("avx2"), always_inline)) inline __m256i At(const int16_t* p) {
+  return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+}
+
+// Bit k of `words` (k = 0 .. 16 kVectors - 1) is the sign of 16-bit lane k % 16 of
+// masks[k / 16] (masks: comparison results, all ones or all zeros).
+template <int kVectors>
+__attribute__((target("avx2"), always_inline)) inline void LaneBits(const __m256i* masks, uint64_t* words) {
+  static_assert(kVectors % 2 == 0);
+  #pragma GCC unroll 8
+  for (int v = 0; v < kVectors; v += 2) {
+    // packs interleaves the 128-bit halves (a.lo b.lo a.hi b.hi); the permute puts them in order.
+    const __m256i packed =
+        _mm256_permute4x64_epi64(_mm256_packs_epi16(masks[v], masks[v + 1]), 0xD8);
+    const uint64_t bits = static_cast<uint32_t>(_mm256_movemask_epi8(packed));
+    if (v % 4 == 0) {
+      words[v / 4] = bits;
+    } else {
+      words[v / 4] |= bits << 32;
+    }
+  }
+}
+
+// One row of pixels of the AVX2 kernel with 16-bit costs and nd = 16 kVectors: the current pixel's
+// costs stay in registers from pixel to pixel, a window column entering the block is moved down a
+// row and added in the same pass, and the best index and the uniqueness test come from bit masks
+// of all nd costs at once. `tsum`: the texture of the row's first window minus its last column,
+// as the generic loop starts it. The same output as the generic loop, bit for bit.
+template <int kVectors>
+__attribute__((target("avx2"), noinline)) void MatchRowInRegisters(
+    const Job& job, int16_t* cols, int* tex, int tsum, bool slide, const uint8_t* left_add,
+    const uint8_t* left_sub, const int16_t* right_add, const int16_t* right_sub, int16_t* out) {
+  constexpr int kLanes = 16;
+  constexpr int nd = kVectors * kLanes;
+  constexpr int kWords = (nd + 63) / 64;
+  const int span = 2 * job.half;
+  int16_t* const sad_buffer = cols - 2 * nd;  // the Job's T[nd] of the current pixel's costs
+  __m256i s[kVectors];
+  #pragma GCC unroll 8
+  for (int v = 0; v < kVectors; ++v) s[v] = At(sad_buffer + v * kLanes);
+  for (int x = job.x0; x < job.x1; ++x) {
+    const int jadd = x - job.x0 + span;
+    const int jsub = jadd - span - 1;  // -1 (the zero column) at the first pixel
+    int16_t* const add_col = cols + static_cast<ptrdiff_t>(jadd) * nd;
+    const int16_t* const sub_col = cols + static_cast<ptrdiff_t>(jsub) * nd;
+    if (slide) {
+      const int lc = job.left_col[jadd];
+      const int a = left_add[lc];
+      const int b = left_sub[lc];
+      const __m256i av = _mm256_set1_epi16(static_cast<int16_t>(a));
+      const __m256i bv = _mm256_set1_epi16(static_cast<int16_t>(b));
+      const int16_t* ra = right_add + job.right_col[jadd];
+      const int16_t* rs = right_sub + job.right_col[jadd];
+      #pragma GCC unroll 8
+      for (int v = 0; v < kVectors; ++v) {
+        const __m256i da = _mm256_abs_epi16(_mm256_sub_epi16(av, At(ra + v * kLanes)));
+        const __m256i db = _mm256_abs_epi16(_mm256_sub_epi16(bv, At(rs + v * kLanes)));
+        const __m256i column = _mm256_add_epi16(At(add_col + v * kLanes), _mm256_sub_epi16(da, db));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(add_col + v * kLanes), column);
+        s[v] = _mm256_add_epi16(s[v], _mm256_sub_epi16(column, At(sub_col + v * kLanes)));
+      }
+      tex[jadd] += std::abs(a - job.cap) - std::abs(b - job.cap);
+    } else {
+      #pragma GCC unroll 8
+      for (int v = 0; v < kVectors; ++v) {
+        s[v] = _mm256_add_epi16(s[v], _mm256_sub_epi16(At(add_col + v * kLanes), At(sub_col + v * kLanes)));
+      }
+    }
+    tsum += tex[jadd] - tex[jsub];
+    if (tsum < job.texture_threshold) {
+      out[x] = job.filtered;
+      continue;
+    }
+    // The minimum (costs are >= 0: the unsigned horizontal minimum applies), then the first index
+    // holding it.
+    __m256i vmin = s[0];
+    #pragma GCC unroll 8
+    for (int v = 1; v < kVectors; ++v) vmin = _mm256_min_epi16(vmin, s[v]);
+    const __m128i half_min = _mm_min_epi16(_mm256_castsi256_si128(vmin), _mm256_extracti128_si256(vmin, 1));
+    const int min_sad = _mm_extract_epi16(_mm_minpos_epu16(half_min), 0);
+    const __m256i min_v = _mm256_set1_epi16(static_cast<int16_t>(min_sad));
+    __m256i masks[kVectors];
+    uint64_t words[kWords];
+    #pragma GCC unroll 8
+    for (int v = 0; v < kVectors; ++v) masks[v] = _mm256_cmpeq_epi16(s[v], min_v);
+    LaneBits<kVectors>(masks, words);
+    int best = 0;
+    for (int w = 0; w < kWords; ++w) {
+      if (words[w] != 0) {
+        best = 64 * w + __builtin_ctzll(words[w]);
+        break;
+      }
+    }
+    if (job.uniqueness_ratio > 0) {
+      // Rivals: any cost <= thresh outside [best - 1, best + 1].
+      const int thresh = std::min(min_sad + min_sad * job.uniqueness_ratio / 100,
+                                  static_cast<int>(std::numeric_limits<int16_t>::max()));
+      const __m256i above = _mm256_set1_epi16(static_cast<int16_t>(thresh));
+      #pragma GCC unroll 8
+      for (int v = 0; v < kVectors; ++v) masks[v] = _mm256_cmpgt_epi16(above, s[v]);  // s < thresh
+      #pragma GCC unroll 8
+      for (int v = 0; v < kVectors; ++v) masks[v] = _mm256_or_si256(masks[v], _mm256_cmpeq_epi16(above, s[v]));
+      LaneBits<kVectors>(masks, words);
+      for (int k = std::max(0, best - 1); k <= std::min(nd - 1, best + 1); ++k) {
+        words[k / 64] &= ~(uint64_t{1} << (k % 64));
+      }
+      uint64_t rival = 0;
+      for (int w = 0; w < kWords; ++w) rival |= words[w];
+      if (rival != 0) {
+        out[x] = job.filtered;
+        continue;
+      }
+    }
+    #pragma GCC unroll 8
+    for (int v = 0; v < kVectors; ++v) _mm256_storeu_si256(reinterpret_cast<__m256i*>(sad_buffer + v * kLanes), s[v]);
+    out[x] = Interpolated(sad_buffer, best, nd, job.max_disp);
+  }
+  #pragma GCC unroll 8
+  for (int v = 0; v < kVectors; ++v) _mm256_storeu_si256(reinterpret_cast<__m256i*>(sad_buffer + v * kLanes), s[v]);
+}
+#endif
+
 // Column sums updated row by row, running sums along x: the cost of a pixel is O(nd), whatever
 // the block size. T holds every block sum exactly (16 bits when block^2 * 2 * cap < 32767).
-template <typename T, int kBytes, typename P>
+//
+// kVectors > 0 (AVX2, 16-bit costs only): the rows go through MatchRowInRegisters.
+template <typename T, int kBytes, typename P, int kVectors = 0>
 [[gnu::always_inline]] inline void MatchKernel(const Job& job) {
   using V = typename Lanes<T, kBytes>::V;
   using Bytes = typename Lanes<T, kBytes>::Bytes;
@@ -295,6 +450,14 @@ template <typename T, int kBytes, typename P>
     }
 
     int16_t* out = job.disp + y * job.disp_step;
+#if defined(__x86_64__) || defined(__i386__)
+    if constexpr (kVectors > 0) {
+      static_assert(std::is_same_v<T, int16_t> && std::is_same_v<P, int16_t> && kBytes == 32);
+      MatchRowInRegisters<kVectors>(job, cols, tex, tsum, slide, left_add, left_sub, right_add,
+                                    right_sub, out);
+      continue;
+    }
+#endif
     for (int x = job.x0; x < job.x1; ++x) {
       const int jadd = x - job.x0 + span;
       const int jsub = jadd - span - 1;  // -1 (the zero column) at the first pixel
@@ -359,6 +522,16 @@ void MatchPortable32(const Job& job) { MatchKernel<int32_t, 16, uint8_t>(job); }
 #if defined(__x86_64__) || defined(__i386__)
 __attribute__((target("avx2"))) void MatchAvx2_16(const Job& job) {
   MatchKernel<int16_t, 32, int16_t>(job);
+}
+// 32, 64 and 128 disparities (the usual search ranges) in registers.
+__attribute__((target("avx2"))) void MatchAvx2_16x32(const Job& job) {
+  MatchKernel<int16_t, 32, int16_t, 2>(job);
+}
+__attribute__((target("avx2"))) void MatchAvx2_16x64(const Job& job) {
+  MatchKernel<int16_t, 32, int16_t, 4>(job);
+}
+__attribute__((target("avx2"))) void MatchAvx2_16x128(const Job& job) {
+  MatchKernel<int16_t, 32, int16_t, 8>(job);
 }
 __attribute__((target("avx2"))) void MatchAvx2_32(const Job& job) {
   MatchKernel<int32_t, 32, uint8_t>(job);
@@ -478,7 +651,14 @@ void SadBlockMatcher::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat
       job.right_step = right_wide_.step1();
       kernel = MatchPortable16;
 #if defined(__x86_64__) || defined(__i386__)
-      if (avx2) kernel = MatchAvx2_16;
+      if (avx2) {
+        switch (nd) {
+          case 32: kernel = MatchAvx2_16x32; break;
+          case 64: kernel = MatchAvx2_16x64; break;
+          case 128: kernel = MatchAvx2_16x128; break;
+          default: kernel = MatchAvx2_16; break;
+        }
+      }
 #endif
     } else {
       if (cost32_.size() < cost_size * stripes) cost32_.resize(cost_size * stripes);

@@ -205,7 +205,7 @@ TEST(SadBlockMatcherTest, SyntheticFrameOneParameterAtATime) {
   std::vector<SadBlockMatcherParams> cases;
   const SadBlockMatcherParams base;
   for (const int v : {5, 9, 21, 31, 51}) cases.push_back(base), cases.back().block_size = v;
-  for (const int v : {16, 128}) cases.push_back(base), cases.back().num_disparities = v;
+  for (const int v : {16, 32, 128}) cases.push_back(base), cases.back().num_disparities = v;
   for (const int v : {1, 4, 13}) cases.push_back(base), cases.back().min_disparity = v;
   for (const int v : {0, 100}) cases.push_back(base), cases.back().uniqueness_ratio = v;
   for (const int v : {0, 100, 1000}) cases.push_back(base), cases.back().texture_threshold = v;
