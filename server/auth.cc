@@ -2,6 +2,7 @@
 
 #include <arpa/inet.h>
 
+#include "server/grpc_status.h"
 #include "server/log.h"
 
 #include <fstream>
@@ -138,13 +139,13 @@ grpc::Status Authorizer::CheckControl(const grpc::ServerContextBase& context,
   const auto it = metadata.find("authorization");
   if (it == metadata.end() && !certificate_name.empty()) {
     LogRefusal(context, method, "client certificate '" + certificate_name + "' not allowed");
-    return grpc::Status(grpc::StatusCode::PERMISSION_DENIED,
+    return ToGrpcStatus(ErrorCode::kPermissionDenied,
                         std::string(method) + ": the client certificate '" + certificate_name +
                             "' is not allowed to make control calls");
   }
   if (it == metadata.end()) {
     LogRefusal(context, method, "no credentials");
-    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
+    return ToGrpcStatus(ErrorCode::kUnauthenticated,
                         std::string(method) + " is a control call: it needs a bearer token "
                                               "(authorization: Bearer TOKEN) or an allowed client certificate");
   }
@@ -153,7 +154,7 @@ grpc::Status Authorizer::CheckControl(const grpc::ServerContextBase& context,
   if (token_.empty() || value.substr(0, prefix.size()) != prefix ||
       !ConstantTimeEquals(value.substr(prefix.size()), token_)) {
     LogRefusal(context, method, "wrong credentials");
-    return grpc::Status(grpc::StatusCode::PERMISSION_DENIED,
+    return ToGrpcStatus(ErrorCode::kPermissionDenied,
                         std::string(method) + ": the credentials given do not allow control calls");
   }
   return grpc::Status::OK;

@@ -14,6 +14,9 @@
 namespace stevi::server {
 namespace {
 
+// A capture that stops before its last pair: the client cancelled it, or the server is stopping.
+Error CaptureCancelled() { return Error{ErrorCode::kCancelled, "capture cancelled"}; }
+
 constexpr int kDefaultCapturePairs = 20;
 constexpr double kDefaultCaptureInterval = 0.5;
 constexpr auto kCaptureFrameTimeout = std::chrono::seconds(5);
@@ -284,9 +287,7 @@ Status CalibrationManager::Capture(const v1::CaptureCalibrationRequest& request,
       std::unique_lock lock(mu_);
       cv_.wait_for(lock, interval, [&] { return stopping_; });
     }
-    if (Stopping() || cancelled()) {
-      return Error{ErrorCode::kFailedPrecondition, "capture cancelled"};
-    }
+    if (Stopping() || cancelled()) return CaptureCancelled();
     Result<StereoFrame> frame = engine_.WaitForCapture(kCaptureFrameTimeout);
     if (!frame.ok()) return frame.error();
     const cv::Mat1b left = Grey(frame->left), right = Grey(frame->right);
@@ -313,7 +314,7 @@ Status CalibrationManager::Capture(const v1::CaptureCalibrationRequest& request,
     p->set_coverage_right(Coverage(hulls_right, image_size, options.coverage_grid));
     emit(progress);
   }
-  if (Stopping() || cancelled()) return Error{ErrorCode::kFailedPrecondition, "capture cancelled"};
+  if (Stopping() || cancelled()) return CaptureCancelled();
   Result<v1::CalibrationReport> report = Calibrate(request.settings(), pairs);
   if (!report.ok()) return report.error();
   v1::CaptureProgress last;

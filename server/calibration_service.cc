@@ -40,12 +40,12 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
       v1::ImagePair& pair = *upload_.mutable_pair();
       bytes_ += static_cast<int64_t>(pair.left().size() + pair.right().size());
       if (static_cast<int>(pairs_.size()) >= kMaxCalibrationPairs) {
-        return Finish(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+        return Finish(ToGrpcStatus(ErrorCode::kResourceExhausted,
                                    "more than " + std::to_string(kMaxCalibrationPairs) +
                                        " pairs in one upload"));
       }
       if (bytes_ > kMaxCalibrationUploadBytes) {
-        return Finish(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+        return Finish(ToGrpcStatus(ErrorCode::kResourceExhausted,
                                    "the upload exceeds 1 GiB of images in all"));
       }
       pairs_.push_back(calibration::ImagePair{std::move(*pair.mutable_left()),
@@ -64,7 +64,7 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
 
  private:
   void Refuse(const std::string& why) {
-    Finish(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, why));
+    Finish(ToGrpcStatus(ErrorCode::kInvalidArgument, why));
   }
 
   void Run() {
@@ -76,7 +76,7 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
       if (report.ok()) *response_ = std::move(report).value();
       Finish(report.ok() ? grpc::Status::OK : ToGrpcStatus(report.error()));
     });
-    if (!posted) Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "server shutting down"));
+    if (!posted) Finish(ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
   }
 
   CalibrationManager& manager_;
@@ -125,7 +125,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
     });
     if (!posted) {
       std::lock_guard lock(shared_->mu);
-      shared_->final_status = grpc::Status(grpc::StatusCode::UNAVAILABLE, "server shutting down");
+      shared_->final_status = ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down");
       MaybeFinishLocked(*shared_);
     }
   }
@@ -138,7 +138,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
       shared_->queue.clear();
       if (!shared_->finished) {
         shared_->finished = true;
-        Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "stream write failed"));
+        Finish(ToGrpcStatus(ErrorCode::kUnavailable, "stream write failed"));
       }
       return;
     }

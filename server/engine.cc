@@ -107,7 +107,7 @@ Result<StereoFrame> Engine::WaitForCapture(Clock::duration timeout) {
   const uint64_t seen = frames_captured_;
   const bool got = capture_cv_.wait_for(lock, timeout,
                                         [&] { return stopping_ || frames_captured_ > seen; });
-  if (stopping_) return Error{ErrorCode::kFailedPrecondition, "the server is stopping"};
+  if (stopping_) return Error{ErrorCode::kCancelled, "the server is stopping"};
   if (!got) {
     return Error{ErrorCode::kUnavailable,
                  "no frame from the source within the timeout (" +
@@ -223,7 +223,8 @@ void Engine::CaptureLoop() {
     }
     capture_cv_.notify_all();
     if (recovered) {
-      Log(LogLevel::kInfo, "source_state", {{"state", "RUNNING"}, {"source", source_description_}});
+      Log(LogLevel::kInfo, "source_state", {{"state", std::string(SourceStateName(SourceState::kRunning))},
+                                            {"source", source_description_}});
     }
     if (tap) (*tap)(*frame);
     mailbox_.Put(std::move(frame).value());

@@ -1,6 +1,7 @@
 #include "server/grpc_status.h"
 
 #include <string>
+#include <utility>
 
 namespace stevi::server {
 namespace {
@@ -17,6 +18,9 @@ grpc::Status ToGrpcStatus(const Error& error) {
     case ErrorCode::kUnavailable: code = grpc::StatusCode::UNAVAILABLE; break;
     case ErrorCode::kResourceExhausted: code = grpc::StatusCode::RESOURCE_EXHAUSTED; break;
     case ErrorCode::kOutOfRange: code = grpc::StatusCode::OUT_OF_RANGE; break;
+    case ErrorCode::kCancelled: code = grpc::StatusCode::CANCELLED; break;
+    case ErrorCode::kUnauthenticated: code = grpc::StatusCode::UNAUTHENTICATED; break;
+    case ErrorCode::kPermissionDenied: code = grpc::StatusCode::PERMISSION_DENIED; break;
     case ErrorCode::kInternal: code = grpc::StatusCode::INTERNAL; break;
   }
   std::string message = error.message;
@@ -25,6 +29,10 @@ grpc::Status ToGrpcStatus(const Error& error) {
     message += "... (truncated)";
   }
   return grpc::Status(code, message);
+}
+
+grpc::Status ToGrpcStatus(ErrorCode code, std::string message) {
+  return ToGrpcStatus(Error{code, std::move(message)});
 }
 
 grpc::Status ToGrpcStatus(const Status& status) {

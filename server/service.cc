@@ -36,8 +36,8 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
     if (sub_ == nullptr) {
       finished_ = true;
       Finish(broadcaster_.closed()
-                 ? grpc::Status(grpc::StatusCode::UNAVAILABLE, "server shutting down")
-                 : grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                 ? ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down")
+                 : ToGrpcStatus(ErrorCode::kResourceExhausted,
                                 "too many StreamTracks subscribers (see max_streams)"));
       return;
     }
@@ -50,7 +50,7 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
       std::lock_guard lock(mu_);
       writing_ = false;
       if (!ok) {
-        FinishLocked(grpc::Status(grpc::StatusCode::UNAVAILABLE, "stream write failed"));
+        FinishLocked(ToGrpcStatus(ErrorCode::kUnavailable, "stream write failed"));
         return;
       }
     }
@@ -86,7 +86,7 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
       case Subscription<FramePtr>::PopState::kEmpty:
         return;  // notified at the next frame
       case Subscription<FramePtr>::PopState::kEnded:
-        FinishLocked(grpc::Status(grpc::StatusCode::UNAVAILABLE, "server shutting down"));
+        FinishLocked(ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
         return;
       case Subscription<FramePtr>::PopState::kItem:
         current_ = **popped.item;

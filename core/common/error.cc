@@ -13,6 +13,9 @@ std::string_view ErrorCodeName(ErrorCode code) {
     case ErrorCode::kUnavailable: return "unavailable";
     case ErrorCode::kResourceExhausted: return "resource exhausted";
     case ErrorCode::kOutOfRange: return "out of range";
+    case ErrorCode::kCancelled: return "cancelled";
+    case ErrorCode::kUnauthenticated: return "unauthenticated";
+    case ErrorCode::kPermissionDenied: return "permission denied";
     case ErrorCode::kInternal: return "internal";
   }
   return "unknown";

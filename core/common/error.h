@@ -19,6 +19,9 @@ enum class ErrorCode {
   kUnavailable,         // a camera or source is down
   kResourceExhausted,   // too large
   kOutOfRange,          // end of a finite stream (image sequence, video)
+  kCancelled,           // the caller cancelled (a capture, a wait), or the server is stopping
+  kUnauthenticated,     // no credentials for a call that needs them
+  kPermissionDenied,    // credentials that do not allow the call
   kInternal,            // a bug or an unexpected library failure
 };
 

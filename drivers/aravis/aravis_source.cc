@@ -400,8 +400,8 @@ std::string AravisStereoSource::Describe() const {
   std::snprintf(rate, sizeof rate, "%g", o.frame_rate_hz);
   std::string text = "aravis " + left + " + " + right + " " + std::to_string(o.roi_width) + "x" +
                      std::to_string(o.roi_height) + " " + rate + " fps";
-  if (o.trigger.mode == TriggerMode::kSoftware) text += " software trigger";
-  if (o.trigger.mode == TriggerMode::kHardware) text += " hardware trigger on " + o.trigger.line;
+  if (o.trigger.mode != TriggerMode::kFreeRun) text += std::string(" ") + TriggerModeName(o.trigger.mode) + " trigger";
+  if (o.trigger.mode == TriggerMode::kHardware) text += " on " + o.trigger.line;
   return text;
 }
 

@@ -9,9 +9,7 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/ximgproc/segmentation.hpp>
-#ifdef STEVI_HAVE_CV_SALIENCY
 #include <opencv2/saliency.hpp>
-#endif
 
 namespace stevi::bench {
 
@@ -109,23 +107,13 @@ std::vector<detection::Detection> MovingTargets::Detections(int64_t frame, doubl
 // Naive baseline
 // ---------------------------------------------------------------------------------------------
 
-bool NaiveSaliencyAvailable() {
-#ifdef STEVI_HAVE_CV_SALIENCY
-  return true;
-#else
-  return false;
-#endif
-}
-
 SingleThreadScope::SingleThreadScope() : saved_(cv::getNumThreads()) { cv::setNumThreads(1); }
 SingleThreadScope::~SingleThreadScope() { cv::setNumThreads(saved_); }
 
 struct NaiveThesisPipeline::Impl {
   cv::Mat left_x, left_y, right_x, right_y;  // CV_32FC1
   cv::Ptr<cv::StereoSGBM> sgbm;
-#ifdef STEVI_HAVE_CV_SALIENCY
   cv::Ptr<cv::saliency::StaticSaliencyFineGrained> saliency;
-#endif
   cv::Ptr<cv::ximgproc::segmentation::GraphSegmentation> graph;
 };
 
@@ -151,9 +139,7 @@ NaiveThesisPipeline::NaiveThesisPipeline(const geometry::StereoRig& raw_rig, Nai
   impl_->sgbm = cv::StereoSGBM::create(0, options_.num_disparities, block, 8 * block * block,
                                        32 * block * block, 1, 63, 10, 100, 32,
                                        cv::StereoSGBM::MODE_SGBM);
-#ifdef STEVI_HAVE_CV_SALIENCY
   impl_->saliency = cv::saliency::StaticSaliencyFineGrained::create();
-#endif
   impl_->graph = cv::ximgproc::segmentation::createGraphSegmentation(
       options_.graph_sigma, static_cast<float>(options_.graph_k), options_.graph_min_size);
 }
@@ -174,11 +160,7 @@ cv::Mat NaiveThesisPipeline::Disparity(const cv::Mat& left, const cv::Mat& right
 
 cv::Mat NaiveThesisPipeline::Saliency(const cv::Mat& left) {
   cv::Mat map;
-#ifdef STEVI_HAVE_CV_SALIENCY
   impl_->saliency->computeSaliency(left, map);
-#else
-  (void)left;
-#endif
   return map;
 }
 

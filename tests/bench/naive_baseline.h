@@ -5,8 +5,7 @@
 //      - rectify:    cv::remap of both images with float (CV_32FC1) maps, bilinear;
 //      - disparity:  cv::StereoSGBM in MODE_SGBM (the 5-path single pass, not 3-way), no padding;
 //      - saliency:   cv::saliency::StaticSaliencyFineGrained (opencv_contrib, the intensity
-//                    centre-surround of Montabone & Soto, a VOCUS relative) on the full image, when
-//                    the OpenCV build has the saliency module (STEVI_HAVE_CV_SALIENCY);
+//                    centre-surround of Montabone & Soto, a VOCUS relative) on the full image;
 //      - segmentation: cv::ximgproc::segmentation::GraphSegmentation (Felzenszwalb-Huttenlocher)
 //                    on the full image, with the same sigma, k and min_size as SteViS.
 //    Each stage is a function so that the caller times it; SingleThreadScope pins OpenCV to one
@@ -78,9 +77,6 @@ class MovingTargets {
 // ---------------------------------------------------------------------------------------------
 // Naive baseline
 // ---------------------------------------------------------------------------------------------
-
-// Whether this build has cv::saliency (opencv_contrib's saliency module).
-bool NaiveSaliencyAvailable();
 
 // Pins OpenCV to one thread while alive, then restores the previous setting.
 class SingleThreadScope {

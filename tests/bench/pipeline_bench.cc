@@ -406,10 +406,6 @@ void BM_NaiveSgbm(benchmark::State& state) {
 BENCHMARK(BM_NaiveSgbm)->Unit(benchmark::kMillisecond);
 
 void BM_NaiveSaliency(benchmark::State& state) {
-  if (!bench::NaiveSaliencyAvailable()) {
-    state.SkipWithError("cv::saliency (opencv_contrib) is not in this OpenCV build");
-    return;
-  }
   const Scene& scene = SceneAt(0);
   bench::NaiveThesisPipeline& naive = TheNaive();
   const bench::SingleThreadScope one_thread;

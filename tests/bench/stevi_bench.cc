@@ -532,8 +532,6 @@ struct BaselineRow {
 };
 
 struct Baseline {
-  bool saliency_available = false;
-  bool graph_available = true;
   int opencv_threads = 0;
   std::vector<BaselineRow> rows;
 };
@@ -541,7 +539,6 @@ struct Baseline {
 Baseline MeasureBaseline(double seconds, const std::vector<OfflineRun>& offline) {
   std::fprintf(stderr, "  naive baseline (one thread) and our stages on one 640x480 frame\n");
   Baseline b;
-  b.saliency_available = bench::NaiveSaliencyAvailable();
   b.opencv_threads = cv::getNumThreads();
   const drivers::SyntheticRenderer renderer(bench::SyntheticAt({640, 480}));
   const StereoFrame frame = renderer.Render(50);
@@ -588,12 +585,8 @@ Baseline MeasureBaseline(double seconds, const std::vector<OfflineRun>& offline)
   const cv::Mat1b left = frame.left;
   const extraction::SaliencyOptions saliency_options;
   BaselineRow saliency{"saliency", "StaticSaliencyFineGrained, full resolution",
-                       "VOCUS intensity (ComputeSaliency), summed at level 2", {}, {}, {},
-                       b.saliency_available, ""};
-  if (!b.saliency_available) saliency.note = "cv::saliency not in this OpenCV build";
-  both(saliency,
-       b.saliency_available ? std::function<void()>([&] { (void)naive.Saliency(frame.left); })
-                            : std::function<void()>(),
+                       "VOCUS intensity (ComputeSaliency), summed at level 2", {}, {}, {}, true, ""};
+  both(saliency, [&] { (void)naive.Saliency(frame.left); },
        [&] { (void)extraction::ComputeSaliency(left, saliency_options); });
   b.rows.push_back(saliency);
 
@@ -662,8 +655,6 @@ Json BaselineJson(const Baseline& b) {
   }
   return Json::Object()
       .Set("frame", "synthetic demo scene, frame 50, 640x480")
-      .Set("fine_grained_saliency_available", b.saliency_available)
-      .Set("graph_segmentation_available", b.graph_available)
       .Set("opencv_threads_default", b.opencv_threads)
       .Set("rows", std::move(rows));
 }
@@ -1436,9 +1427,6 @@ int main(int argc, char** argv) {
 
   std::fprintf(table, "\n3. Naive thesis baseline (1 OpenCV thread, full resolution) vs ours, one 640x480 "
                       "frame (ms, mean)\n");
-  std::fprintf(table, "   fine-grained saliency (cv::saliency): %s; graph segmentation (ximgproc): %s\n",
-               baseline.saliency_available ? "available" : "NOT available",
-               baseline.graph_available ? "available" : "NOT available");
   std::fprintf(table, "%-20s %9s %9s %9s %10s %10s  %s\n", "stage", "naive 1t", "ours", "ours 1t",
                "ours/naive", "1t/naive", "ours is");
   for (const BaselineRow& row : baseline.rows) {
