@@ -14,6 +14,7 @@
 #include "core/pipeline/config.h"
 #include "drivers/stereo_source.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "server/runtime/pose_source.h"
 #include "stevi/v1/config.pb.h"
 
 namespace stevi::server {
@@ -54,6 +55,12 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config);
 
 // The pipeline configuration: core defaults, then the config's fields, then validation.
 Result<pipeline::PipelineConfig> BuildPipelineConfig(const v1::PipelineConfig& config);
+
+// The pose source of the configuration's GeoConfig (its fields over the core defaults; errors name
+// them as "geo.FIELD"). `synthetic_default` is the fixed pose used when the config gives none (the
+// synthetic rig's hover at Pisa), or nullopt.
+Result<std::unique_ptr<PoseSource>> MakePoseSource(const v1::GeoConfig& config,
+                                                   const std::optional<geo::VehicleState>& synthetic_default);
 
 // A named evaluation or tracking scenario (drivers/synthetic), to play live with --scene NAME.
 std::optional<drivers::Scenario> FindScenario(const std::string& name);

@@ -3,7 +3,7 @@
 #include <arpa/inet.h>
 
 #include "server/grpc_status.h"
-#include "server/log.h"
+#include "server/runtime/log.h"
 
 #include <fstream>
 #include <sstream>

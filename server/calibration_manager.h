@@ -16,7 +16,7 @@
 #include "core/calibration/calibrate.h"
 #include "core/calibration/store.h"
 #include "core/common/error.h"
-#include "server/engine.h"
+#include "server/runtime/engine.h"
 #include "stevi/v1/calibration_service.pb.h"
 
 namespace stevi::server {

@@ -10,7 +10,7 @@
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/app_config.h"
 #include "server/convert.h"
-#include "server/pose_source.h"
+#include "server/runtime/pose_source.h"
 #include "drivers/recording/replay_source.h"
 
 namespace {
@@ -117,7 +117,7 @@ int main(int argc, char** argv) {
     for (const std::string& note : replay->notes()) std::cerr << "stevi-process: " << note << "\n";
     if (!replay->vehicle_states().empty()) {
       Result<std::unique_ptr<server::PoseSource>> created =
-          server::PoseSource::Create(v1::GeoConfig(), std::nullopt);
+          server::PoseSource::Create(geo::PoseBufferOptions{}, std::nullopt);
       if (!created.ok()) return Fail(created.error().message, 1);
       poses = std::move(created).value();
       poses->SetRecordedStates(replay->vehicle_states());

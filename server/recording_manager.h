@@ -11,8 +11,8 @@
 
 #include "core/common/error.h"
 #include "drivers/recording/recorder.h"
-#include "server/engine.h"
-#include "server/pose_source.h"
+#include "server/runtime/engine.h"
+#include "server/runtime/pose_source.h"
 #include "stevi/v1/obstacle_service.pb.h"
 
 namespace stevi::server {

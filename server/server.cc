@@ -8,7 +8,7 @@
 
 #include "server/app_config.h"
 #include "server/convert.h"
-#include "server/log.h"
+#include "server/runtime/log.h"
 #include "drivers/recording/replay_source.h"
 
 namespace stevi::server {
@@ -28,7 +28,7 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
     synthetic_pose = SyntheticRigPose(scenario ? scenario->options.scene.camera_height_m
                                                : drivers::DefaultScene().camera_height_m);
   }
-  Result<std::unique_ptr<PoseSource>> poses = PoseSource::Create(config.geo(), synthetic_pose);
+  Result<std::unique_ptr<PoseSource>> poses = MakePoseSource(config.geo(), synthetic_pose);
   if (!poses.ok()) return poses.error();
 
   // Credentials before the source: a bad certificate or token file is found without touching a

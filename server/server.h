@@ -12,7 +12,7 @@
 #include "server/auth.h"
 #include "server/calibration_manager.h"
 #include "server/calibration_service.h"
-#include "server/engine.h"
+#include "server/runtime/engine.h"
 #include "server/recording_manager.h"
 #include "server/service.h"
 #include "stevi/v1/config.pb.h"

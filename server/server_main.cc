@@ -8,7 +8,7 @@
 
 #include "core/common/allocator.h"
 #include "server/app_config.h"
-#include "server/log.h"
+#include "server/runtime/log.h"
 #include "server/server.h"
 
 namespace {

@@ -8,9 +8,9 @@
 #include <grpcpp/grpcpp.h>
 
 #include "server/auth.h"
-#include "server/broadcaster.h"
-#include "server/engine.h"
-#include "server/pose_source.h"
+#include "server/runtime/broadcaster.h"
+#include "server/runtime/engine.h"
+#include "server/runtime/pose_source.h"
 #include "server/recording_manager.h"
 #include "stevi/v1/obstacle_service.grpc.pb.h"
 

@@ -15,7 +15,7 @@
 #include "client/client.h"
 #include "core/calibration/chessboard_render.h"
 #include "core/geometry/calibration_io.h"
-#include "server/engine.h"
+#include "server/runtime/engine.h"
 #include "server/server.h"
 #include "tests/testing/data.h"
 

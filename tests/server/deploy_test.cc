@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "server/app_config.h"
-#include "server/pose_source.h"
+#include "server/runtime/pose_source.h"
 #include "tests/testing/data.h"
 #include "tests/testing/subprocess.h"
 
@@ -113,7 +113,7 @@ TEST(DeployConfigs, EveryConfigLoadsValidatesAndBuildsItsPipeline) {
     Result<pipeline::PipelineConfig> pipeline = BuildPipelineConfig(config->pipeline());
     EXPECT_TRUE(pipeline.ok()) << pipeline.error().message;
     // The geo block is checked when the server builds its pose source.
-    Result<std::unique_ptr<PoseSource>> poses = PoseSource::Create(config->geo(), std::nullopt);
+    Result<std::unique_ptr<PoseSource>> poses = MakePoseSource(config->geo(), std::nullopt);
     EXPECT_TRUE(poses.ok()) << poses.error().message;
     // All of them keep their state where the unit's StateDirectory and the container's VOLUME are.
     EXPECT_EQ(config->data_dir(), "/var/lib/stevi");

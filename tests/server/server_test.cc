@@ -15,7 +15,7 @@
 
 #include "client/client.h"
 #include "core/geo/georeferencer.h"
-#include "server/pose_source.h"
+#include "server/runtime/pose_source.h"
 #include "server/service.h"
 #include "tests/server/truth_check.h"
 #include "tests/testing/data.h"

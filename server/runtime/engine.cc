@@ -1,6 +1,6 @@
-#include "server/engine.h"
+#include "server/runtime/engine.h"
 
-#include "server/log.h"
+#include "server/runtime/log.h"
 
 #include <algorithm>
 #include <chrono>

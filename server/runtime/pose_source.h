@@ -13,18 +13,17 @@
 #include "core/common/error.h"
 #include "core/geo/pose_buffer.h"
 #include "core/geo/vehicle_state.h"
-#include "stevi/v1/config.pb.h"
 
 namespace stevi::server {
 
 // Thread-safe.
 class PoseSource {
  public:
-  // From the configuration's GeoConfig: kInvalidArgument naming every bad field ("geo.fixed_pose.
-  // lat_deg: ..."). `synthetic_default` is the fixed pose used when the config gives none (the
-  // synthetic rig's hover at Pisa), or nullopt.
-  static Result<std::unique_ptr<PoseSource>> Create(
-      const v1::GeoConfig& config, const std::optional<geo::VehicleState>& synthetic_default);
+  // The published states' buffer options and the fixed pose (nullopt: none): kInvalidArgument
+  // naming every bad field as the configuration's GeoConfig names it ("geo.max_age_s: ...",
+  // "geo.fixed_pose.lat_deg: ...").
+  static Result<std::unique_ptr<PoseSource>> Create(const geo::PoseBufferOptions& options,
+                                                     const std::optional<geo::VehicleState>& fixed);
 
   // The synthetic rig's own flight: its pose at a frame's source time (t_ns, the scene clock).
   // Used instead of the fixed pose until an autopilot publishes states. Set before the engine

@@ -1,4 +1,4 @@
-#include "server/pose_source.h"
+#include "server/runtime/pose_source.h"
 
 #include <cmath>
 #include <numbers>
@@ -6,25 +6,15 @@
 
 #include <GeographicLib/LocalCartesian.hpp>
 
-#include "server/convert.h"
-
 namespace stevi::server {
 
-Result<std::unique_ptr<PoseSource>> PoseSource::Create(
-    const v1::GeoConfig& config, const std::optional<geo::VehicleState>& synthetic_default) {
+Result<std::unique_ptr<PoseSource>> PoseSource::Create(const geo::PoseBufferOptions& options,
+                                                       const std::optional<geo::VehicleState>& fixed) {
   std::vector<std::string> problems;
-  geo::PoseBufferOptions options;
-  if (config.has_max_age_s()) options.max_age_s = config.max_age_s();
-  if (config.has_max_extrapolation_s()) options.max_extrapolation_s = config.max_extrapolation_s();
-  if (config.has_max_gap_s()) options.max_gap_s = config.max_gap_s();
   AppendPrefixed(problems, "geo.", options.Validate());
-  std::optional<geo::VehicleState> fixed = synthetic_default;
-  if (config.has_fixed_pose()) {
-    fixed = FromProto(config.fixed_pose());
-    AppendPrefixed(problems, "geo.fixed_pose.", fixed->Validate());
-  }
+  if (fixed) AppendPrefixed(problems, "geo.fixed_pose.", fixed->Validate());
   if (!problems.empty()) return Error::Invalid(problems);
-  return std::unique_ptr<PoseSource>(new PoseSource(options, std::move(fixed)));
+  return std::unique_ptr<PoseSource>(new PoseSource(options, fixed));
 }
 
 void PoseSource::SetRecordedStates(const std::vector<geo::VehicleState>& states) {

@@ -1,5 +1,5 @@
 // One-line structured logs: logfmt that a log shipper can split without guessing.
-#include "server/log.h"
+#include "server/runtime/log.h"
 
 #include <gtest/gtest.h>
 

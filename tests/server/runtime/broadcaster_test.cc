@@ -1,4 +1,4 @@
-#include "server/broadcaster.h"
+#include "server/runtime/broadcaster.h"
 
 #include <gtest/gtest.h>
 
