@@ -92,8 +92,8 @@ class Engine {
   cv::Size source_image_size() const { return source_image_size_; }
 
   // Waits for a frame captured after the call (raw, as the source delivered it, not swapped), for
-  // at most `timeout`. kUnavailable when none came (source down or ended), kCancelled-like
-  // kFailedPrecondition when the engine is stopping.
+  // at most `timeout`. kUnavailable when none came (source down or ended), kCancelled when the
+  // engine is stopping.
   Result<StereoFrame> WaitForCapture(std::chrono::steady_clock::duration timeout);
   // The latest processed frame, or nullptr before the first.
   std::shared_ptr<const pipeline::FrameResult> Latest() const;

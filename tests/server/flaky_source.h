@@ -12,10 +12,11 @@
 namespace stevi::server::test_support {
 
 // A source that fails `failures` times (camera down), then renders `frames` synthetic frames,
-// then ends: the engine's retry, accounting and end-of-stream paths on a real renderer.
+// then ends: the engine's retry, accounting and end-of-stream paths on a real renderer. `fps`:
+// the rate the engine paces it at (0: as fast as it can).
 class FlakySource : public drivers::StereoSource {
  public:
-  FlakySource(int failures, int frames) : failures_(failures), frames_(frames) {
+  FlakySource(int failures, int frames, double fps = 0) : failures_(failures), frames_(frames), fps_(fps) {
     drivers::SyntheticOptions options;
     options.width = 320;
     options.height = 240;
@@ -25,7 +26,7 @@ class FlakySource : public drivers::StereoSource {
   }
   std::string Describe() const override { return "flaky synthetic"; }
   std::shared_ptr<const geometry::StereoRig> Rig() const override { return rig_; }
-  double NominalFps() const override { return 0; }  // as fast as it can
+  double NominalFps() const override { return fps_; }
   Result<StereoFrame> Next() override {
     if (failures_ > 0) {
       --failures_;
@@ -47,6 +48,7 @@ class FlakySource : public drivers::StereoSource {
   std::shared_future<void> ended_future_ = ended_.get_future().share();
   bool ended_told_ = false;
   int failures_, frames_, next_ = 0;
+  double fps_;
   std::unique_ptr<drivers::SyntheticRenderer> renderer_;
   std::shared_ptr<const geometry::StereoRig> rig_;
 };
