@@ -4,10 +4,13 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "core/common/error.h"
 #include "core/common/stereo_frame.h"
+#include "core/geo/vehicle_state.h"
 #include "core/geometry/stereo_rig.h"
+#include "drivers/truth.h"
 
 namespace stevi::drivers {
 
@@ -54,6 +57,17 @@ class StereoSource {
   // kUnavailable: the owner is stopping. Safe from any thread. A source whose Next() never waits
   // long (a synthetic scene, image files) need not override it.
   virtual void Interrupt() {}
+
+  // Optional capabilities: a source that has none keeps these defaults.
+  // The vehicle states recorded with the frames (a replay), each at its frame's Unix time: the
+  // poses to georeference them with.
+  virtual std::vector<geo::VehicleState> RecordedVehicleStates() const { return {}; }
+  // What the operator should know about how the source was opened (a replay's unreadable
+  // calibration, a truncated recording).
+  virtual std::vector<std::string> Notes() const { return {}; }
+  // The truth of the frame last returned by Next(), for a source that knows it (the synthetic
+  // rig); nullptr otherwise.
+  virtual const FrameTruth* LastTruth() const { return nullptr; }
 };
 
 }  // namespace stevi::drivers

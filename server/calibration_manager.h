@@ -52,7 +52,7 @@ class CalibrationManager {
 
   // Grabs request.pairs() pairs from the engine's source, one every request.interval_s(), calls
   // `emit` with a progress message per pair, then calibrates (as Calibrate) and emits the report.
-  // Stops early with kCancelled-like kFailedPrecondition when `cancelled()` turns true or the
+  // Stops early with kCancelled when `cancelled()` turns true or the
   // manager stops, and with kUnavailable when the source delivers no frame for 5 s.
   Status Capture(const v1::CaptureCalibrationRequest& request,
                  const std::function<void(const v1::CaptureProgress&)>& emit,

@@ -98,7 +98,6 @@ int main(int argc, char** argv) {
   Result<std::unique_ptr<drivers::StereoSource>> source =
       server::OpenSource(config.source(), /*loop_images=*/false);
   if (!source.ok()) return Fail(source.error().message, 1);
-  auto* synthetic_source = dynamic_cast<drivers::SyntheticSource*>(source->get());
 
   std::ofstream out_file, truth_file;
   if (auto it = flags->values.find("out"); it != flags->values.end()) {
@@ -113,15 +112,13 @@ int main(int argc, char** argv) {
 
   // A replay georeferences its frames with the poses recorded with them, exactly as live.
   std::unique_ptr<server::PoseSource> poses;
-  if (auto* replay = dynamic_cast<drivers::ReplaySource*>(source->get())) {
-    for (const std::string& note : replay->notes()) std::cerr << "stevi-process: " << note << "\n";
-    if (!replay->vehicle_states().empty()) {
-      Result<std::unique_ptr<server::PoseSource>> created =
-          server::PoseSource::Create(geo::PoseBufferOptions{}, std::nullopt);
-      if (!created.ok()) return Fail(created.error().message, 1);
-      poses = std::move(created).value();
-      poses->SetRecordedStates(replay->vehicle_states());
-    }
+  for (const std::string& note : (*source)->Notes()) std::cerr << "stevi-process: " << note << "\n";
+  if (const std::vector<geo::VehicleState> recorded = (*source)->RecordedVehicleStates(); !recorded.empty()) {
+    Result<std::unique_ptr<server::PoseSource>> created =
+        server::PoseSource::Create(geo::PoseBufferOptions{}, std::nullopt);
+    if (!created.ok()) return Fail(created.error().message, 1);
+    poses = std::move(created).value();
+    poses->SetRecordedStates(recorded);
   }
   pipeline::Pipeline pipe;
   pipeline::Snapshot snapshot{
@@ -142,10 +139,8 @@ int main(int argc, char** argv) {
     v1::TrackFrame track_frame = server::ToTrackFrame(*result);
     if (!timings) track_frame.clear_timings();
     out << server::ToJsonLine(track_frame) << "\n";
-    if (truth_file.is_open() && synthetic_source != nullptr) {
-      truth_file << server::ToJsonLine(
-                        server::ToTruthFrame(synthetic_source->last_truth(), frame->t_ns))
-                 << "\n";
+    if (const drivers::FrameTruth* truth = (*source)->LastTruth(); truth_file.is_open() && truth != nullptr) {
+      truth_file << server::ToJsonLine(server::ToTruthFrame(*truth, frame->t_ns)) << "\n";
     }
   }
   out.flush();

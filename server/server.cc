@@ -9,9 +9,70 @@
 #include "server/app_config.h"
 #include "server/convert.h"
 #include "server/runtime/log.h"
-#include "drivers/recording/replay_source.h"
 
 namespace stevi::server {
+
+namespace {
+
+// The synthetic rig hovers at Pisa unless the config gives a pose: its pose for the configured
+// scene, or nullopt for another source (or the chessboard, which has no vehicle).
+std::optional<geo::VehicleState> SyntheticPose(const v1::SourceConfig& source) {
+  const v1::SourceKind kind = source.kind();
+  if ((kind != v1::SOURCE_KIND_SYNTHETIC && kind != v1::SOURCE_KIND_UNSPECIFIED) ||
+      source.synthetic().scene() == "chessboard") {
+    return std::nullopt;
+  }
+  const std::optional<drivers::Scenario> scenario = FindScenario(source.synthetic().scene());
+  return SyntheticRigPose(scenario ? scenario->options.scene.camera_height_m
+                                   : drivers::DefaultScene().camera_height_m);
+}
+
+// A scenario whose rig moves flies its path: the pose source follows it.
+void FollowSyntheticFlight(const v1::SourceConfig& source, const geo::VehicleState& start,
+                           PoseSource& poses) {
+  const std::optional<drivers::Scenario> scenario = FindScenario(source.synthetic().scene());
+  if (!scenario || scenario->options.scene.rig_velocity_mps == cv::Vec3d(0, 0, 0)) return;
+  const drivers::Scene scene = scenario->options.scene;
+  poses.SetSyntheticPath([scene, start](int64_t t_ns) {
+    return MovedRigPose(start, scene.RigOffsetAt(static_cast<double>(t_ns) * 1e-9), scene.rig_velocity_mps);
+  });
+}
+
+// ServerConfig.record: recording from the first frame on (the tap is in place before the engine
+// starts). Errors are prefixed "record: ".
+Status StartConfiguredRecording(const v1::RecordConfig& record, RecordingManager& recording) {
+  if (!record.has_dir()) return Status::Ok();
+  const uint64_t max_bytes = record.has_max_bytes() ? record.max_bytes() : kDefaultRecordingMaxBytes;
+  const int queue = record.has_queue_frames() ? static_cast<int>(record.queue_frames())
+                                              : kDefaultRecordingQueueFrames;
+  Result<v1::RecordingStatus> started = recording.StartIn(record.dir(), max_bytes, queue);
+  if (started.ok()) return Status::Ok();
+  Error error = started.error();
+  error.message = "record: " + error.message;
+  return error;
+}
+
+// The gRPC server's transport settings: message sizes and keepalive (idle connections are pinged
+// and dead, half-open ones of vanished clients closed).
+void ConfigureTransport(const v1::ServerConfig& config, grpc::ServerBuilder& builder) {
+  const auto ms = [](bool has, double seconds, double fallback) {
+    return static_cast<int>((has ? seconds : fallback) * 1000.0);
+  };
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS,
+                             ms(config.has_keepalive_time_s(), config.keepalive_time_s(), 30));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS,
+                             ms(config.has_keepalive_timeout_s(), config.keepalive_timeout_s(), 10));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  builder.AddChannelArgument(
+      GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS,
+      ms(config.has_min_client_ping_interval_s(), config.min_client_ping_interval_s(), 10));
+  const int max_message = static_cast<int>(
+      config.has_max_message_bytes() ? config.max_message_bytes() : kDefaultMaxMessageBytes);
+  builder.SetMaxReceiveMessageSize(max_message);
+  builder.SetMaxSendMessageSize(max_message);
+}
+
+}  // namespace
 
 Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   std::vector<std::string> problems = ValidateServerConfig(config);
@@ -19,15 +80,7 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   if (!pipeline_config.ok()) problems.push_back(pipeline_config.error().message);
   if (!problems.empty()) return Error::Invalid(problems);
 
-  // The synthetic airfield rig hovers at Pisa unless the config gives a pose.
-  std::optional<geo::VehicleState> synthetic_pose;
-  const v1::SourceKind kind = config.source().kind();
-  if ((kind == v1::SOURCE_KIND_SYNTHETIC || kind == v1::SOURCE_KIND_UNSPECIFIED) &&
-      config.source().synthetic().scene() != "chessboard") {
-    const std::optional<drivers::Scenario> scenario = FindScenario(config.source().synthetic().scene());
-    synthetic_pose = SyntheticRigPose(scenario ? scenario->options.scene.camera_height_m
-                                               : drivers::DefaultScene().camera_height_m);
-  }
+  const std::optional<geo::VehicleState> synthetic_pose = SyntheticPose(config.source());
   Result<std::unique_ptr<PoseSource>> poses = MakePoseSource(config.geo(), synthetic_pose);
   if (!poses.ok()) return poses.error();
 
@@ -41,113 +94,76 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   Result<std::unique_ptr<drivers::StereoSource>> source =
       OpenSource(config.source(), /*loop_images=*/true);
   if (!source.ok()) return source.error();
-
-  if (auto* replay = dynamic_cast<drivers::ReplaySource*>(source->get())) {
-    (*poses)->SetRecordedStates(replay->vehicle_states());
-  }
+  (*poses)->SetRecordedStates((*source)->RecordedVehicleStates());
+  if (synthetic_pose) FollowSyntheticFlight(config.source(), *synthetic_pose, **poses);
 
   std::unique_ptr<Server> server(new Server());
   server->auth_ = std::move(auth).value();
   server->poses_ = std::move(poses).value();
   server->listen_ = config.has_listen() ? config.listen() : kDefaultListen;
+  Status built = server->BuildRuntime(config, std::move(source).value(), std::move(pipeline_config).value());
+  if (!built.ok()) return built.error();
+  built = server->BuildGrpcServer(config, *credentials);
+  if (!built.ok()) return built.error();
+  server->engine_->Start(config.has_pipeline_workers() ? config.pipeline_workers() : 0,
+                         config.has_opencv_threads() ? static_cast<int>(config.opencv_threads()) : 0);
+  server->health_thread_ = std::thread([raw = server.get()] { raw->HealthLoop(); });
+  return server;
+}
+
+Status Server::BuildRuntime(const v1::ServerConfig& config, std::unique_ptr<drivers::StereoSource> source,
+                            pipeline::PipelineConfig pipeline_config) {
   const uint32_t queue =
       config.has_subscriber_queue_frames() ? config.subscriber_queue_frames() : kDefaultQueueFrames;
   const uint32_t max_streams = config.has_max_streams() ? config.max_streams() : kDefaultMaxStreams;
-  server->broadcaster_ = std::make_unique<FrameBroadcaster>(queue, max_streams);
-
-  FrameBroadcaster* broadcaster = server->broadcaster_.get();
+  broadcaster_ = std::make_unique<FrameBroadcaster>(queue, max_streams);
+  FrameBroadcaster* broadcaster = broadcaster_.get();
   Result<std::unique_ptr<Engine>> engine = Engine::Create(
-      std::move(source).value(), std::move(pipeline_config).value(),
+      std::move(source), std::move(pipeline_config),
       [broadcaster](const std::shared_ptr<const pipeline::FrameResult>& result) {
         // Converted once per frame, shared by every subscriber.
         broadcaster->Publish(std::make_shared<const v1::TrackFrame>(ToTrackFrame(*result)));
       });
   if (!engine.ok()) return engine.error();
-  server->engine_ = std::move(engine).value();
-  PoseSource* pose_source = server->poses_.get();
-  if (synthetic_pose) {
-    const std::optional<drivers::Scenario> scenario = FindScenario(config.source().synthetic().scene());
-    if (scenario && scenario->options.scene.rig_velocity_mps != cv::Vec3d(0, 0, 0)) {
-      const drivers::Scene scene = scenario->options.scene;
-      const geo::VehicleState start = *synthetic_pose;
-      pose_source->SetSyntheticPath([scene, start](int64_t t_ns) {
-        return MovedRigPose(start, scene.RigOffsetAt(static_cast<double>(t_ns) * 1e-9),
-                            scene.rig_velocity_mps);
-      });
-    }
-  }
-  server->engine_->SetPoseSource(
-      [pose_source](int64_t t, int64_t unix_t) { return pose_source->At(t, unix_t); });
-  Result<std::unique_ptr<CalibrationManager>> calibration = CalibrationManager::Open(
-      config.has_data_dir() ? config.data_dir() : kDefaultDataDir, *server->engine_);
-  // (The recorder comes after the calibration store, so that it records the calibration the
-  // store restored.)
-  if (!calibration.ok()) return calibration.error();
-  server->calibration_ = std::move(calibration).value();
+  engine_ = std::move(engine).value();
+  PoseSource* pose_source = poses_.get();
+  engine_->SetPoseSource([pose_source](int64_t t, int64_t unix_t) { return pose_source->At(t, unix_t); });
   const std::string data_dir = config.has_data_dir() ? config.data_dir() : kDefaultDataDir;
-  server->recording_ =
-      std::make_unique<RecordingManager>(data_dir, *server->engine_, *server->poses_);
-  if (config.record().has_dir()) {
-    // From the first frame on: the tap is in place before the engine starts.
-    const uint64_t max_bytes = config.record().has_max_bytes() ? config.record().max_bytes()
-                                                               : kDefaultRecordingMaxBytes;
-    const int record_queue = config.record().has_queue_frames()
-                                 ? static_cast<int>(config.record().queue_frames())
-                                 : kDefaultRecordingQueueFrames;
-    Result<v1::RecordingStatus> recording =
-        server->recording_->StartIn(config.record().dir(), max_bytes, record_queue);
-    if (!recording.ok()) {
-      Error error = recording.error();
-      error.message = "record: " + error.message;
-      return error;
-    }
-  }
-  server->service_ = std::make_unique<ObstacleServiceImpl>(
-      *server->engine_, *broadcaster, *server->poses_, *server->recording_, server->auth_);
-  server->calibration_service_ =
-      std::make_unique<CalibrationServiceImpl>(*server->calibration_, server->auth_);
+  Result<std::unique_ptr<CalibrationManager>> calibration = CalibrationManager::Open(data_dir, *engine_);
+  if (!calibration.ok()) return calibration.error();
+  calibration_ = std::move(calibration).value();
+  // The recorder comes after the calibration store, so that it records the calibration the store
+  // restored.
+  recording_ = std::make_unique<RecordingManager>(data_dir, *engine_, *poses_);
+  const Status recording = StartConfiguredRecording(config.record(), *recording_);
+  if (!recording.ok()) return recording;
+  service_ = std::make_unique<ObstacleServiceImpl>(*engine_, *broadcaster, *poses_, *recording_, auth_);
+  calibration_service_ = std::make_unique<CalibrationServiceImpl>(*calibration_, auth_);
+  return Status::Ok();
+}
 
-  const int max_message =
-      static_cast<int>(config.has_max_message_bytes() ? config.max_message_bytes()
-                                                      : kDefaultMaxMessageBytes);
+Status Server::BuildGrpcServer(const v1::ServerConfig& config,
+                               const std::shared_ptr<grpc::ServerCredentials>& credentials) {
   // grpc.health.v1 (gRPC's own implementation) and server reflection (grpcurl, grpc_cli).
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(server->listen_, *credentials, &server->port_);
-  builder.RegisterService(server->service_.get());
-  builder.RegisterService(server->calibration_service_.get());
-  // Keepalive: idle connections are pinged and dead ones (half-open: a client that vanished)
-  // closed.
-  const auto ms = [](bool has, double seconds, double fallback) {
-    return static_cast<int>((has ? seconds : fallback) * 1000.0);
-  };
-  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS,
-                             ms(config.has_keepalive_time_s(), config.keepalive_time_s(), 30));
-  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS,
-                             ms(config.has_keepalive_timeout_s(), config.keepalive_timeout_s(), 10));
-  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
-  builder.AddChannelArgument(
-      GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS,
-      ms(config.has_min_client_ping_interval_s(), config.min_client_ping_interval_s(), 10));
-  builder.SetMaxReceiveMessageSize(max_message);
-  builder.SetMaxSendMessageSize(max_message);
-  server->grpc_server_ = builder.BuildAndStart();
-  if (server->grpc_server_ == nullptr || server->port_ == 0) {
-    return Error{ErrorCode::kUnavailable,
-                 "cannot listen on " + server->listen_ + " (address in use or not local?)"};
+  builder.AddListeningPort(listen_, credentials, &port_);
+  builder.RegisterService(service_.get());
+  builder.RegisterService(calibration_service_.get());
+  ConfigureTransport(config, builder);
+  grpc_server_ = builder.BuildAndStart();
+  if (grpc_server_ == nullptr || port_ == 0) {
+    return Error{ErrorCode::kUnavailable, "cannot listen on " + listen_ + " (address in use or not local?)"};
   }
-  if (grpc::HealthCheckServiceInterface* health = server->grpc_server_->GetHealthCheckService()) {
+  if (grpc::HealthCheckServiceInterface* health = grpc_server_->GetHealthCheckService()) {
     // NOT_SERVING until the first frame comes through (the default is SERVING); naming the
     // services lets a client ask for each.
     health->SetServingStatus("stevi.v1.ObstacleService", false);
     health->SetServingStatus("stevi.v1.CalibrationService", false);
     health->SetServingStatus(false);
   }
-  server->engine_->Start(config.has_pipeline_workers() ? config.pipeline_workers() : 0,
-                         config.has_opencv_threads() ? static_cast<int>(config.opencv_threads()) : 0);
-  server->health_thread_ = std::thread([raw = server.get()] { raw->HealthLoop(); });
-  return server;
+  return Status::Ok();
 }
 
 Server::~Server() { Shutdown(); }

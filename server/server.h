@@ -39,6 +39,12 @@ class Server {
 
  private:
   Server() = default;
+  // Start()'s steps: the broadcaster, engine, calibration store, recorder and services; then the
+  // gRPC server listening with them.
+  Status BuildRuntime(const v1::ServerConfig& config, std::unique_ptr<drivers::StereoSource> source,
+                      pipeline::PipelineConfig pipeline_config);
+  Status BuildGrpcServer(const v1::ServerConfig& config,
+                         const std::shared_ptr<grpc::ServerCredentials>& credentials);
   // Keeps the gRPC health service (grpc.health.v1) in step with the source and the pipeline:
   // SERVING while frames are processed, NOT_SERVING while the source is starting, down or ended.
   void HealthLoop();

@@ -41,8 +41,9 @@ constexpr int kMinRefinePatches = 5;
 // boxes, whose errors it leaves at 1 sigma rms).
 constexpr double kRefineSystematicPx = 0.03;
 // Hypotheses whose disparity's 1-sigma exceeds this fraction of it (7 % of the range) are dropped:
-// their range says little. Below it the range is kept with its honest sigma; at 3.5 % the
-// tuning seeds lost 4.6 % of their obstacles (aircraft at 3-4 px) and no false positives.
+// their range says little. Below it the range is kept with its honest sigma; a bound of 3.5 % lost
+// obstacles on the tuning seeds (aircraft at 3-4 px) and no false positives
+// (core/detection/README.md, "Measured").
 constexpr double kMaxRelativeDisparitySigma = 0.07;
 // Hypotheses within this many pixels of the top of the matcher's search range are dropped.
 constexpr double kSearchTopMarginPx = 2.0;

@@ -43,8 +43,8 @@ struct StereoBlobOptions {
   // regions are closed contours, object outlines: any gap; and with 0 a hypothesis alone in its
   // region, where no other trusted disparity lies, takes the region's box (the outline says how
   // far the object reaches where the stereo matched only part of it). SteViS's salient blobs can span
-  // neighbouring objects: 2 (tuning seeds 1-40 of stevi-eval's families: recall 58.9 -> 60.8 %,
-  // precision 45.4 -> 55.8 %; any gap lost recall, 3 lost the demo scene's).
+  // neighbouring objects: 2, chosen on the tuning seeds of stevi-eval's families (figures:
+  // core/detection/README.md, "Measured").
   bool join_within_region = false;
   double region_gap_fraction = 0.0;
   // The blob's disparity is the median over its interior: the mask eroded by this many pixels
@@ -53,10 +53,12 @@ struct StereoBlobOptions {
   int interior_erode_px = 5;
   // Terrain is not an obstacle: a blob whose depth grows by more than this many metres per metre
   // of height (least squares over its pixels: a surface leaning back, like a hillside) is dropped.
-  // Obstacles show vertical faces (about 0). 0 disables. Blobs spanning less than
-  // min_terrain_height_m of height (or fewer than 12 rows) are never judged: over a small height
-  // the slope is mostly disparity noise.
+  // Obstacles show vertical faces (about 0). 0 disables. Blobs of fewer than 12 rows (at 640 px
+  // wide) are never judged, and the lean must exceed three standard errors of the fit: over a
+  // small height the slope is mostly disparity noise.
   double max_depth_per_height = 0.6;
+  // Blobs spanning less than this height (metres at their range), or fewer than 12 rows, are too
+  // short for that test: the surroundings test below judges them.
   double min_terrain_height_m = 3.0;
   // Blobs too short for that test are judged by their surroundings, when the ground model says they
   // reach below the horizon: one whose ring of trusted disparities 6..12 px out lies at its own

@@ -1,39 +1,10 @@
 // Bottom-up intensity saliency for the SteViS extractor (thesis section 3.4), after VOCUS
 // (Frintrop 2006, "VOCUS: A Visual Attention System for Object Detection and Goal-Directed
-// Search", intensity channel).
-//
-// Definition, with every stage exposed below so that tests can check it against a naive
-// implementation:
-//
-//   1. Grey pyramid i0..iN (BuildGreyPyramid). i0 is the input as float grey levels. Each next
-//      level is the previous one smoothed with the 3x3 Gaussian [1 2 1]/4 (x and y, border
-//      reflected without repeating the edge pixel) and halved by averaging 2x2 blocks: pixel
-//      (x, y) of level k+1 covers pixels 2x..2x+1, 2y..2y+1 of level k (a trailing odd row or
-//      column is dropped; a dimension of 1 stays 1). The effective 1-D filter per octave is the
-//      binomial [1 3 3 1]/8, and level k's pixel centres sit at 2^k (x + 0.5) - 0.5 in i0, the
-//      same convention as the up-sampling below, so maps stay aligned across levels. The blur
-//      and the block average run as one separable pass over the rows and columns they keep.
-//   2. Centre-surround (CentreSurround). At each level s in options.scales and each radius r in
-//      options.surround_radii, the centre c is the pixel of i_s and the surround S is the mean of
-//      the other pixels of the (2r+1) x (2r+1) box around it ("the average of the surrounding
-//      pixels", VOCUS), with the box clipped to the image. Box sums come from an integral image
-//      (double precision). on = max(c - S, 0) and off = max(S - c, 0), in grey levels.
-//   3. Across-scale sum. Every on and off map is brought to the size of level
-//      options.centre_level (bilinear up-sampling with the exact scale 2^(s - centre_level) and
-//      centre-aligned pixels, or PyramidDown steps when s < centre_level). The
-//      conspicuity maps ON and OFF are the means of the resampled on and off maps (grey levels).
-//   4. Fusion (FuseSaliency). Each of ON and OFF is divided by sqrt(m), VOCUS's uniqueness weight,
-//      where m is the number of its local maxima (8-neighbourhood, plateaus count once) at or
-//      above options.peak_fraction of its global maximum: a map with one strong peak counts more
-//      than a map with many similar ones, so a bright object's on-peak beats the ring of
-//      off-responses around it. ON and OFF are not scaled to their own maxima first: they share
-//      the grey-level unit, and scaling would inflate a map that holds only weak responses.
-//      S = ON / sqrt(m_on) + OFF / sqrt(m_off) is divided by max(max(S), options.min_contrast),
-//      so the map lies in [0, 1] with its maximum at 1 unless the scene is flatter than
-//      min_contrast. A flat image gives all zeros.
-//
-// Cost at 640x480 with the defaults: about 1-1.5 ms on one core (the step from level 0 to level 1
-// is half of it; levels 2-4 are small).
+// Search", intensity channel), in four stages, each exposed below so that tests can check it
+// against a naive implementation: (1) a grey pyramid, (2) centre-surround on and off maps,
+// (3) their across-scale sum into the conspicuity maps ON and OFF, (4) the fusion of ON and OFF
+// with VOCUS's uniqueness weight into a map in [0, 1].
+// Definition and derivation: core/extraction/README.md, "Saliency"; cost: its "Measured".
 #pragma once
 
 #include <string>
@@ -64,21 +35,29 @@ struct SaliencyOptions {
   std::vector<std::string> Validate() const;
 };
 
-// Levels 0..top_level of the grey pyramid (step 1 above), float grey levels. top_level >= 0.
+// Levels 0..top_level of the grey pyramid (stage 1), float grey levels: level 0 is the input,
+// each next level PyramidDown of the previous one. top_level >= 0.
 std::vector<cv::Mat1f> BuildGreyPyramid(const cv::Mat1b& grey, int top_level);
 
-// One pyramid step (step 1 above): 3x3 Gaussian, then 2x2 block average.
+// One pyramid step (stage 1): the 3x3 Gaussian [1 2 1]/4 in x and y (border reflected without
+// repeating the edge pixel), then 2x2 block averages: output pixel (x, y) covers input pixels
+// 2x..2x+1, 2y..2y+1; a trailing odd row or column is dropped, a dimension of 1 stays 1.
 cv::Mat1f PyramidDown(const cv::Mat1f& level);
 
-// Centre-surround on and off maps (step 2 above) of one pyramid level for one surround radius
-// (pixels, >= 1). `on` and `off` get the level's size, grey levels, >= 0.
+// Centre-surround on and off maps (stage 2) of one pyramid level for one surround radius
+// (pixels, >= 1): with c the pixel and S the mean of the other pixels of the (2r+1) x (2r+1) box
+// around it (clipped to the image), on = max(c - S, 0) and off = max(S - c, 0). `on` and `off`
+// get the level's size, grey levels, >= 0.
 void CentreSurround(const cv::Mat1f& level, int radius, cv::Mat1f& on, cv::Mat1f& off);
 
-// Number of local maxima of `map` (step 4 above) at or above fraction * its maximum. 0 when the
-// maximum is <= 0.
+// Number of local maxima of `map` (8-neighbourhood, a plateau counts once; stage 4) at or above
+// fraction * its maximum. 0 when the maximum is <= 0.
 int CountPeaks(const cv::Mat1f& map, double fraction);
 
-// Step 4 above: the saliency map in [0, 1] from the conspicuity maps ON and OFF (same size).
+// Stage 4: the saliency map in [0, 1] from the conspicuity maps ON and OFF (same size):
+// ON / sqrt(m_on) + OFF / sqrt(m_off) (m: CountPeaks at options.peak_fraction, with
+// options.uniqueness_weight; else weights 1), divided by max(its maximum, options.min_contrast).
+// A flat image gives all zeros.
 cv::Mat1f FuseSaliency(const cv::Mat1f& on, const cv::Mat1f& off, const SaliencyOptions& options);
 
 // Every intermediate product of ComputeSaliency, at the resolution of options.centre_level.
@@ -90,6 +69,9 @@ struct SaliencyMaps {
   cv::Mat1f saliency;  // [0, 1]
 };
 
+// Stages 1-4 on an 8-bit grey image: ON and OFF are the means over options.scales and
+// options.surround_radii of the on and off maps brought to the centre level (stage 3: up-sampled
+// with UpsampleOctaves, or PyramidDown steps for scales below it). `options` must be valid.
 SaliencyMaps ComputeSaliencyMaps(const cv::Mat1b& grey, const SaliencyOptions& options);
 
 // The saliency map in [0, 1] at the resolution of pyramid level options.centre_level. `options`
@@ -98,7 +80,7 @@ cv::Mat1f ComputeSaliency(const cv::Mat1b& grey, const SaliencyOptions& options)
 
 // Up-samples a map `octaves` pyramid levels above a level of size `size` to that size: bilinear,
 // exact scale 2^octaves, pixel centres aligned as in BuildGreyPyramid, edges replicated. Used for
-// step 3 and to bring the saliency map back to the input's size. octaves >= 0.
+// stage 3 and to bring the saliency map back to the input's size. octaves >= 0.
 cv::Mat1f UpsampleOctaves(const cv::Mat1f& map, int octaves, cv::Size size);
 
 // ComputeSaliency brought to the input's size with UpsampleOctaves.

@@ -173,11 +173,12 @@ class OpenCvMatcher final : public DisparityMatcher {
 
  private:
   int last_gate_threshold_ = 0;
-  // texture_sum_ (CV_32SC1, the left image's size) = sum over the gate window of
+  // texture_sum_ (CV_16UC1, the left image's size) = sum over the gate window of
   // min(|x-Sobel|, 255) of `left`. The border is replicated, so the first and last columns get a
   // one-sided derivative rather than 0. Member buffers: allocated again only on a size change.
   // Window sums of |d/dx| (saturated to 255): 16 bits hold them for windows up to 16x16
-  // (256 * 255 < 65536), and a 16-bit box filter costs about half a 32-bit one.
+  // (256 * 255 < 65536), and a 16-bit box filter costs less than a 32-bit one
+  // (core/stereo/README.md, "Measured").
   using TextureSum = uint16_t;
   static constexpr int kMax16BitWindow = 16;
 
@@ -349,14 +350,14 @@ std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options) {
   const int pad = BlockMatchingLeftPad(o);
   const TextureGate gate{o.local_texture_threshold, kMinTextureWindow};
   if (o.prefilter_type == BlockMatchingOptions::PreFilter::kXSobel) {
-    // cv::StereoBM's output, bit for bit (block_matcher_test), in about 0.6 of its time: this
-    // Debian OpenCV build runs StereoBM's SIMD code at its SSE2 baseline.
+    // cv::StereoBM's output, bit for bit (block_matcher_test), in less time: this Debian
+    // OpenCV build runs StereoBM's SIMD code at its SSE2 baseline.
     SadBlockMatcherParams params = SadParamsFor(o);
     // Row stripes on a thread each, as many as one OpenCV call may use (cv::getNumThreads(), at
     // most 4), read when the matcher is built. The server sets that to 1 when its workers already
-    // keep every core busy with a frame each: stripes on top of them cost 3-16 % of the throughput
-    // and did not shorten the latency at 30 fps (stevi-bench, interleaved runs). With one worker,
-    // or offline, a frame's matching spreads over the cores (12.2 -> 8.8 ms on two).
+    // keep every core busy with a frame each: stripes on top of them cost throughput and did not
+    // shorten the latency. With one worker, or offline, a frame's matching spreads over the cores.
+    // Figures: core/stereo/README.md, "Measured".
     params.stripes = std::clamp(cv::getNumThreads(), 1, 4);
     return std::make_unique<OpenCvMatcher>(options, std::make_unique<SadBlockMatcher>(params), pad,
                                            o.block_size, gate);

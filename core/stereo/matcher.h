@@ -16,9 +16,9 @@ namespace stevi::stereo {
 // SAD block matching with every parameter the thesis tunes: cv::StereoBM's output, computed by
 // SadBlockMatcher (block_matcher.h) for the x-Sobel pre-filter and by cv::StereoBM otherwise.
 struct BlockMatchingOptions {
-  // Pre-filter applied to both images before the SAD. The x-Sobel pre-filter is the default: on
-  // the Middlebury pairs (tsukuba, venus, teddy, cones; block 9, padded) it gives 7.6 % bad pixels
-  // with holes filled against 9.8 % for the normalized response (see middlebury_test).
+  // Pre-filter applied to both images before the SAD. The x-Sobel pre-filter is the default: it
+  // gives fewer bad pixels on the Middlebury pairs than the normalized response (middlebury_test;
+  // figures: core/stereo/README.md, "Measured").
   enum class PreFilter { kXSobel, kNormalizedResponse };
   PreFilter prefilter_type = PreFilter::kXSobel;
   // Normalized-response window, odd, 5..255 (validated always, used by kNormalizedResponse only).
@@ -84,11 +84,9 @@ struct SemiGlobalOptions {
   // |x-Sobel| of the left image (3x3 kernel, each value capped at 255). Units: a horizontal ramp
   // of g grey levels per pixel gives 8 * g; Gaussian pixel noise of sigma s on a flat surface
   // gives about 2.8 * s (5.5 at s = 2).
-  // The default 14 removes the random matches on a noisy flat sky (synthetic scene, noise sigma 2:
-  // sky away from obstacles 26 % -> 0.001 % matched) and keeps 99 % of the textured obstacles.
-  // It also drops the nearly noise-free low-texture areas of Middlebury that SGM fills correctly
-  // (filled bad pixels 4.7 % -> 8.5 %, see middlebury_test): use 0 for such low-noise imagery.
+  // The default 14 is for noisy imagery; use 0 for nearly noise-free imagery such as Middlebury.
   // Like the block matcher's gate, it is scaled by each frame's measured noise / 2 (down to 3).
+  // Why 14, and its cost: core/stereo/README.md, "Texture gates" and "Measured".
   int texture_threshold = 14;
 
   std::vector<std::string> Validate() const;

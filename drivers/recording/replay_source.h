@@ -67,6 +67,7 @@ class ReplaySource : public StereoSource {
 
   // Every vehicle state of the recording, in recorded order (for a geo::PoseBuffer).
   const std::vector<geo::VehicleState>& vehicle_states() const { return vehicle_states_; }
+  std::vector<geo::VehicleState> RecordedVehicleStates() const override { return vehicle_states_; }
   // The calibration changes of the recording, in order.
   const std::vector<ReplayCalibrationChange>& calibration_changes() const { return changes_; }
   // The calibration id the frames last returned follow (at first the manifest's calibration_id).
@@ -79,6 +80,7 @@ class ReplaySource : public StereoSource {
   // What was wrong with the recording: a truncated or corrupt tail, a calibration change that does
   // not give a rig. Empty for a sound recording.
   const std::vector<std::string>& notes() const { return notes_; }
+  std::vector<std::string> Notes() const override { return notes_; }
   const v1::RecordingManifest& manifest() const { return manifest_; }
   const std::string& dir() const { return dir_; }
   // Completed laps (looping).
