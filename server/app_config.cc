@@ -189,9 +189,10 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
     const size_t x = v->find('x');
     const std::optional<double> w = x == std::string::npos ? std::nullopt : ParseDouble(v->substr(0, x));
     const std::optional<double> h = x == std::string::npos ? std::nullopt : ParseDouble(v->substr(x + 1));
-    if (!w || !h || *w < 16 || *h < 16 || *w > 16384 || *h > 16384 || *w != std::floor(*w) ||
-        *h != std::floor(*h)) {
-      problems.push_back("--roi: expected WIDTHxHEIGHT in pixels, 16..16384 each (got '" + *v + "')");
+    const auto side_ok = [](double s) { return s >= drivers::kMinRoiPx && s <= drivers::kMaxRoiPx && s == std::floor(s); };
+    if (!w || !h || !side_ok(*w) || !side_ok(*h)) {
+      problems.push_back("--roi: expected WIDTHxHEIGHT in pixels, " + std::to_string(drivers::kMinRoiPx) + ".." +
+                         std::to_string(drivers::kMaxRoiPx) + " each (got '" + *v + "')");
     } else {
       source->mutable_aravis()->set_width(static_cast<uint32_t>(*w));
       source->mutable_aravis()->set_height(static_cast<uint32_t>(*h));
@@ -318,11 +319,13 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
                            source.left() + "')");
       }
       const v1::AravisConfig& a = source.aravis();
-      if (a.has_width() && (a.width() < 16 || a.width() > 16384)) {
-        problems.push_back("source.aravis.width: must be 16..16384 pixels (got " + std::to_string(a.width()) + ")");
+      const std::string sides = "must be " + std::to_string(drivers::kMinRoiPx) + ".." +
+                                std::to_string(drivers::kMaxRoiPx) + " pixels";
+      if (a.has_width() && (a.width() < drivers::kMinRoiPx || a.width() > drivers::kMaxRoiPx)) {
+        problems.push_back("source.aravis.width: " + sides + " (got " + std::to_string(a.width()) + ")");
       }
-      if (a.has_height() && (a.height() < 16 || a.height() > 16384)) {
-        problems.push_back("source.aravis.height: must be 16..16384 pixels (got " + std::to_string(a.height()) + ")");
+      if (a.has_height() && (a.height() < drivers::kMinRoiPx || a.height() > drivers::kMaxRoiPx)) {
+        problems.push_back("source.aravis.height: " + sides + " (got " + std::to_string(a.height()) + ")");
       }
       if (a.has_frame_rate_hz() && !(a.frame_rate_hz() > 0 && a.frame_rate_hz() <= 1000)) {
         problems.push_back("source.aravis.frame_rate_hz: must be in (0, 1000] (got " + std::to_string(a.frame_rate_hz()) + ")");

@@ -53,12 +53,9 @@ std::vector<std::string> AravisOptions::Validate() const {
   if (!left_id.empty() && left_id == right_id) {
     problems.push_back("right_id: must differ from left_id (both are '" + left_id + "')");
   }
-  if (roi_width < 1 || roi_width > 65535) {
-    problems.push_back("roi_width: must be in 1..65535 pixels" + Got(roi_width));
-  }
-  if (roi_height < 1 || roi_height > 65535) {
-    problems.push_back("roi_height: must be in 1..65535 pixels" + Got(roi_height));
-  }
+  const std::string sides = "must be in " + std::to_string(kMinRoiPx) + ".." + std::to_string(kMaxRoiPx) + " pixels";
+  if (roi_width < kMinRoiPx || roi_width > kMaxRoiPx) problems.push_back("roi_width: " + sides + Got(roi_width));
+  if (roi_height < kMinRoiPx || roi_height > kMaxRoiPx) problems.push_back("roi_height: " + sides + Got(roi_height));
   if (!pixel_format.empty()) {
     const std::optional<PixelFormat> format = ParsePixelFormat(pixel_format);
     if (!format) {

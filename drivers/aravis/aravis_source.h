@@ -19,12 +19,17 @@ struct AravisTrigger {
   std::string line;
 };
 
+// The region of interest's sides, pixels: the one place these bounds live (the server's config
+// checks use them too). Below 16 px no block matcher has a window to work with.
+inline constexpr int kMinRoiPx = 16;
+inline constexpr int kMaxRoiPx = 16384;
+
 struct AravisOptions {
   // The cameras: a device id ("Aravis-Fake-GV01"), a serial number ("GV01") or an IP address.
   std::string left_id;
   std::string right_id;
   // Region of interest, pixels, centred on each sensor; the same on both cameras.
-  int roi_width = 640;
+  int roi_width = 640;   // kMinRoiPx..kMaxRoiPx
   int roi_height = 480;
   // "" picks Mono8 where offered, else a Bayer*8 format (converted to grey).
   std::string pixel_format;

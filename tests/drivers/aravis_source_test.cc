@@ -172,7 +172,7 @@ TEST(AravisOptions, ValidateListsEveryProblem) {
   const std::vector<std::string> problems = bad.Validate();
   const std::vector<std::string> want = {
       "right_id: must differ from left_id (both are 'GV01')",
-      "roi_width: must be in 1..65535 pixels (got 0)",
+      "roi_width: must be in 16..16384 pixels (got 0)",
       "pixel_format: RGB8 is not supported (supported: Mono8, BayerRG8, BayerGR8, BayerGB8, "
       "BayerBG8, or empty for automatic)",
       "frame_rate_hz: must be in (0, 1000] (got 0)",
