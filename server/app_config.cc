@@ -261,8 +261,10 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
   return Status::Ok();
 }
 
-std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
-  std::vector<std::string> problems;
+namespace {
+
+// ValidateServerConfig's parts, each appending to `problems`.
+void ValidateListen(const v1::ServerConfig& config, std::vector<std::string>& problems) {
   if (config.has_listen()) {
     const std::string& listen = config.listen();
     const size_t colon = listen.rfind(':');
@@ -277,99 +279,114 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
       }
     }
   }
-  const v1::SourceConfig& source = config.source();
+}
+
+void ValidateSyntheticSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
+  if (source.has_left() || source.has_right() || source.has_calibration()) {
+    problems.push_back(
+        "source: left, right and calibration are for the images source (--source images)");
+  }
+  if (source.synthetic().scene() == "chessboard" && source.synthetic().has_loop_frames()) {
+    problems.push_back("source.synthetic.loop_frames: not for the chessboard scene");
+  }
+  if (source.synthetic().has_scene() && source.synthetic().scene() != "airfield" &&
+      source.synthetic().scene() != "chessboard" && !FindScenario(source.synthetic().scene())) {
+    std::string names = "airfield, flight, chessboard";
+    for (const drivers::Scenario& s : drivers::EvaluationScenarios()) names += ", " + s.name;
+    for (const drivers::Scenario& s : drivers::TrackingScenarios()) names += ", " + s.name;
+    problems.push_back("source.synthetic.scene: unknown scene '" + source.synthetic().scene() +
+                       "' (one of: " + names + ")");
+  }
+}
+
+void ValidateImagesSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
+  if (source.left().empty()) problems.push_back("source.left: required for the images source");
+  if (source.right().empty()) problems.push_back("source.right: required for the images source");
+  if (source.calibration().empty()) {
+    problems.push_back("source.calibration: required for the images source");
+  }
+}
+
+void ValidateAravisSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
+  if (source.left().empty()) {
+    problems.push_back("source.left: required for the aravis source (device id, serial or address)");
+  }
+  if (source.right().empty()) {
+    problems.push_back("source.right: required for the aravis source (device id, serial or address)");
+  }
+  if (!source.left().empty() && source.left() == source.right()) {
+    problems.push_back("source.right: must be another camera than source.left (both '" +
+                       source.left() + "')");
+  }
+  const v1::AravisConfig& a = source.aravis();
+  const std::string sides = "must be " + std::to_string(drivers::kMinRoiPx) + ".." +
+                            std::to_string(drivers::kMaxRoiPx) + " pixels";
+  if (a.has_width() && (a.width() < drivers::kMinRoiPx || a.width() > drivers::kMaxRoiPx)) {
+    problems.push_back("source.aravis.width: " + sides + " (got " + std::to_string(a.width()) + ")");
+  }
+  if (a.has_height() && (a.height() < drivers::kMinRoiPx || a.height() > drivers::kMaxRoiPx)) {
+    problems.push_back("source.aravis.height: " + sides + " (got " + std::to_string(a.height()) + ")");
+  }
+  if (a.has_frame_rate_hz() && !(a.frame_rate_hz() > 0 && a.frame_rate_hz() <= 1000)) {
+    problems.push_back("source.aravis.frame_rate_hz: must be in (0, 1000] (got " + std::to_string(a.frame_rate_hz()) + ")");
+  }
+  if (a.has_exposure_us() && !(a.exposure_us() > 0 && a.exposure_us() < 1e8)) {
+    problems.push_back("source.aravis.exposure_us: must be in (0, 1e8) (got " + std::to_string(a.exposure_us()) + ")");
+  }
+  if (a.has_gain_db() && !std::isfinite(a.gain_db())) {
+    problems.push_back("source.aravis.gain_db: must be finite");
+  }
+  if (a.trigger() == v1::TRIGGER_MODE_HARDWARE && a.trigger_line().empty()) {
+    problems.push_back("source.aravis.trigger_line: required with a hardware trigger (e.g. Line0)");
+  }
+  if (a.trigger() < v1::TRIGGER_MODE_UNSPECIFIED || a.trigger() > v1::TRIGGER_MODE_HARDWARE) {
+    problems.push_back("source.aravis.trigger: unknown value " + std::to_string(a.trigger()));
+  }
+  if (a.has_pair_tolerance_ms() && !(a.pair_tolerance_ms() > 0 && a.pair_tolerance_ms() <= 1000)) {
+    problems.push_back("source.aravis.pair_tolerance_ms: must be in (0, 1000] (got " + std::to_string(a.pair_tolerance_ms()) + ")");
+  }
+  if (a.has_buffers() && (a.buffers() < 2 || a.buffers() > 64)) {
+    problems.push_back("source.aravis.buffers: must be 2..64 (got " + std::to_string(a.buffers()) + ")");
+  }
+  if (a.timestamps() < v1::TIMESTAMP_SOURCE_UNSPECIFIED || a.timestamps() > v1::TIMESTAMP_SOURCE_HOST) {
+    problems.push_back("source.aravis.timestamps: unknown value " + std::to_string(a.timestamps()));
+  }
+}
+
+void ValidateReplaySource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
+  if (source.replay().dir().empty()) {
+    problems.push_back("source.replay.dir: required for the replay source (--replay DIR)");
+  }
+  if (source.has_left() || source.has_right() || source.has_calibration()) {
+    problems.push_back("source: left, right and calibration do not apply to a replay (the "
+                       "recording holds its frames and calibration)");
+  }
+  const v1::ReplayConfig& r = source.replay();
+  if (r.has_rate() && !(r.rate() >= 0 && r.rate() <= 1000)) {
+    problems.push_back("source.replay.rate: must be in [0, 1000], 0 = as fast as possible (got " + std::to_string(r.rate()) + ")");
+  }
+}
+
+void ValidateSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
   if (source.has_fps() && !(source.fps() > 0 && source.fps() <= 1000)) {
     problems.push_back("source.fps: must be in (0, 1000] (got " + std::to_string(source.fps()) + ")");
   }
   switch (source.kind()) {
     case v1::SOURCE_KIND_UNSPECIFIED:
-    case v1::SOURCE_KIND_SYNTHETIC:
-      if (source.has_left() || source.has_right() || source.has_calibration()) {
-        problems.push_back(
-            "source: left, right and calibration are for the images source (--source images)");
-      }
-      if (source.synthetic().scene() == "chessboard" && source.synthetic().has_loop_frames()) {
-        problems.push_back("source.synthetic.loop_frames: not for the chessboard scene");
-      }
-      if (source.synthetic().has_scene() && source.synthetic().scene() != "airfield" &&
-          source.synthetic().scene() != "chessboard" && !FindScenario(source.synthetic().scene())) {
-        std::string names = "airfield, flight, chessboard";
-        for (const drivers::Scenario& s : drivers::EvaluationScenarios()) names += ", " + s.name;
-        for (const drivers::Scenario& s : drivers::TrackingScenarios()) names += ", " + s.name;
-        problems.push_back("source.synthetic.scene: unknown scene '" + source.synthetic().scene() +
-                           "' (one of: " + names + ")");
-      }
-      break;
-    case v1::SOURCE_KIND_IMAGES:
-      if (source.left().empty()) problems.push_back("source.left: required for the images source");
-      if (source.right().empty()) problems.push_back("source.right: required for the images source");
-      if (source.calibration().empty()) {
-        problems.push_back("source.calibration: required for the images source");
-      }
-      break;
-    case v1::SOURCE_KIND_ARAVIS: {
-      if (source.left().empty()) {
-        problems.push_back("source.left: required for the aravis source (device id, serial or address)");
-      }
-      if (source.right().empty()) {
-        problems.push_back("source.right: required for the aravis source (device id, serial or address)");
-      }
-      if (!source.left().empty() && source.left() == source.right()) {
-        problems.push_back("source.right: must be another camera than source.left (both '" +
-                           source.left() + "')");
-      }
-      const v1::AravisConfig& a = source.aravis();
-      const std::string sides = "must be " + std::to_string(drivers::kMinRoiPx) + ".." +
-                                std::to_string(drivers::kMaxRoiPx) + " pixels";
-      if (a.has_width() && (a.width() < drivers::kMinRoiPx || a.width() > drivers::kMaxRoiPx)) {
-        problems.push_back("source.aravis.width: " + sides + " (got " + std::to_string(a.width()) + ")");
-      }
-      if (a.has_height() && (a.height() < drivers::kMinRoiPx || a.height() > drivers::kMaxRoiPx)) {
-        problems.push_back("source.aravis.height: " + sides + " (got " + std::to_string(a.height()) + ")");
-      }
-      if (a.has_frame_rate_hz() && !(a.frame_rate_hz() > 0 && a.frame_rate_hz() <= 1000)) {
-        problems.push_back("source.aravis.frame_rate_hz: must be in (0, 1000] (got " + std::to_string(a.frame_rate_hz()) + ")");
-      }
-      if (a.has_exposure_us() && !(a.exposure_us() > 0 && a.exposure_us() < 1e8)) {
-        problems.push_back("source.aravis.exposure_us: must be in (0, 1e8) (got " + std::to_string(a.exposure_us()) + ")");
-      }
-      if (a.has_gain_db() && !std::isfinite(a.gain_db())) {
-        problems.push_back("source.aravis.gain_db: must be finite");
-      }
-      if (a.trigger() == v1::TRIGGER_MODE_HARDWARE && a.trigger_line().empty()) {
-        problems.push_back("source.aravis.trigger_line: required with a hardware trigger (e.g. Line0)");
-      }
-      if (a.trigger() < v1::TRIGGER_MODE_UNSPECIFIED || a.trigger() > v1::TRIGGER_MODE_HARDWARE) {
-        problems.push_back("source.aravis.trigger: unknown value " + std::to_string(a.trigger()));
-      }
-      if (a.has_pair_tolerance_ms() && !(a.pair_tolerance_ms() > 0 && a.pair_tolerance_ms() <= 1000)) {
-        problems.push_back("source.aravis.pair_tolerance_ms: must be in (0, 1000] (got " + std::to_string(a.pair_tolerance_ms()) + ")");
-      }
-      if (a.has_buffers() && (a.buffers() < 2 || a.buffers() > 64)) {
-        problems.push_back("source.aravis.buffers: must be 2..64 (got " + std::to_string(a.buffers()) + ")");
-      }
-      if (a.timestamps() < v1::TIMESTAMP_SOURCE_UNSPECIFIED || a.timestamps() > v1::TIMESTAMP_SOURCE_HOST) {
-        problems.push_back("source.aravis.timestamps: unknown value " + std::to_string(a.timestamps()));
-      }
-      break;
-    }
-    case v1::SOURCE_KIND_REPLAY: {
-      if (source.replay().dir().empty()) {
-        problems.push_back("source.replay.dir: required for the replay source (--replay DIR)");
-      }
-      if (source.has_left() || source.has_right() || source.has_calibration()) {
-        problems.push_back("source: left, right and calibration do not apply to a replay (the "
-                           "recording holds its frames and calibration)");
-      }
-      const v1::ReplayConfig& r = source.replay();
-      if (r.has_rate() && !(r.rate() >= 0 && r.rate() <= 1000)) {
-        problems.push_back("source.replay.rate: must be in [0, 1000], 0 = as fast as possible (got " + std::to_string(r.rate()) + ")");
-      }
-      break;
-    }
-    default:
-      problems.push_back("source.kind: unknown value " + std::to_string(source.kind()));
+    case v1::SOURCE_KIND_SYNTHETIC: ValidateSyntheticSource(source, problems); break;
+    case v1::SOURCE_KIND_IMAGES: ValidateImagesSource(source, problems); break;
+    case v1::SOURCE_KIND_ARAVIS: ValidateAravisSource(source, problems); break;
+    case v1::SOURCE_KIND_REPLAY: ValidateReplaySource(source, problems); break;
+    default: problems.push_back("source.kind: unknown value " + std::to_string(source.kind()));
   }
+}
+
+}  // namespace
+
+std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
+  std::vector<std::string> problems;
+  ValidateListen(config, problems);
+  ValidateSource(config.source(), problems);
   if (config.has_subscriber_queue_frames() &&
       (config.subscriber_queue_frames() < 1 || config.subscriber_queue_frames() > 1024)) {
     problems.push_back("subscriber_queue_frames: must be in 1..1024");
