@@ -292,6 +292,301 @@ AravisCamera::~AravisCamera() {
 
 bool AravisCamera::control_lost() const { return handles_->lost->load(); }
 
+namespace {
+
+// What AravisCamera::Open's configure steps share: the camera, its name for messages, the error
+// slot of the last call, and whether the camera's control was lost (then every failure is
+// kUnavailable).
+struct ConfigureStep {
+  ArvCamera* camera;
+  const std::string& name;
+  GErrorSlot& error;
+  const std::atomic<bool>& lost;
+
+  // Any failing call names the camera and the step.
+  Error Failed(const std::string& what) const {
+    return Error{lost.load() ? ErrorCode::kUnavailable : error.code(),
+                 name + ": " + what + " failed: " + error.message()};
+  }
+  bool Available(const char* feature) const {
+    GErrorSlot e;
+    const bool yes = arv_camera_is_feature_available(camera, feature, e.out()) != 0;
+    return yes && !e;
+  }
+};
+
+// Pixel format first: on some cameras it changes the ROI steps.
+Status ConfigurePixelFormat(ConfigureStep& step, const CameraSettings& settings, CameraInfo& info,
+                            guint32& arv_format) {
+  std::vector<std::string> offered;
+  {
+    guint n = 0;
+    const char** strings =
+        arv_camera_dup_available_pixel_formats_as_strings(step.camera, &n, step.error.out());
+    offered = TakeStrings(strings, n);  // after the call: it sets n
+    if (step.error) return step.Failed("listing the pixel formats");
+  }
+  const auto offers = [&](const std::string& format) {
+    return std::find(offered.begin(), offered.end(), format) != offered.end();
+  };
+  std::optional<PixelFormat> format;
+  if (!settings.pixel_format.empty()) {
+    format = ParsePixelFormat(settings.pixel_format);
+    if (!format) {
+      return Error{ErrorCode::kInvalidArgument,
+                   step.name + ": pixel format " + settings.pixel_format +
+                       " is not supported (supported: " + SupportedPixelFormats() + ")"};
+    }
+    if (!offers(settings.pixel_format)) {
+      return Error{ErrorCode::kInvalidArgument, step.name + " does not offer pixel format " +
+                                                    settings.pixel_format +
+                                                    " (it offers " + Join(offered) + ")"};
+    }
+  } else if (offers("Mono8")) {
+    format = PixelFormat::kMono8;
+  } else {
+    for (const std::string& f : offered) {
+      if (std::optional<PixelFormat> p = ParsePixelFormat(f)) {
+        format = p;
+        break;
+      }
+    }
+    if (!format) {
+      return Error{ErrorCode::kInvalidArgument,
+                   step.name + " offers none of the supported pixel formats (" +
+                       SupportedPixelFormats() + "); it offers " + Join(offered)};
+    }
+  }
+  info.pixel_format = *format;
+  arv_camera_set_pixel_format_from_string(step.camera, PixelFormatName(*format), step.error.out());
+  if (step.error) return step.Failed(std::string("setting pixel format ") + PixelFormatName(*format));
+  arv_format = arv_camera_get_pixel_format(step.camera, step.error.out());
+  if (step.error) return step.Failed("reading the pixel format back");
+
+  return Status::Ok();
+}
+
+// The region of interest, centred on the sensor.
+Status ConfigureRoi(ConfigureStep& step, const CameraSettings& settings, CameraInfo& info) {
+  const PixelFormat format = info.pixel_format;
+  // Centred region of interest. Offsets go to 0 first, so that the full width is allowed.
+  const bool has_offsets = step.Available("OffsetX") && step.Available("OffsetY");
+  if (has_offsets) {
+    arv_camera_set_region(step.camera, 0, 0, -1, -1, step.error.out());
+    if (step.error) return step.Failed("resetting the ROI offsets");
+  }
+  gint sensor_w = 0, sensor_h = 0;
+  if (step.Available("SensorWidth") && step.Available("SensorHeight")) {
+    arv_camera_get_sensor_size(step.camera, &sensor_w, &sensor_h, step.error.out());
+    if (step.error) return step.Failed("reading the sensor size");
+  }
+  gint w_min = 0, w_max = 0, h_min = 0, h_max = 0;
+  arv_camera_get_width_bounds(step.camera, &w_min, &w_max, step.error.out());
+  if (step.error) return step.Failed("reading the width bounds");
+  arv_camera_get_height_bounds(step.camera, &h_min, &h_max, step.error.out());
+  if (step.error) return step.Failed("reading the height bounds");
+  if (sensor_w <= 0 || sensor_h <= 0) {  // no SensorWidth: the largest ROI is the sensor
+    sensor_w = w_max;
+    sensor_h = h_max;
+  }
+  info.sensor = cv::Size(sensor_w, sensor_h);
+  const int roi_w = settings.roi_width, roi_h = settings.roi_height;
+  if (roi_w > std::min(sensor_w, w_max) || roi_h > std::min(sensor_h, h_max)) {
+    return Error{ErrorCode::kInvalidArgument,
+                 step.name + ": the region of interest " + SizeText(roi_w, roi_h) +
+                     " is larger than its sensor (" + SizeText(sensor_w, sensor_h) +
+                     (w_max < sensor_w || h_max < sensor_h
+                          ? ", largest ROI " + SizeText(w_max, h_max) + " at the current binning"
+                          : std::string()) +
+                     ")"};
+  }
+  if (roi_w < w_min || roi_h < h_min) {
+    return Error{ErrorCode::kInvalidArgument, step.name + ": the region of interest " +
+                                                  SizeText(roi_w, roi_h) +
+                                                  " is smaller than its minimum " +
+                                                  SizeText(w_min, h_min)};
+  }
+  const gint w_step = std::max(1, arv_camera_get_width_increment(step.camera, step.error.out()));
+  if (step.error) return step.Failed("reading the width step");
+  const gint h_step = std::max(1, arv_camera_get_height_increment(step.camera, step.error.out()));
+  if (step.error) return step.Failed("reading the height step");
+  if ((roi_w - w_min) % w_step != 0 || (roi_h - h_min) % h_step != 0) {
+    return Error{ErrorCode::kInvalidArgument,
+                 step.name + ": the region of interest " + SizeText(roi_w, roi_h) +
+                     " does not fit its size steps (width " + std::to_string(w_min) + " + k*" +
+                     std::to_string(w_step) + ", height " + std::to_string(h_min) + " + k*" +
+                     std::to_string(h_step) + ")"};
+  }
+  int x = (sensor_w - roi_w) / 2, y = (sensor_h - roi_h) / 2;
+  if (has_offsets) {
+    const gint x_step = std::max(1, arv_camera_get_x_offset_increment(step.camera, step.error.out()));
+    if (step.error) return step.Failed("reading the x offset step");
+    const gint y_step = std::max(1, arv_camera_get_y_offset_increment(step.camera, step.error.out()));
+    if (step.error) return step.Failed("reading the y offset step");
+    // A Bayer mosaic keeps its phase only with even offsets.
+    const int x_align = IsBayer(format) ? std::lcm(x_step, 2) : x_step;
+    const int y_align = IsBayer(format) ? std::lcm(y_step, 2) : y_step;
+    x -= x % x_align;
+    y -= y % y_align;
+  } else {
+    x = y = 0;
+    info.notes.push_back("roi: the camera has no offsets, the region is at the sensor's corner");
+  }
+  // Width and height before the offsets: the offsets' bounds depend on them.
+  arv_camera_set_region(step.camera, -1, -1, roi_w, roi_h, step.error.out());
+  if (step.error) return step.Failed("setting the ROI size " + SizeText(roi_w, roi_h));
+  if (has_offsets) {
+    arv_camera_set_region(step.camera, x, y, -1, -1, step.error.out());
+    if (step.error) return step.Failed("setting the ROI offsets");
+  }
+  gint rx = 0, ry = 0, rw = 0, rh = 0;
+  arv_camera_get_region(step.camera, &rx, &ry, &rw, &rh, step.error.out());
+  if (step.error) return step.Failed("reading the ROI back");
+  info.roi = cv::Rect(rx, ry, rw, rh);
+  if (rw != roi_w || rh != roi_h || (has_offsets && (rx != x || ry != y))) {
+    return Error{ErrorCode::kInvalidArgument,
+                 step.name + ": asked for the region " + SizeText(roi_w, roi_h) + " at (" +
+                     std::to_string(x) + ", " + std::to_string(y) + "), the camera set " +
+                     SizeText(rw, rh) + " at (" + std::to_string(rx) + ", " +
+                     std::to_string(ry) + ")"};
+  }
+
+  return Status::Ok();
+}
+
+// Exposure and gain: a value, or automatic; the same steps over two SFNC features.
+struct AnalogControl {
+  const char* noun;     // "exposure"
+  const char* setting;  // "exposure_us"
+  const char* control;  // "exposure time control"
+  const char* unit;     // "us"
+  gboolean (*available)(ArvCamera*, GError**);
+  gboolean (*auto_available)(ArvCamera*, GError**);
+  void (*set_auto)(ArvCamera*, ArvAuto, GError**);
+  void (*get_bounds)(ArvCamera*, double*, double*, GError**);
+  void (*set)(ArvCamera*, double, GError**);
+  double (*get)(ArvCamera*, GError**);
+};
+
+const AnalogControl kExposure = {"exposure", "exposure_us", "exposure time control", "us",
+                                 arv_camera_is_exposure_time_available,
+                                 arv_camera_is_exposure_auto_available,
+                                 arv_camera_set_exposure_time_auto,
+                                 arv_camera_get_exposure_time_bounds,
+                                 arv_camera_set_exposure_time,
+                                 arv_camera_get_exposure_time};
+// SFNC "Gain" is in dB; a few cameras expose only a raw gain in their own units.
+const AnalogControl kGain = {"gain", "gain_db", "gain control", "dB",
+                             arv_camera_is_gain_available, arv_camera_is_gain_auto_available,
+                             arv_camera_set_gain_auto, arv_camera_get_gain_bounds,
+                             arv_camera_set_gain, arv_camera_get_gain};
+
+// Sets `c` to `value`, or to automatic when `automatic` (kept as it is, with a note, on a camera
+// without the automatic mode); reads the value back into `actual` when the camera has the control.
+Status ConfigureAnalog(ConfigureStep& step, const AnalogControl& c, bool automatic, double value,
+                       double& actual, bool& is_auto, std::vector<std::string>& notes) {
+  const std::string noun = c.noun;
+  const bool has = c.available(step.camera, nullptr) != 0;
+  const bool has_auto = c.auto_available(step.camera, nullptr) != 0;
+  if (automatic) {
+    if (has_auto) {
+      c.set_auto(step.camera, ARV_AUTO_CONTINUOUS, step.error.out());
+      if (step.error) return step.Failed("enabling automatic " + noun);
+      is_auto = true;
+    } else {
+      notes.push_back(noun + ": the camera has no automatic " + noun + ", kept its setting");
+    }
+  } else {
+    if (!has) {
+      return Error{ErrorCode::kInvalidArgument, step.name + ": " + c.setting + " " + Number(value) +
+                                                    " was asked but the camera has no " + c.control};
+    }
+    if (has_auto) {
+      c.set_auto(step.camera, ARV_AUTO_OFF, step.error.out());
+      if (step.error) return step.Failed("disabling automatic " + noun);
+    }
+    double lo = 0, hi = 0;
+    c.get_bounds(step.camera, &lo, &hi, step.error.out());
+    if (step.error) return step.Failed("reading the " + noun + " bounds");
+    if (value < lo || value > hi) {
+      return Error{ErrorCode::kInvalidArgument, step.name + ": " + c.setting + " " + Number(value) +
+                                                    " is outside its range " + Number(lo) + ".." +
+                                                    Number(hi) + " " + c.unit};
+    }
+    c.set(step.camera, value, step.error.out());
+    if (step.error) return step.Failed("setting the " + noun + " to " + Number(value) + " " + c.unit);
+  }
+  if (has) {
+    actual = c.get(step.camera, step.error.out());
+    if (step.error) return step.Failed("reading the " + noun + " back");
+  }
+  return Status::Ok();
+}
+
+Status ConfigureFrameRate(ConfigureStep& step, const CameraSettings& settings, CameraInfo& info) {
+  // Frame rate, before the trigger: on several vendors arv_camera_set_frame_rate() also
+  // switches the FrameStart trigger off. Triggered cameras are paced by their trigger.
+  if (arv_camera_is_frame_rate_available(step.camera, nullptr) != 0) {
+    if (settings.trigger == TriggerMode::kFreeRun) {
+      double lo = 0, hi = 0;
+      arv_camera_get_frame_rate_bounds(step.camera, &lo, &hi, step.error.out());
+      if (step.error) return step.Failed("reading the frame rate bounds");
+      if (settings.frame_rate_hz < lo || settings.frame_rate_hz > hi) {
+        return Error{ErrorCode::kInvalidArgument,
+                     step.name + ": frame_rate_hz " + Number(settings.frame_rate_hz) +
+                         " is outside its range " + Number(lo) + ".." + Number(hi) + " Hz"};
+      }
+      arv_camera_set_frame_rate(step.camera, settings.frame_rate_hz, step.error.out());
+      if (step.error) return step.Failed("setting the frame rate to " + Number(settings.frame_rate_hz));
+    }
+    info.frame_rate_hz = arv_camera_get_frame_rate(step.camera, step.error.out());
+    if (step.error) return step.Failed("reading the frame rate back");
+  } else if (settings.trigger == TriggerMode::kFreeRun) {
+    info.notes.push_back("frame rate: the camera has no frame-rate control, it runs at its own");
+  }
+
+  return Status::Ok();
+}
+
+Status ConfigureTrigger(ConfigureStep& step, const CameraSettings& settings, CameraInfo& info) {
+  switch (settings.trigger) {
+    case TriggerMode::kFreeRun:
+      if (step.Available("TriggerMode")) {
+        arv_camera_clear_triggers(step.camera, step.error.out());
+        if (step.error) return step.Failed("switching the triggers off");
+      }
+      break;
+    case TriggerMode::kSoftware:
+      if (arv_camera_is_software_trigger_supported(step.camera, nullptr) == 0) {
+        return Error{ErrorCode::kInvalidArgument, step.name + " has no software trigger"};
+      }
+      arv_camera_set_trigger(step.camera, "Software", step.error.out());
+      if (step.error) return step.Failed("setting the software trigger");
+      break;
+    case TriggerMode::kHardware: {
+      guint n = 0;
+      const char** strings = arv_camera_dup_available_trigger_sources(step.camera, &n, step.error.out());
+      const std::vector<std::string> sources = TakeStrings(strings, n);
+      if (step.error) return step.Failed("listing the trigger sources");
+      if (std::find(sources.begin(), sources.end(), settings.trigger_line) == sources.end()) {
+        return Error{ErrorCode::kInvalidArgument,
+                     step.name + " has no trigger source '" + settings.trigger_line + "' (it has " +
+                         (sources.empty() ? std::string("none") : Join(sources)) + ")"};
+      }
+      arv_camera_set_trigger(step.camera, settings.trigger_line.c_str(), step.error.out());
+      if (step.error) return step.Failed("setting the trigger source " + settings.trigger_line);
+      break;
+    }
+  }
+  info.trigger = settings.trigger;
+  arv_camera_set_acquisition_mode(step.camera, ARV_ACQUISITION_MODE_CONTINUOUS, step.error.out());
+  if (step.error) return step.Failed("setting continuous acquisition");
+
+  return Status::Ok();
+}
+
+}  // namespace
+
 Result<std::unique_ptr<AravisCamera>> AravisCamera::Open(const CameraSettings& settings,
                                                          bool refresh_device_list) {
   std::unique_ptr<AravisCamera> cam(new AravisCamera());
@@ -335,277 +630,26 @@ Result<std::unique_ptr<AravisCamera>> AravisCamera::Open(const CameraSettings& s
                                          G_CALLBACK(OnControlLost), flag, DeleteLostFlag,
                                          static_cast<GConnectFlags>(0));
 
-  // Any failing call below names the camera and the step.
-  const auto failed = [&](const std::string& what) {
-    return Error{cam->control_lost() ? ErrorCode::kUnavailable : error.code(),
-                 name + ": " + what + " failed: " + error.message()};
-  };
-  const auto available = [&](const char* feature) {
-    GErrorSlot e;
-    const bool yes = arv_camera_is_feature_available(h.camera, feature, e.out()) != 0;
-    return yes && !e;
-  };
-
-  // Pixel format first: on some cameras it changes the ROI steps.
-  std::vector<std::string> offered;
-  {
-    guint n = 0;
-    const char** strings =
-        arv_camera_dup_available_pixel_formats_as_strings(h.camera, &n, error.out());
-    offered = TakeStrings(strings, n);  // after the call: it sets n
-    if (error) return failed("listing the pixel formats");
+  ConfigureStep step{h.camera, name, error, *h.lost};
+  Status done = ConfigurePixelFormat(step, settings, info, h.pixel_format);
+  if (done.ok()) done = ConfigureRoi(step, settings, info);
+  if (done.ok()) {
+    done = ConfigureAnalog(step, kExposure, settings.exposure_us <= 0, settings.exposure_us,
+                           info.exposure_us, info.exposure_auto, info.notes);
   }
-  const auto offers = [&](const std::string& format) {
-    return std::find(offered.begin(), offered.end(), format) != offered.end();
-  };
-  std::optional<PixelFormat> format;
-  if (!settings.pixel_format.empty()) {
-    format = ParsePixelFormat(settings.pixel_format);
-    if (!format) {
-      return Error{ErrorCode::kInvalidArgument,
-                   name + ": pixel format " + settings.pixel_format +
-                       " is not supported (supported: " + SupportedPixelFormats() + ")"};
-    }
-    if (!offers(settings.pixel_format)) {
-      return Error{ErrorCode::kInvalidArgument, name + " does not offer pixel format " +
-                                                    settings.pixel_format +
-                                                    " (it offers " + Join(offered) + ")"};
-    }
-  } else if (offers("Mono8")) {
-    format = PixelFormat::kMono8;
-  } else {
-    for (const std::string& f : offered) {
-      if (std::optional<PixelFormat> p = ParsePixelFormat(f)) {
-        format = p;
-        break;
-      }
-    }
-    if (!format) {
-      return Error{ErrorCode::kInvalidArgument,
-                   name + " offers none of the supported pixel formats (" +
-                       SupportedPixelFormats() + "); it offers " + Join(offered)};
-    }
+  if (done.ok()) {
+    done = ConfigureAnalog(step, kGain, settings.gain_db < 0, settings.gain_db, info.gain_db,
+                           info.gain_auto, info.notes);
   }
-  info.pixel_format = *format;
-  arv_camera_set_pixel_format_from_string(h.camera, PixelFormatName(*format), error.out());
-  if (error) return failed(std::string("setting pixel format ") + PixelFormatName(*format));
-  h.pixel_format = arv_camera_get_pixel_format(h.camera, error.out());
-  if (error) return failed("reading the pixel format back");
-
-  // Centred region of interest. Offsets go to 0 first, so that the full width is allowed.
-  const bool has_offsets = available("OffsetX") && available("OffsetY");
-  if (has_offsets) {
-    arv_camera_set_region(h.camera, 0, 0, -1, -1, error.out());
-    if (error) return failed("resetting the ROI offsets");
-  }
-  gint sensor_w = 0, sensor_h = 0;
-  if (available("SensorWidth") && available("SensorHeight")) {
-    arv_camera_get_sensor_size(h.camera, &sensor_w, &sensor_h, error.out());
-    if (error) return failed("reading the sensor size");
-  }
-  gint w_min = 0, w_max = 0, h_min = 0, h_max = 0;
-  arv_camera_get_width_bounds(h.camera, &w_min, &w_max, error.out());
-  if (error) return failed("reading the width bounds");
-  arv_camera_get_height_bounds(h.camera, &h_min, &h_max, error.out());
-  if (error) return failed("reading the height bounds");
-  if (sensor_w <= 0 || sensor_h <= 0) {  // no SensorWidth: the largest ROI is the sensor
-    sensor_w = w_max;
-    sensor_h = h_max;
-  }
-  info.sensor = cv::Size(sensor_w, sensor_h);
-  const int roi_w = settings.roi_width, roi_h = settings.roi_height;
-  if (roi_w > std::min(sensor_w, w_max) || roi_h > std::min(sensor_h, h_max)) {
-    return Error{ErrorCode::kInvalidArgument,
-                 name + ": the region of interest " + SizeText(roi_w, roi_h) +
-                     " is larger than its sensor (" + SizeText(sensor_w, sensor_h) +
-                     (w_max < sensor_w || h_max < sensor_h
-                          ? ", largest ROI " + SizeText(w_max, h_max) + " at the current binning"
-                          : std::string()) +
-                     ")"};
-  }
-  if (roi_w < w_min || roi_h < h_min) {
-    return Error{ErrorCode::kInvalidArgument, name + ": the region of interest " +
-                                                  SizeText(roi_w, roi_h) +
-                                                  " is smaller than its minimum " +
-                                                  SizeText(w_min, h_min)};
-  }
-  const gint w_step = std::max(1, arv_camera_get_width_increment(h.camera, error.out()));
-  if (error) return failed("reading the width step");
-  const gint h_step = std::max(1, arv_camera_get_height_increment(h.camera, error.out()));
-  if (error) return failed("reading the height step");
-  if ((roi_w - w_min) % w_step != 0 || (roi_h - h_min) % h_step != 0) {
-    return Error{ErrorCode::kInvalidArgument,
-                 name + ": the region of interest " + SizeText(roi_w, roi_h) +
-                     " does not fit its size steps (width " + std::to_string(w_min) + " + k*" +
-                     std::to_string(w_step) + ", height " + std::to_string(h_min) + " + k*" +
-                     std::to_string(h_step) + ")"};
-  }
-  int x = (sensor_w - roi_w) / 2, y = (sensor_h - roi_h) / 2;
-  if (has_offsets) {
-    const gint x_step = std::max(1, arv_camera_get_x_offset_increment(h.camera, error.out()));
-    if (error) return failed("reading the x offset step");
-    const gint y_step = std::max(1, arv_camera_get_y_offset_increment(h.camera, error.out()));
-    if (error) return failed("reading the y offset step");
-    // A Bayer mosaic keeps its phase only with even offsets.
-    const int x_align = IsBayer(*format) ? std::lcm(x_step, 2) : x_step;
-    const int y_align = IsBayer(*format) ? std::lcm(y_step, 2) : y_step;
-    x -= x % x_align;
-    y -= y % y_align;
-  } else {
-    x = y = 0;
-    info.notes.push_back("roi: the camera has no offsets, the region is at the sensor's corner");
-  }
-  // Width and height before the offsets: the offsets' bounds depend on them.
-  arv_camera_set_region(h.camera, -1, -1, roi_w, roi_h, error.out());
-  if (error) return failed("setting the ROI size " + SizeText(roi_w, roi_h));
-  if (has_offsets) {
-    arv_camera_set_region(h.camera, x, y, -1, -1, error.out());
-    if (error) return failed("setting the ROI offsets");
-  }
-  gint rx = 0, ry = 0, rw = 0, rh = 0;
-  arv_camera_get_region(h.camera, &rx, &ry, &rw, &rh, error.out());
-  if (error) return failed("reading the ROI back");
-  info.roi = cv::Rect(rx, ry, rw, rh);
-  if (rw != roi_w || rh != roi_h || (has_offsets && (rx != x || ry != y))) {
-    return Error{ErrorCode::kInvalidArgument,
-                 name + ": asked for the region " + SizeText(roi_w, roi_h) + " at (" +
-                     std::to_string(x) + ", " + std::to_string(y) + "), the camera set " +
-                     SizeText(rw, rh) + " at (" + std::to_string(rx) + ", " +
-                     std::to_string(ry) + ")"};
-  }
-
-  // Exposure.
-  const bool has_exposure = arv_camera_is_exposure_time_available(h.camera, nullptr) != 0;
-  const bool has_exposure_auto = arv_camera_is_exposure_auto_available(h.camera, nullptr) != 0;
-  if (settings.exposure_us <= 0) {
-    if (has_exposure_auto) {
-      arv_camera_set_exposure_time_auto(h.camera, ARV_AUTO_CONTINUOUS, error.out());
-      if (error) return failed("enabling automatic exposure");
-      info.exposure_auto = true;
-    } else {
-      info.notes.push_back("exposure: the camera has no automatic exposure, kept its setting");
-    }
-  } else {
-    if (!has_exposure) {
-      return Error{ErrorCode::kInvalidArgument,
-                   name + ": exposure_us " + Number(settings.exposure_us) +
-                       " was asked but the camera has no exposure time control"};
-    }
-    if (has_exposure_auto) {
-      arv_camera_set_exposure_time_auto(h.camera, ARV_AUTO_OFF, error.out());
-      if (error) return failed("disabling automatic exposure");
-    }
-    double lo = 0, hi = 0;
-    arv_camera_get_exposure_time_bounds(h.camera, &lo, &hi, error.out());
-    if (error) return failed("reading the exposure bounds");
-    if (settings.exposure_us < lo || settings.exposure_us > hi) {
-      return Error{ErrorCode::kInvalidArgument,
-                   name + ": exposure_us " + Number(settings.exposure_us) +
-                       " is outside its range " + Number(lo) + ".." + Number(hi) + " us"};
-    }
-    arv_camera_set_exposure_time(h.camera, settings.exposure_us, error.out());
-    if (error) return failed("setting the exposure to " + Number(settings.exposure_us) + " us");
-  }
-  if (has_exposure) {
-    info.exposure_us = arv_camera_get_exposure_time(h.camera, error.out());
-    if (error) return failed("reading the exposure back");
-  }
-
-  // Gain (SFNC "Gain" is in dB; a few cameras expose only a raw gain in their own units).
-  const bool has_gain = arv_camera_is_gain_available(h.camera, nullptr) != 0;
-  const bool has_gain_auto = arv_camera_is_gain_auto_available(h.camera, nullptr) != 0;
-  if (settings.gain_db < 0) {
-    if (has_gain_auto) {
-      arv_camera_set_gain_auto(h.camera, ARV_AUTO_CONTINUOUS, error.out());
-      if (error) return failed("enabling automatic gain");
-      info.gain_auto = true;
-    } else {
-      info.notes.push_back("gain: the camera has no automatic gain, kept its setting");
-    }
-  } else {
-    if (!has_gain) {
-      return Error{ErrorCode::kInvalidArgument,
-                   name + ": gain_db " + Number(settings.gain_db) +
-                       " was asked but the camera has no gain control"};
-    }
-    if (has_gain_auto) {
-      arv_camera_set_gain_auto(h.camera, ARV_AUTO_OFF, error.out());
-      if (error) return failed("disabling automatic gain");
-    }
-    double lo = 0, hi = 0;
-    arv_camera_get_gain_bounds(h.camera, &lo, &hi, error.out());
-    if (error) return failed("reading the gain bounds");
-    if (settings.gain_db < lo || settings.gain_db > hi) {
-      return Error{ErrorCode::kInvalidArgument, name + ": gain_db " + Number(settings.gain_db) +
-                                                    " is outside its range " + Number(lo) +
-                                                    ".." + Number(hi) + " dB"};
-    }
-    arv_camera_set_gain(h.camera, settings.gain_db, error.out());
-    if (error) return failed("setting the gain to " + Number(settings.gain_db) + " dB");
-  }
-  if (has_gain) {
-    info.gain_db = arv_camera_get_gain(h.camera, error.out());
-    if (error) return failed("reading the gain back");
-  }
-
-  // Frame rate, before the trigger: on several vendors arv_camera_set_frame_rate() also
-  // switches the FrameStart trigger off. Triggered cameras are paced by their trigger.
-  if (arv_camera_is_frame_rate_available(h.camera, nullptr) != 0) {
-    if (settings.trigger == TriggerMode::kFreeRun) {
-      double lo = 0, hi = 0;
-      arv_camera_get_frame_rate_bounds(h.camera, &lo, &hi, error.out());
-      if (error) return failed("reading the frame rate bounds");
-      if (settings.frame_rate_hz < lo || settings.frame_rate_hz > hi) {
-        return Error{ErrorCode::kInvalidArgument,
-                     name + ": frame_rate_hz " + Number(settings.frame_rate_hz) +
-                         " is outside its range " + Number(lo) + ".." + Number(hi) + " Hz"};
-      }
-      arv_camera_set_frame_rate(h.camera, settings.frame_rate_hz, error.out());
-      if (error) return failed("setting the frame rate to " + Number(settings.frame_rate_hz));
-    }
-    info.frame_rate_hz = arv_camera_get_frame_rate(h.camera, error.out());
-    if (error) return failed("reading the frame rate back");
-  } else if (settings.trigger == TriggerMode::kFreeRun) {
-    info.notes.push_back("frame rate: the camera has no frame-rate control, it runs at its own");
-  }
-
-  // Trigger.
-  switch (settings.trigger) {
-    case TriggerMode::kFreeRun:
-      if (available("TriggerMode")) {
-        arv_camera_clear_triggers(h.camera, error.out());
-        if (error) return failed("switching the triggers off");
-      }
-      break;
-    case TriggerMode::kSoftware:
-      if (arv_camera_is_software_trigger_supported(h.camera, nullptr) == 0) {
-        return Error{ErrorCode::kInvalidArgument, name + " has no software trigger"};
-      }
-      arv_camera_set_trigger(h.camera, "Software", error.out());
-      if (error) return failed("setting the software trigger");
-      break;
-    case TriggerMode::kHardware: {
-      guint n = 0;
-      const char** strings = arv_camera_dup_available_trigger_sources(h.camera, &n, error.out());
-      const std::vector<std::string> sources = TakeStrings(strings, n);
-      if (error) return failed("listing the trigger sources");
-      if (std::find(sources.begin(), sources.end(), settings.trigger_line) == sources.end()) {
-        return Error{ErrorCode::kInvalidArgument,
-                     name + " has no trigger source '" + settings.trigger_line + "' (it has " +
-                         (sources.empty() ? std::string("none") : Join(sources)) + ")"};
-      }
-      arv_camera_set_trigger(h.camera, settings.trigger_line.c_str(), error.out());
-      if (error) return failed("setting the trigger source " + settings.trigger_line);
-      break;
-    }
-  }
-  info.trigger = settings.trigger;
-  arv_camera_set_acquisition_mode(h.camera, ARV_ACQUISITION_MODE_CONTINUOUS, error.out());
-  if (error) return failed("setting continuous acquisition");
+  // Frame rate before the trigger: on several vendors arv_camera_set_frame_rate() also switches
+  // the FrameStart trigger off.
+  if (done.ok()) done = ConfigureFrameRate(step, settings, info);
+  if (done.ok()) done = ConfigureTrigger(step, settings, info);
+  if (!done.ok()) return done.error();
 
   // Stream and its buffer pool.
   const guint payload = arv_camera_get_payload(h.camera, error.out());
-  if (error) return failed("reading the payload size");
+  if (error) return step.Failed("reading the payload size");
   if (arv_camera_is_gv_device(h.camera)) {
     // A plain UDP socket rather than Aravis's packet socket (used when the process has
     // CAP_NET_RAW): a packet socket catches every GVSP packet on the interface until its filter
@@ -615,7 +659,7 @@ Result<std::unique_ptr<AravisCamera>> AravisCamera::Open(const CameraSettings& s
     arv_camera_gv_set_stream_options(h.camera, ARV_GV_STREAM_OPTION_PACKET_SOCKET_DISABLED);
   }
   h.stream = arv_camera_create_stream(h.camera, nullptr, nullptr, error.out());
-  if (h.stream == nullptr || error) return failed("creating the stream");
+  if (h.stream == nullptr || error) return step.Failed("creating the stream");
   if (ARV_IS_GV_STREAM(h.stream)) {
     // The kernel's default receive buffer (~200 kB) is smaller than one 640x480 frame: any
     // scheduling hiccup of the stream thread then drops packets and frames. Ask for a few
