@@ -463,29 +463,33 @@ void ExtendToRegions(const cv::Mat1i& region_labels, const cv::Mat1i& region_sta
   }
 }
 
-std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b& classes,
-                                    const stereo::DisparityMap& disparity,
-                                    const geometry::StereoRig& rig,
-                                    const geometry::RangeOptions& range,
-                                    const StereoBlobOptions& options, std::string_view extractor,
-                                    const std::optional<GroundModel>& ground,
-                                    const FullResolutionPair* full) {
-  std::vector<Detection> out;
-  std::vector<RegionOf> out_region;  // per detection
-  const cv::Mat1s& fixed = disparity.fixed;
-  if (fixed.empty() || appearance.size() != fixed.size() || classes.size() != fixed.size()) return out;
-  const int width = fixed.cols, height = fixed.rows;
+namespace {
 
-  // 1. Pieces: the appearance cue's pixels with a trusted disparity standing out from the ground
-  //    (candidates), joined as neighbours across disparity steps of at most
-  //    max_disparity_step_px. The appearance pixels near a candidate (within kLinkSize640) join
-  //    with the nearest surface's disparity (a grey dilation), so that a sparsely matched object
-  //    holds together; only the candidates' own disparities measure it. Each piece is then split
-  //    where its disparities form separate depth modes.
-  // Per-frame buffers, kept between frames of a thread (no page faults for fresh memory).
-  thread_local cv::Mat1s linked_disparity, grown;
-  thread_local cv::Mat1b candidates, linked;
-  thread_local cv::Mat1i piece_labels, labels;
+// RangeRegions' inputs, passed to its steps.
+struct RegionsContext {
+  const cv::Mat1b& appearance;
+  const cv::Mat1b& classes;
+  const stereo::DisparityMap& disparity;
+  const geometry::StereoRig& rig;
+  const geometry::RangeOptions& range;
+  const StereoBlobOptions& options;
+  std::string_view extractor;
+  const std::optional<GroundModel>& ground;
+  const FullResolutionPair* full;
+  int width, height;
+};
+
+// Step 1a: the appearance cue's pixels with a trusted disparity standing out from the ground
+// (`candidates`), and the appearance pixels near a candidate (within kLinkSize640), which take the
+// nearest surface's disparity (a grey dilation) in `linked_disparity` so that a sparsely matched
+// object holds together; `linked` marks both.
+void LinkAppearance(const RegionsContext& ctx, cv::Mat1b& candidates, cv::Mat1s& linked_disparity,
+                    cv::Mat1b& linked) {
+  const cv::Mat1b& classes = ctx.classes;
+  const cv::Mat1b& appearance = ctx.appearance;
+  const cv::Mat1s& fixed = ctx.disparity.fixed;
+  const int width = ctx.width;
+  thread_local cv::Mat1s grown;
   // (Whole-image steps are OpenCV's vectorised operations.)
   cv::compare(classes, static_cast<double>(kCandidate), candidates, cv::CMP_EQ);
   cv::bitwise_and(candidates, appearance, candidates);  // appearance is 0 or not: 255 & a
@@ -503,6 +507,19 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   cv::bitwise_and(grow, ~candidates, grow);
   grown.copyTo(linked_disparity, grow);
   cv::compare(linked_disparity, 0, linked, cv::CMP_GE);
+}
+
+// Step 1b: the linked pixels joined as neighbours across disparity steps of at most
+// max_disparity_step_px, each blob split where its candidates' disparities form separate depth
+// modes: the pieces (index 0: nothing), summarised, with their labels in `piece_labels`. A piece's
+// box and disparities are its candidates' (linking only holds them together).
+std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candidates,
+                             const cv::Mat1s& linked_disparity, const cv::Mat1b& linked,
+                             const cv::Mat1i& region_labels, cv::Mat1i& piece_labels) {
+  const StereoBlobOptions& options = ctx.options;
+  const stereo::DisparityMap& disparity = ctx.disparity;
+  const cv::Mat1s& fixed = disparity.fixed;
+  const int width = ctx.width, height = ctx.height;
   const int step_fixed = std::max(1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale)));
   const extraction::BlobSet blobs =
       options.max_disparity_step_px > 0
@@ -557,17 +574,6 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
       for (int k = first; k <= last; ++k) piece_of_bin[b * bins + k] = static_cast<int>(pieces.size()) - 1;
     }
   }
-  // The appearance regions, when pieces in one of them join whatever their gap.
-  // Their boxes (the stats) only when a lone hypothesis takes its region's extent (step 4).
-  thread_local cv::Mat1i region_labels;
-  thread_local cv::Mat1i region_stats;
-  thread_local cv::Mat1d region_centroids;
-  const bool extend_to_regions = options.join_within_region && options.region_gap_fraction == 0;
-  if (extend_to_regions) {
-    cv::connectedComponentsWithStats(appearance, region_labels, region_stats, region_centroids, 8, CV_32S);
-  } else if (options.join_within_region) {
-    cv::connectedComponents(appearance, region_labels, 8, CV_32S);
-  }
   std::vector<cv::Point> lo(pieces.size(), cv::Point(INT32_MAX, INT32_MAX));
   std::vector<cv::Point> hi(pieces.size(), cv::Point(-1, -1));
   piece_labels.create(fixed.size());
@@ -609,7 +615,18 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     if (!pieces[i].disparities.empty()) Summarise(pieces[i], disparity.block_size);
   }
 
-  // 2. Pieces at one range join across gaps that scale with their size.
+  return pieces;
+}
+
+// Step 2: pieces at one range join across gaps that scale with their size (within one appearance
+// region, whatever their gap, when join_within_region). Returns the groups (index 0: nothing),
+// their labels in `labels`.
+std::vector<Piece> JoinPieces(const RegionsContext& ctx, const std::vector<Piece>& pieces,
+                              const cv::Mat1i& piece_labels, cv::Mat1i& labels) {
+  const StereoBlobOptions& options = ctx.options;
+  const cv::Mat1s& fixed = ctx.disparity.fixed;
+  const int width = ctx.width, height = ctx.height;
+  const int piece_count = static_cast<int>(pieces.size());
   std::vector<int> parent(piece_count);
   std::iota(parent.begin(), parent.end(), 0);
   const double join_fraction = options.join_gap_fraction;
@@ -674,126 +691,201 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
     for (int x = 0; x < width; ++x) g[x] = group_of[p[x]];
   }
 
-  // 3. Filters and range.
+  return groups;
+}
+
+// Step 3's pixel sizes, scaled with the image.
+struct GroupLimits {
+  double max_width_px;
+  int min_rows, ring_in, ring_out, interior;
+};
+
+// The range of a group from its pixels: the sub-pixel fit on the full-resolution pair when there
+// is one (over the pixels at the group's own range), else the median of its interior when there is
+// enough of it; `d` keeps the median's range otherwise.
+void RangeFromPixels(const RegionsContext& ctx, const GroupLimits& limits, const Piece& group,
+                     const cv::Mat1b& mask, double median_px, int n, Detection& d) {
+  const FullResolutionPair* full = ctx.full;
+  const cv::Mat1s& fixed = ctx.disparity.fixed;
+  const cv::Mat1b& classes = ctx.classes;
+  const int interior = limits.interior;
+  bool refined_ok = false;
+  if (full != nullptr && !full->left.empty()) {
+    const int k = std::max(1, full->binning);
+    const cv::Rect full_box = cv::Rect(group.box.x * k, group.box.y * k, group.box.width * k,
+                                       group.box.height * k) &
+                              cv::Rect(0, 0, full->left.cols, full->left.rows);
+    // The fit runs over the pixels at the hypothesis' own range (a box's oblique faces and a
+    // halo at other disparities would pull it off its nearest face).
+    const int band = std::max(kScale * 3 / 8, static_cast<int>(std::lround(0.02 * median_px * kScale)));
+    const int median_fixed = static_cast<int>(std::lround(median_px * kScale));
+    cv::Mat1b at_range(mask.size());
+    for (int y = 0; y < mask.rows; ++y) {
+      const int16_t* dd = fixed[group.box.y + y] + group.box.x;
+      const uchar* c = classes[group.box.y + y] + group.box.x;
+      const uchar* m = mask[y];
+      uchar* o = at_range[y];
+      for (int x = 0; x < mask.cols; ++x) {
+        const bool near = (m[x] != 0) & (c[x] == kCandidate) & (std::abs(dd[x] - median_fixed) <= band);
+        o[x] = near ? 255 : 0;
+      }
+    }
+    cv::Mat1b full_mask;
+    cv::resize(at_range, full_mask, cv::Size(group.box.width * k, group.box.height * k), 0, 0,
+               cv::INTER_NEAREST);
+    full_mask = full_mask(cv::Rect(0, 0, full_box.width, full_box.height));
+    const std::optional<RefinedDisparity> refined =
+        RefineDisparity(full->left, full->right, full_mask, full_box, median_px * k);
+    if (refined && std::abs(refined->disparity_px - median_px * k) <= std::max(1.5 * k, 0.2 * median_px * k)) {
+      d.disparity_px = refined->disparity_px / k;
+      d.disparity_sigma_px = refined->sigma_px / k;
+      refined_ok = true;
+    }
+  }
+  if (!refined_ok && interior > 1) {
+    // No fit: the median of the interior when there is enough of it (block matching spreads an
+    // object's disparity a few pixels past its borders).
+    std::vector<int16_t> inner;
+    cv::Mat1b eroded;
+    cv::erode(mask, eroded, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(interior, interior)),
+              cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+    for (int y = 0; y < eroded.rows; ++y) {
+      const uchar* e = eroded[y];
+      const uchar* c = classes[group.box.y + y] + group.box.x;
+      const int16_t* dd = fixed[group.box.y + y] + group.box.x;
+      for (int x = 0; x < eroded.cols; ++x) {
+        if (e[x] && c[x] == kCandidate) inner.push_back(dd[x]);
+      }
+    }
+    if (static_cast<int>(inner.size()) >= std::max(30, n / 4)) {
+      d.disparity_px = static_cast<double>(Percentiles(inner)[1]) / kScale;
+    }
+  }
+}
+
+// Step 3: a group's filters (size, support, trusted range, terrain), then its range and score;
+// nullopt when it is filtered out.
+std::optional<Detection> RangeGroup(const RegionsContext& ctx, const GroupLimits& limits,
+                                    const cv::Mat1i& labels, int g, Piece& group) {
+  const stereo::DisparityMap& disparity = ctx.disparity;
+  const geometry::StereoRig& rig = ctx.rig;
+  const geometry::RangeOptions& range = ctx.range;
+  const StereoBlobOptions& options = ctx.options;
+  const std::optional<GroundModel>& ground = ctx.ground;
+  const auto& [max_width_px, min_rows, ring_in, ring_out, interior] = limits;
+  const int n = static_cast<int>(group.disparities.size());
+  if (group.area < options.min_area_px || group.box.width > max_width_px) return std::nullopt;
+  // At least the trusted disparities of one independent matcher window (half a block square):
+  // fewer are one coherent mismatch as often as an object.
+  const int block = std::max(1, disparity.block_size);
+  if (n < std::max({options.min_valid_px, kMinPieceDisparities, block * block / 4})) return std::nullopt;
+  const double box_area = static_cast<double>(group.box.area());
+  const double valid_fraction = n / box_area;
+  if (static_cast<double>(n) / group.area < options.min_valid_fraction) return std::nullopt;
+  // Range from the interior when there is enough of it: block matching spreads an object's
+  // disparity a few pixels past its borders.
+  const cv::Mat1b mask = labels(group.box) == g;
+  Summarise(group, disparity.block_size);
+  const double median_px = static_cast<double>(group.median) / kScale;
+  if (!geometry::IsTrustedDisparity(median_px, rig.f_px(), rig.baseline_m(), range)) return std::nullopt;
+  // At the top of the search range the matcher has run out of disparities: what is nearer than
+  // it can see matches there by chance.
+  if (disparity.num_disparities > 0 &&
+      median_px > disparity.min_disparity + disparity.num_disparities - 1 - kSearchTopMarginPx) {
+    return std::nullopt;
+  }
+  if (options.max_depth_per_height > 0 &&
+      LeanBack(disparity, labels, g, group.box, median_px, rig, min_rows) > options.max_depth_per_height) {
+    return std::nullopt;  // terrain leaning back, or level ground
+  }
+  const double height_m = group.box.height * (rig.f_px() * rig.baseline_m() / median_px) / rig.f_px();
+  const bool too_short = group.box.height < min_rows || height_m < options.min_terrain_height_m;
+  // Terrain is below the horizon: the ground model's, or without one the principal point's
+  // row (a level camera's horizon).
+  const double horizon_row = ground ? ground->horizon_row : rig.cy();
+  if (options.max_attached_fraction < 1 && too_short && group.box.y + group.box.height > horizon_row &&
+      AttachedFraction(disparity, labels, g, group.box, median_px, range.min_disparity_px, ring_in,
+                       ring_out) > options.max_attached_fraction) {
+    return std::nullopt;  // a patch of a continuous surface
+  }
+
+  Detection d;
+  d.bbox = group.box;
+  d.centroid_px = cv::Point2d(group.sum_x / group.area, group.sum_y / group.area);
+  d.area_px = group.area;
+  // Perimeter: of the box (a sparsely matched hypothesis has no outline of its own).
+  d.perimeter_px = 2.0 * (group.box.width + group.box.height);
+  d.disparity_px = median_px;
+  d.valid_disparities = n;
+  d.valid_fraction = std::clamp(valid_fraction, 0.0, 1.0);
+  // Without a fit: the median's own uncertainty and the matcher's sub-pixel bias.
+  d.disparity_sigma_px = std::hypot(group.median_sigma / kScale, kMatcherBiasPx);
+  RangeFromPixels(ctx, limits, group, mask, median_px, n, d);
+  // A hypothesis whose own disparity is this uncertain says nothing about where it is: its
+  // range is not trusted.
+  if (d.disparity_sigma_px > kMaxRelativeDisparitySigma * d.disparity_px) return std::nullopt;
+  FillRange(d, rig, range);
+  // Score: how much of the hypothesis the stereo supports, and how consistently.
+  int consistent = 0;
+  const double band = std::max(1.0, 0.1 * median_px) * kScale;
+  for (int16_t v : group.disparities) consistent += std::abs(v - median_px * kScale) <= band;
+  d.score = std::clamp(std::min(1.0, 2.0 * static_cast<double>(n) / group.area), 0.0, 1.0) *
+            (static_cast<double>(consistent) / n);
+  d.extractor = std::string(ctx.extractor);
+  return d;
+}
+
+}  // namespace
+
+std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b& classes,
+                                    const stereo::DisparityMap& disparity,
+                                    const geometry::StereoRig& rig,
+                                    const geometry::RangeOptions& range,
+                                    const StereoBlobOptions& options, std::string_view extractor,
+                                    const std::optional<GroundModel>& ground,
+                                    const FullResolutionPair* full) {
+  std::vector<Detection> out;
+  std::vector<RegionOf> out_region;  // per detection
+  const cv::Mat1s& fixed = disparity.fixed;
+  if (fixed.empty() || appearance.size() != fixed.size() || classes.size() != fixed.size()) return out;
+  const int width = fixed.cols, height = fixed.rows;
+  const RegionsContext ctx{appearance, classes, disparity, rig, range, options, extractor, ground, full, width, height};
+
+  // 1. Pieces (LinkAppearance, CutPieces). Per-frame buffers, kept between frames of a thread (no
+  //    page faults for fresh memory).
+  thread_local cv::Mat1s linked_disparity;
+  thread_local cv::Mat1b candidates, linked;
+  thread_local cv::Mat1i piece_labels, labels;
+  LinkAppearance(ctx, candidates, linked_disparity, linked);
+  // The appearance regions, when pieces in one of them join whatever their gap.
+  // Their boxes (the stats) only when a lone hypothesis takes its region's extent (step 4).
+  thread_local cv::Mat1i region_labels;
+  thread_local cv::Mat1i region_stats;
+  thread_local cv::Mat1d region_centroids;
+  const bool extend_to_regions = options.join_within_region && options.region_gap_fraction == 0;
+  if (extend_to_regions) {
+    cv::connectedComponentsWithStats(appearance, region_labels, region_stats, region_centroids, 8, CV_32S);
+  } else if (options.join_within_region) {
+    cv::connectedComponents(appearance, region_labels, 8, CV_32S);
+  }
+  std::vector<Piece> pieces = CutPieces(ctx, candidates, linked_disparity, linked, region_labels, piece_labels);
+
+  // 2. Groups (JoinPieces).
+  std::vector<Piece> groups = JoinPieces(ctx, pieces, piece_labels, labels);
+  const int group_count = static_cast<int>(groups.size()) - 1;
+
+  // 3. Filters and range (RangeGroup).
   const double max_width_px = options.max_width_fraction * width;
   const int min_rows = std::max(3, ScaledKernel(kMinTerrainRows640, width));
   const int ring_in = std::max(2, ScaledKernel(6, width) - 1);
   const int ring_out = std::max(ring_in + 2, ScaledKernel(12, width));
   const int interior = options.interior_erode_px > 0 ? ScaledKernel(2 * options.interior_erode_px + 1, width) : 1;
+  const GroupLimits limits{max_width_px, min_rows, ring_in, ring_out, interior};
   for (int g = 1; g <= group_count; ++g) {
-    Piece& group = groups[g];
-    const int n = static_cast<int>(group.disparities.size());
-    if (group.area < options.min_area_px || group.box.width > max_width_px) continue;
-    // At least the trusted disparities of one independent matcher window (half a block square):
-    // fewer are one coherent mismatch as often as an object.
-    const int block = std::max(1, disparity.block_size);
-    if (n < std::max({options.min_valid_px, kMinPieceDisparities, block * block / 4})) continue;
-    const double box_area = static_cast<double>(group.box.area());
-    const double valid_fraction = n / box_area;
-    if (static_cast<double>(n) / group.area < options.min_valid_fraction) continue;
-    // Range from the interior when there is enough of it: block matching spreads an object's
-    // disparity a few pixels past its borders.
-    const cv::Mat1b mask = labels(group.box) == g;
-    Summarise(group, disparity.block_size);
-    const double median_px = static_cast<double>(group.median) / kScale;
-    if (!geometry::IsTrustedDisparity(median_px, rig.f_px(), rig.baseline_m(), range)) continue;
-    // At the top of the search range the matcher has run out of disparities: what is nearer than
-    // it can see matches there by chance.
-    if (disparity.num_disparities > 0 &&
-        median_px > disparity.min_disparity + disparity.num_disparities - 1 - kSearchTopMarginPx) {
-      continue;
-    }
-    if (options.max_depth_per_height > 0 &&
-        LeanBack(disparity, labels, g, group.box, median_px, rig, min_rows) > options.max_depth_per_height) {
-      continue;  // terrain leaning back, or level ground
-    }
-    const double height_m = group.box.height * (rig.f_px() * rig.baseline_m() / median_px) / rig.f_px();
-    const bool too_short = group.box.height < min_rows || height_m < options.min_terrain_height_m;
-    // Terrain is below the horizon: the ground model's, or without one the principal point's
-    // row (a level camera's horizon).
-    const double horizon_row = ground ? ground->horizon_row : rig.cy();
-    if (options.max_attached_fraction < 1 && too_short && group.box.y + group.box.height > horizon_row &&
-        AttachedFraction(disparity, labels, g, group.box, median_px, range.min_disparity_px, ring_in,
-                         ring_out) > options.max_attached_fraction) {
-      continue;  // a patch of a continuous surface
-    }
-
-    Detection d;
-    d.bbox = group.box;
-    d.centroid_px = cv::Point2d(group.sum_x / group.area, group.sum_y / group.area);
-    d.area_px = group.area;
-    // Perimeter: of the box (a sparsely matched hypothesis has no outline of its own).
-    d.perimeter_px = 2.0 * (group.box.width + group.box.height);
-    d.disparity_px = median_px;
-    d.valid_disparities = n;
-    d.valid_fraction = std::clamp(valid_fraction, 0.0, 1.0);
-    // Without a fit: the median's own uncertainty and the matcher's sub-pixel bias.
-    d.disparity_sigma_px = std::hypot(group.median_sigma / kScale, kMatcherBiasPx);
-    bool refined_ok = false;
-    if (full != nullptr && !full->left.empty()) {
-      const int k = std::max(1, full->binning);
-      const cv::Rect full_box = cv::Rect(group.box.x * k, group.box.y * k, group.box.width * k,
-                                         group.box.height * k) &
-                                cv::Rect(0, 0, full->left.cols, full->left.rows);
-      // The fit runs over the pixels at the hypothesis' own range (a box's oblique faces and a
-      // halo at other disparities would pull it off its nearest face).
-      const int band = std::max(kScale * 3 / 8, static_cast<int>(std::lround(0.02 * median_px * kScale)));
-      const int median_fixed = static_cast<int>(std::lround(median_px * kScale));
-      cv::Mat1b at_range(mask.size());
-      for (int y = 0; y < mask.rows; ++y) {
-        const int16_t* dd = fixed[group.box.y + y] + group.box.x;
-        const uchar* c = classes[group.box.y + y] + group.box.x;
-        const uchar* m = mask[y];
-        uchar* o = at_range[y];
-        for (int x = 0; x < mask.cols; ++x) {
-          const bool near = (m[x] != 0) & (c[x] == kCandidate) & (std::abs(dd[x] - median_fixed) <= band);
-          o[x] = near ? 255 : 0;
-        }
-      }
-      cv::Mat1b full_mask;
-      cv::resize(at_range, full_mask, cv::Size(group.box.width * k, group.box.height * k), 0, 0,
-                 cv::INTER_NEAREST);
-      full_mask = full_mask(cv::Rect(0, 0, full_box.width, full_box.height));
-      const std::optional<RefinedDisparity> refined =
-          RefineDisparity(full->left, full->right, full_mask, full_box, median_px * k);
-      if (refined && std::abs(refined->disparity_px - median_px * k) <= std::max(1.5 * k, 0.2 * median_px * k)) {
-        d.disparity_px = refined->disparity_px / k;
-        d.disparity_sigma_px = refined->sigma_px / k;
-        refined_ok = true;
-      }
-    }
-    if (!refined_ok && interior > 1) {
-      // No fit: the median of the interior when there is enough of it (block matching spreads an
-      // object's disparity a few pixels past its borders).
-      std::vector<int16_t> inner;
-      cv::Mat1b eroded;
-      cv::erode(mask, eroded, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(interior, interior)),
-                cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
-      for (int y = 0; y < eroded.rows; ++y) {
-        const uchar* e = eroded[y];
-        const uchar* c = classes[group.box.y + y] + group.box.x;
-        const int16_t* dd = fixed[group.box.y + y] + group.box.x;
-        for (int x = 0; x < eroded.cols; ++x) {
-          if (e[x] && c[x] == kCandidate) inner.push_back(dd[x]);
-        }
-      }
-      if (static_cast<int>(inner.size()) >= std::max(30, n / 4)) {
-        d.disparity_px = static_cast<double>(Percentiles(inner)[1]) / kScale;
-      }
-    }
-    // A hypothesis whose own disparity is this uncertain says nothing about where it is: its
-    // range is not trusted.
-    if (d.disparity_sigma_px > kMaxRelativeDisparitySigma * d.disparity_px) continue;
-    FillRange(d, rig, range);
-    // Score: how much of the hypothesis the stereo supports, and how consistently.
-    int consistent = 0;
-    const double band = std::max(1.0, 0.1 * median_px) * kScale;
-    for (int16_t v : group.disparities) consistent += std::abs(v - median_px * kScale) <= band;
-    d.score = std::clamp(std::min(1.0, 2.0 * static_cast<double>(n) / group.area), 0.0, 1.0) *
-              (static_cast<double>(consistent) / n);
-    d.extractor = std::string(extractor);
-    out.push_back(std::move(d));
-    out_region.push_back({group.region, g});
+    std::optional<Detection> d = RangeGroup(ctx, limits, labels, g, groups[g]);
+    if (!d) continue;
+    out.push_back(std::move(*d));
+    out_region.push_back({groups[g].region, g});
   }
   // 4. A closed outline is one object (region_gap_fraction 0): a hypothesis alone in its region,
   //    with no other trusted disparity in it, takes the region's extent. The stereo matched only
