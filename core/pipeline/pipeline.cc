@@ -45,6 +45,53 @@ Error Invalid(std::string message) {
 
 }  // namespace
 
+// A frame's images through the front end: the processed (binned) pair, and the full-resolution
+// left and right the detectors range on.
+struct FrameImages {
+  cv::Mat rect_left;        // processed left: published in the FrameResult
+  cv::Mat rect_right;       // processed right: only read
+  cv::Mat full_left;        // the camera-resolution rectified left: only read
+  cv::Mat rect_right_full;  // the camera-resolution rectified right: only read
+};
+
+namespace {
+
+// Stage: extract. The detectors work on the processed (binned) images, where the disparity floor
+// (camera pixels) is divided by the binning; each hypothesis is then ranged on the camera's own
+// images.
+void Extract(const PipelineConfig& config, int factor, const FrameImages& images, FrameResult& result) {
+  const geometry::StereoRig& work_rig = *result.rig;
+  geometry::RangeOptions range = config.range;
+  range.min_disparity_px /= factor;
+  detection::FullResolutionPair full;
+  if (factor > 1) {
+    full.left = images.full_left;
+    full.right = images.rect_right_full;
+  } else {
+    full.left = images.rect_left;
+    full.right = images.rect_right;
+  }
+  full.binning = factor;
+  if (full.left.type() != CV_8UC1 || full.right.type() != CV_8UC1) full = {};
+  const cv::Mat& rect_left = images.rect_left;
+  switch (config.algorithm) {
+    case Algorithm::kCanonical:
+      result.detections =
+          detection::DetectCanonical(result.disparity, work_rig, range, config.canonical, &full);
+      break;
+    case Algorithm::kSteViE:
+      result.detections =
+          detection::DetectSteViE(rect_left, result.disparity, work_rig, range, config.stevie, &full);
+      break;
+    case Algorithm::kSteViS:
+      result.detections =
+          detection::DetectSteViS(rect_left, result.disparity, work_rig, range, config.stevis, &full);
+      break;
+  }
+}
+
+}  // namespace
+
 struct FrontEnd::State {
   // The matcher and the options it was built with (rebuilt when they change).
   std::unique_ptr<stereo::DisparityMatcher> matcher;
@@ -60,7 +107,79 @@ struct FrontEnd::State {
   std::shared_ptr<const geometry::StereoRig> binned_from;
   int binned_factor = 1;
   std::shared_ptr<const geometry::StereoRig> binned_rig;
+
+  // Stage: rectify, then bin by `factor` (PipelineConfig::max_width_px): `images` and, when
+  // binning, result.rig and result.binning. The published left image is a fresh buffer; when
+  // binning, the full-size left is only read (the caller's grey image, or a buffer kept between
+  // frames) and the binned one is published.
+  Status Rectify(const StereoFrame& frame, const Snapshot& snapshot, int factor,
+                 FrameImages& images, FrameResult& result);
+  // Stage: disparity, with the matcher rebuilt when its options changed.
+  Status ComputeDisparity(const stereo::MatcherOptions& options, const FrameImages& images,
+                          FrameResult& result);
 };
+
+Status FrontEnd::State::Rectify(const StereoFrame& frame, const Snapshot& snapshot, int factor,
+                                FrameImages& images, FrameResult& result) {
+  const geometry::StereoRig& rig = *snapshot.rig;
+  cv::Mat& full_out = factor > 1 ? full_left : images.rect_left;
+  cv::Mat& out_left = images.full_left;  // never written to from here
+  cv::Mat& out_right = images.rect_right;  // a view of frame.right or of rect_right; never written to
+  if (frame.rectified) {
+    if (factor > 1 && frame.left.type() == CV_8UC1) {
+      out_left = frame.left;  // only read: no copy needed
+    } else if (ToGrey(frame.left, full_out)) {
+      out_left = full_out;
+    } else {
+      return Invalid("frame.left: unsupported image type " + cv::typeToString(frame.left.type()) +
+                     " (want CV_8UC1 or CV_8UC3)");
+    }
+    if (frame.right.type() == CV_8UC1) {
+      out_right = frame.right;  // only read: no copy needed
+    } else if (ToGrey(frame.right, rect_right)) {
+      out_right = rect_right;
+    } else {
+      return Invalid("frame.right: unsupported image type " + cv::typeToString(frame.right.type()) +
+                     " (want CV_8UC1 or CV_8UC3)");
+    }
+  } else {
+    Status status = rig.Rectify(frame.left, frame.right, full_out, rect_right);
+    if (!status.ok()) return status.error();
+    out_left = full_out;
+    out_right = rect_right;
+  }
+  // From here on the frame is the binned one, with its own rig.
+  images.rect_right_full = out_right;
+  if (factor > 1) {
+    if (binned_from != snapshot.rig || binned_factor != factor) {
+      binned_rig = std::make_shared<const geometry::StereoRig>(rig.Binned(factor));
+      binned_from = snapshot.rig;
+      binned_factor = factor;
+    }
+    geometry::BinImage(out_left, factor, images.rect_left);
+    geometry::BinImage(out_right, factor, binned_right);
+    out_right = binned_right;
+    result.rig = binned_rig;
+    result.binning = factor;
+  }
+  return Status::Ok();
+}
+
+Status FrontEnd::State::ComputeDisparity(const stereo::MatcherOptions& options,
+                                         const FrameImages& images, FrameResult& result) {
+  if (matcher == nullptr || !(matcher_options == options)) {
+    const std::vector<std::string> problems = options.Validate();
+    if (!problems.empty()) {
+      std::vector<std::string> prefixed;
+      AppendPrefixed(prefixed, "matcher.", problems);
+      return Error::Invalid(prefixed);
+    }
+    matcher = stereo::MakeMatcher(options);
+    matcher_options = options;
+  }
+  result.disparity = matcher->Compute(images.rect_left, images.rect_right);
+  return Status::Ok();
+}
 
 FrontEnd::FrontEnd() : state_(std::make_unique<State>()) {}
 FrontEnd::~FrontEnd() = default;
@@ -112,103 +231,23 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
   result.rig = snapshot.rig;
   result.timings.reserve(6);
 
-  // Stage: rectify, then bin (PipelineConfig::max_width_px). The published left image is a fresh
-  // buffer; when binning, the full-size left is only read (the caller's grey image, or a buffer
-  // kept between frames) and the binned one is published.
   Clock::time_point t = Clock::now();
   const int factor =
       geometry::BinningFactor(want.width, config.max_width_px, config.range.min_disparity_px);
-  cv::Mat rect_left;
-  cv::Mat& full_out = factor > 1 ? state_->full_left : rect_left;
-  cv::Mat full_left;   // never written to from here
-  cv::Mat rect_right;  // a view of frame.right or of state_->rect_right; never written to
-  if (frame.rectified) {
-    if (factor > 1 && frame.left.type() == CV_8UC1) {
-      full_left = frame.left;  // only read: no copy needed
-    } else if (ToGrey(frame.left, full_out)) {
-      full_left = full_out;
-    } else {
-      return Invalid("frame.left: unsupported image type " + cv::typeToString(frame.left.type()) +
-                     " (want CV_8UC1 or CV_8UC3)");
-    }
-    if (frame.right.type() == CV_8UC1) {
-      rect_right = frame.right;  // only read: no copy needed
-    } else if (ToGrey(frame.right, state_->rect_right)) {
-      rect_right = state_->rect_right;
-    } else {
-      return Invalid("frame.right: unsupported image type " + cv::typeToString(frame.right.type()) +
-                     " (want CV_8UC1 or CV_8UC3)");
-    }
-  } else {
-    Status status = rig.Rectify(frame.left, frame.right, full_out, state_->rect_right);
-    if (!status.ok()) return status.error();
-    full_left = full_out;
-    rect_right = state_->rect_right;
-  }
-  // From here on the frame is the binned one, with its own rig.
-  const cv::Mat rect_right_full = rect_right;
-  if (factor > 1) {
-    if (state_->binned_from != snapshot.rig || state_->binned_factor != factor) {
-      state_->binned_rig = std::make_shared<const geometry::StereoRig>(rig.Binned(factor));
-      state_->binned_from = snapshot.rig;
-      state_->binned_factor = factor;
-    }
-    geometry::BinImage(full_left, factor, rect_left);
-    geometry::BinImage(rect_right, factor, state_->binned_right);
-    rect_right = state_->binned_right;
-    result.rig = state_->binned_rig;
-    result.binning = factor;
-  }
-  const geometry::StereoRig& work_rig = *result.rig;
+  FrameImages images;
+  Status status = state_->Rectify(frame, snapshot, factor, images, result);
+  if (!status.ok()) return status.error();
   result.timings.push_back({"rectify", MsSince(t)});
 
-  // Stage: disparity.
   t = Clock::now();
-  if (state_->matcher == nullptr || !(state_->matcher_options == config.matcher)) {
-    const std::vector<std::string> problems = config.matcher.Validate();
-    if (!problems.empty()) {
-      std::vector<std::string> prefixed;
-      for (const std::string& p : problems) prefixed.push_back("matcher." + p);
-      return Error::Invalid(prefixed);
-    }
-    state_->matcher = stereo::MakeMatcher(config.matcher);
-    state_->matcher_options = config.matcher;
-  }
-  result.disparity = state_->matcher->Compute(rect_left, rect_right);
+  status = state_->ComputeDisparity(config.matcher, images, result);
+  if (!status.ok()) return status.error();
   result.timings.push_back({"disparity", MsSince(t)});
 
-  // Stage: extract. The detectors work on the processed (binned) images, where the disparity
-  // floor (camera pixels) is divided by the binning; each hypothesis is then ranged on the
-  // camera's own images.
   t = Clock::now();
-  geometry::RangeOptions range = config.range;
-  range.min_disparity_px /= factor;
-  detection::FullResolutionPair full;
-  if (factor > 1) {
-    full.left = full_left;
-    full.right = rect_right_full;
-  } else {
-    full.left = rect_left;
-    full.right = rect_right;
-  }
-  full.binning = factor;
-  if (full.left.type() != CV_8UC1 || full.right.type() != CV_8UC1) full = {};
-  switch (config.algorithm) {
-    case Algorithm::kCanonical:
-      result.detections =
-          detection::DetectCanonical(result.disparity, work_rig, range, config.canonical, &full);
-      break;
-    case Algorithm::kSteViE:
-      result.detections =
-          detection::DetectSteViE(rect_left, result.disparity, work_rig, range, config.stevie, &full);
-      break;
-    case Algorithm::kSteViS:
-      result.detections =
-          detection::DetectSteViS(rect_left, result.disparity, work_rig, range, config.stevis, &full);
-      break;
-  }
+  Extract(config, factor, images, result);
   result.timings.push_back({"extract", MsSince(t)});
-  result.rectified_left = std::move(rect_left);
+  result.rectified_left = std::move(images.rect_left);
   prepared.ms = MsSince(start);
   return prepared;
 }
