@@ -373,25 +373,16 @@ __attribute__((target("avx2"), noinline)) void MatchRowInRegisters(
 }
 #endif
 
-// Column sums updated row by row, running sums along x: the cost of a pixel is O(nd), whatever
-// the block size. T holds every block sum exactly (16 bits when block^2 * 2 * cap < 32767).
-//
-// kVectors > 0 (AVX2, 16-bit costs only): the rows go through MatchRowInRegisters.
-template <typename T, int kBytes, typename P, int kVectors = 0>
-[[gnu::always_inline]] inline void MatchKernel(const Job& job) {
+// The first row's window: rows y0 - half .. y0 + half (all inside the image), summed per window
+// column into `cols` (its zero column before it cleared too) and `tex`.
+template <typename T, int kBytes, typename P>
+[[gnu::always_inline]] inline void InitWindow(const Job& job, T* cols, int* tex, int ncols) {
   using V = typename Lanes<T, kBytes>::V;
   using Bytes = typename Lanes<T, kBytes>::Bytes;
   constexpr int kLanes = Lanes<T, kBytes>::kCount;
   const int nd = job.nd;
   const int half = job.half;
-  const int span = 2 * half;
-  const int ncols = job.x1 - job.x0 + span;
   const P* const right = static_cast<const P*>(job.right);
-  T* const sad = static_cast<T*>(job.cost);
-  T* const cols = sad + 2 * nd;  // window column jj at cols + jj * nd; cols - nd: zeros
-  int* const tex = job.texture_col + 1;
-
-  // The first row's window: rows y0 - half .. y0 + half (all inside the image).
   std::fill(cols - nd, cols + static_cast<size_t>(ncols) * nd, T{0});
   std::fill(tex - 1, tex + ncols, 0);
   for (int r = job.y0 - half; r <= job.y0 + half; ++r) {
@@ -416,9 +407,96 @@ template <typename T, int kBytes, typename P, int kVectors = 0>
     }
   }
 
+}
+
+// One row of pixels, for any nd: the costs go through memory (`sad`), as wide as the vectors.
+// `tsum`: the texture of the row's first window minus its last column.
+template <typename T, int kBytes, typename P>
+[[gnu::always_inline]] inline void MatchRowGeneric(const Job& job, T* sad, T* cols, int* tex, int tsum,
+                                                   bool slide, const uint8_t* left_add,
+                                                   const uint8_t* left_sub, const P* right_add,
+                                                   const P* right_sub, int16_t* out) {
+  using V = typename Lanes<T, kBytes>::V;
+  constexpr int kLanes = Lanes<T, kBytes>::kCount;
+  const int nd = job.nd;
+  const int span = 2 * job.half;
   V lane;
   for (int i = 0; i < kLanes; ++i) lane[i] = static_cast<T>(i);
   const V big = V{} + std::numeric_limits<T>::max();
+  for (int x = job.x0; x < job.x1; ++x) {
+    const int jadd = x - job.x0 + span;
+    const int jsub = jadd - span - 1;  // -1 (the zero column) at the first pixel
+    T* const add_col = cols + static_cast<ptrdiff_t>(jadd) * nd;
+    const T* const sub_col = cols + static_cast<ptrdiff_t>(jsub) * nd;
+    if (slide) {
+      SlideColumn<T, kBytes, P>(job, jadd, left_add, left_sub, right_add, right_sub, add_col,
+                                tex + jadd);
+    }
+    tsum += tex[jadd] - tex[jsub];
+
+    // SADs, and per lane the minimum and the first block reaching it.
+    V vmin = big;
+    V vblock = V{};
+    for (int k = 0; k < nd; k += kLanes) {
+      V s, a, b;
+      Load(s, sad + k);
+      Load(a, add_col + k);
+      Load(b, sub_col + k);
+      s += a - b;
+      Store(sad + k, s);
+      const V lower = s < vmin;
+      vmin = lower ? s : vmin;
+      vblock = lower ? V{} + static_cast<T>(k) : vblock;
+    }
+    if (tsum < job.texture_threshold) {
+      out[x] = job.filtered;
+      continue;
+    }
+    const int min_sad = HorizontalMin(vmin);
+    const V candidates = vmin == V{} + static_cast<T>(min_sad) ? vblock + lane : big;
+    const int best = HorizontalMin(candidates);
+
+    if (job.uniqueness_ratio > 0) {
+      const int thresh = std::min(min_sad + min_sad * job.uniqueness_ratio / 100,
+                                  static_cast<int>(std::numeric_limits<T>::max()));
+      const V tv = V{} + static_cast<T>(thresh);
+      const V first_exempt = V{} + static_cast<T>(best - 1);
+      const V last_exempt = V{} + static_cast<T>(best + 1);
+      V index = lane;
+      V rival = V{};
+      for (int k = 0; k < nd; k += kLanes) {
+        V s;
+        Load(s, sad + k);
+        rival |= (s <= tv) & ((index < first_exempt) | (index > last_exempt));
+        index += static_cast<T>(kLanes);
+      }
+      if (Any(rival)) {
+        out[x] = job.filtered;
+        continue;
+      }
+    }
+    out[x] = Interpolated(sad, best, nd, job.max_disp);
+  }
+}
+
+// Column sums updated row by row, running sums along x: the cost of a pixel is O(nd), whatever
+// the block size. T holds every block sum exactly (16 bits when block^2 * 2 * cap < 32767).
+//
+// kVectors > 0 (AVX2, 16-bit costs only): the rows go through MatchRowInRegisters.
+template <typename T, int kBytes, typename P, int kVectors = 0>
+[[gnu::always_inline]] inline void MatchKernel(const Job& job) {
+  using V = typename Lanes<T, kBytes>::V;
+  constexpr int kLanes = Lanes<T, kBytes>::kCount;
+  const int nd = job.nd;
+  const int half = job.half;
+  const int span = 2 * half;
+  const int ncols = job.x1 - job.x0 + span;
+  const P* const right = static_cast<const P*>(job.right);
+  T* const sad = static_cast<T*>(job.cost);
+  T* const cols = sad + 2 * nd;  // window column jj at cols + jj * nd; cols - nd: zeros
+  int* const tex = job.texture_col + 1;
+
+  InitWindow<T, kBytes, P>(job, cols, tex, ncols);
 
   for (int y = job.y0; y < job.y1; ++y) {
     const bool slide = y > job.y0;
@@ -458,60 +536,8 @@ template <typename T, int kBytes, typename P, int kVectors = 0>
       continue;
     }
 #endif
-    for (int x = job.x0; x < job.x1; ++x) {
-      const int jadd = x - job.x0 + span;
-      const int jsub = jadd - span - 1;  // -1 (the zero column) at the first pixel
-      T* const add_col = cols + static_cast<ptrdiff_t>(jadd) * nd;
-      const T* const sub_col = cols + static_cast<ptrdiff_t>(jsub) * nd;
-      if (slide) {
-        SlideColumn<T, kBytes, P>(job, jadd, left_add, left_sub, right_add, right_sub, add_col,
-                                  tex + jadd);
-      }
-      tsum += tex[jadd] - tex[jsub];
-
-      // SADs, and per lane the minimum and the first block reaching it.
-      V vmin = big;
-      V vblock = V{};
-      for (int k = 0; k < nd; k += kLanes) {
-        V s, a, b;
-        Load(s, sad + k);
-        Load(a, add_col + k);
-        Load(b, sub_col + k);
-        s += a - b;
-        Store(sad + k, s);
-        const V lower = s < vmin;
-        vmin = lower ? s : vmin;
-        vblock = lower ? V{} + static_cast<T>(k) : vblock;
-      }
-      if (tsum < job.texture_threshold) {
-        out[x] = job.filtered;
-        continue;
-      }
-      const int min_sad = HorizontalMin(vmin);
-      const V candidates = vmin == V{} + static_cast<T>(min_sad) ? vblock + lane : big;
-      const int best = HorizontalMin(candidates);
-
-      if (job.uniqueness_ratio > 0) {
-        const int thresh = std::min(min_sad + min_sad * job.uniqueness_ratio / 100,
-                                    static_cast<int>(std::numeric_limits<T>::max()));
-        const V tv = V{} + static_cast<T>(thresh);
-        const V first_exempt = V{} + static_cast<T>(best - 1);
-        const V last_exempt = V{} + static_cast<T>(best + 1);
-        V index = lane;
-        V rival = V{};
-        for (int k = 0; k < nd; k += kLanes) {
-          V s;
-          Load(s, sad + k);
-          rival |= (s <= tv) & ((index < first_exempt) | (index > last_exempt));
-          index += static_cast<T>(kLanes);
-        }
-        if (Any(rival)) {
-          out[x] = job.filtered;
-          continue;
-        }
-      }
-      out[x] = Interpolated(sad, best, nd, job.max_disp);
-    }
+    MatchRowGeneric<T, kBytes, P>(job, sad, cols, tex, tsum, slide, left_add, left_sub, right_add,
+                                  right_sub, out);
   }
 }
 
@@ -578,6 +604,123 @@ void SadBlockMatcher::ForcePortable(bool force) { g_force_portable.store(force);
 
 bool SadBlockMatcher::UsesAvx2() { return !g_force_portable.load() && CpuHasAvx2(); }
 
+void SadBlockMatcher::RunKernel(int x0, int x1, int y0, int y1, cv::Mat& disparity) {
+  const int w = left_filtered_.cols;
+  const int nd = p_.num_disparities;
+  const int half = p_.block_size / 2;
+  const int cap = p_.prefilter_cap;
+  const int max_disp = p_.min_disparity + nd - 1;
+  const int16_t filtered = static_cast<int16_t>((p_.min_disparity - 1) * 16);
+  const int ncols = x1 - x0 + 2 * half;
+  // Stripes of at least four blocks' height: below that the window set-up dominates.
+  const int stripes = std::clamp((y1 - y0) / (4 * p_.block_size), 1, p_.stripes);
+  const size_t texture_size = static_cast<size_t>(ncols) + 1;
+  left_col_.resize(static_cast<size_t>(ncols));
+  right_col_.resize(static_cast<size_t>(ncols));
+  texture_col_.resize(texture_size * stripes);
+  for (int jj = 0; jj < ncols; ++jj) {
+    const int j = x0 - half + jj;
+    left_col_[jj] = std::clamp(j, 0, w - 1);
+    right_col_[jj] = std::clamp(j - max_disp, 0, w - nd);
+  }
+  Job job{};
+  job.left = left_filtered_.ptr<uint8_t>();
+  job.left_step = left_filtered_.step[0];
+  job.disp = disparity.ptr<int16_t>();
+  job.disp_step = disparity.step1();
+  job.y0 = y0;
+  job.y1 = y1;
+  job.x0 = x0;
+  job.x1 = x1;
+  job.half = half;
+  job.nd = nd;
+  job.max_disp = max_disp;
+  job.cap = cap;
+  job.texture_threshold = p_.texture_threshold;
+  job.uniqueness_ratio = p_.uniqueness_ratio;
+  job.filtered = filtered;
+  job.left_col = left_col_.data();
+  job.right_col = right_col_.data();
+  job.texture_col = texture_col_.data();
+  const size_t cost_size = static_cast<size_t>(ncols + 2) * nd;
+  const bool avx2 = UsesAvx2();
+  void (*kernel)(const Job&) = nullptr;
+  const bool costs16 = p_.block_size * p_.block_size * 2 * cap < std::numeric_limits<int16_t>::max();
+  if (costs16) {
+    if (cost16_.size() < cost_size * stripes) cost16_.resize(cost_size * stripes);
+    right_filtered_.convertTo(right_wide_, CV_16SC1);
+    job.right = right_wide_.ptr<int16_t>();
+    job.right_step = right_wide_.step1();
+    kernel = MatchPortable16;
+#if defined(__x86_64__) || defined(__i386__)
+    if (avx2) {
+      switch (nd) {
+        case 32: kernel = MatchAvx2_16x32; break;
+        case 64: kernel = MatchAvx2_16x64; break;
+        case 128: kernel = MatchAvx2_16x128; break;
+        default: kernel = MatchAvx2_16; break;
+      }
+    }
+#endif
+  } else {
+    if (cost32_.size() < cost_size * stripes) cost32_.resize(cost_size * stripes);
+    job.right = right_filtered_.ptr<uint8_t>();
+    job.right_step = right_filtered_.step1();
+    kernel = MatchPortable32;
+#if defined(__x86_64__) || defined(__i386__)
+    if (avx2) kernel = MatchAvx2_32;
+#endif
+  }
+  // Each stripe starts its window afresh (its own cost and texture buffers): the sums are exact
+  // integers, so the output is the same as one pass over all rows.
+  std::vector<Job> jobs(static_cast<size_t>(stripes), job);
+  for (int s = 0; s < stripes; ++s) {
+    Job& stripe = jobs[static_cast<size_t>(s)];
+    stripe.y0 = y0 + (y1 - y0) * s / stripes;
+    stripe.y1 = y0 + (y1 - y0) * (s + 1) / stripes;
+    stripe.texture_col = texture_col_.data() + texture_size * s;
+    stripe.cost = costs16 ? static_cast<void*>(cost16_.data() + cost_size * s)
+                          : static_cast<void*>(cost32_.data() + cost_size * s);
+  }
+  std::vector<std::thread> helpers;
+  for (int s = 1; s < stripes; ++s) helpers.emplace_back(kernel, std::cref(jobs[s]));
+  kernel(jobs[0]);
+  for (std::thread& helper : helpers) helper.join();
+}
+
+void SadBlockMatcher::ComputeOverrun(int x_end, int y1, cv::Mat& disparity) {
+  const int w = left_filtered_.cols;
+  const int nd = p_.num_disparities;
+  const int half = p_.block_size / 2;
+  const int cap = p_.prefilter_cap;
+  const int max_disp = p_.min_disparity + nd - 1;
+  const int16_t filtered = static_cast<int16_t>((p_.min_disparity - 1) * 16);
+  for (int x = w; x < x_end; ++x) {
+    const int y = y1 - 1;
+    sad_scalar_.assign(static_cast<size_t>(nd), 0);
+    int tsum = 0;
+    for (int r = y - half; r <= y + half; ++r) {
+      const uint8_t* lrow = left_filtered_.ptr<uint8_t>(r);
+      const uint8_t* rrow = right_filtered_.ptr<uint8_t>(r);
+      for (int j = x - half; j <= x + half; ++j) {
+        const int lv = lrow[std::clamp(j, 0, w - 1)];
+        const uint8_t* rp = rrow + std::clamp(j - max_disp, 0, w - nd);
+        for (int k = 0; k < nd; ++k) sad_scalar_[k] += std::abs(lv - rp[k]);
+        tsum += std::abs(lv - cap);
+      }
+    }
+    const int* sad = sad_scalar_.data();
+    const int best = static_cast<int>(std::min_element(sad, sad + nd) - sad);
+    const int thresh = sad[best] + sad[best] * p_.uniqueness_ratio / 100;
+    bool unique = true;
+    for (int k = 0; k < nd && p_.uniqueness_ratio > 0; ++k) {
+      if ((k < best - 1 || k > best + 1) && sad[k] <= thresh) unique = false;
+    }
+    int16_t& out = disparity.at<int16_t>(y + 1, x - w);
+    out = tsum < p_.texture_threshold || !unique ? filtered : Interpolated(sad, best, nd, max_disp);
+  }
+}
+
 void SadBlockMatcher::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat& disparity) {
   CV_Assert(left.type() == CV_8UC1 && right.type() == CV_8UC1);
   CV_Assert(left.size() == right.size());
@@ -608,109 +751,8 @@ void SadBlockMatcher::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat
   PrefilterXSobel(left, left_filtered_, cap);
   PrefilterXSobel(right, right_filtered_, cap);
 
-  if (x1 > x0) {
-    const int ncols = x1 - x0 + 2 * half;
-    // Stripes of at least four blocks' height: below that the window set-up dominates.
-    const int stripes = std::clamp((y1 - y0) / (4 * p_.block_size), 1, p_.stripes);
-    const size_t texture_size = static_cast<size_t>(ncols) + 1;
-    left_col_.resize(static_cast<size_t>(ncols));
-    right_col_.resize(static_cast<size_t>(ncols));
-    texture_col_.resize(texture_size * stripes);
-    for (int jj = 0; jj < ncols; ++jj) {
-      const int j = x0 - half + jj;
-      left_col_[jj] = std::clamp(j, 0, w - 1);
-      right_col_[jj] = std::clamp(j - max_disp, 0, w - nd);
-    }
-    Job job{};
-    job.left = left_filtered_.ptr<uint8_t>();
-    job.left_step = left_filtered_.step[0];
-    job.disp = disparity.ptr<int16_t>();
-    job.disp_step = disparity.step1();
-    job.y0 = y0;
-    job.y1 = y1;
-    job.x0 = x0;
-    job.x1 = x1;
-    job.half = half;
-    job.nd = nd;
-    job.max_disp = max_disp;
-    job.cap = cap;
-    job.texture_threshold = p_.texture_threshold;
-    job.uniqueness_ratio = p_.uniqueness_ratio;
-    job.filtered = filtered;
-    job.left_col = left_col_.data();
-    job.right_col = right_col_.data();
-    job.texture_col = texture_col_.data();
-    const size_t cost_size = static_cast<size_t>(ncols + 2) * nd;
-    const bool avx2 = UsesAvx2();
-    void (*kernel)(const Job&) = nullptr;
-    const bool costs16 = p_.block_size * p_.block_size * 2 * cap < std::numeric_limits<int16_t>::max();
-    if (costs16) {
-      if (cost16_.size() < cost_size * stripes) cost16_.resize(cost_size * stripes);
-      right_filtered_.convertTo(right_wide_, CV_16SC1);
-      job.right = right_wide_.ptr<int16_t>();
-      job.right_step = right_wide_.step1();
-      kernel = MatchPortable16;
-#if defined(__x86_64__) || defined(__i386__)
-      if (avx2) {
-        switch (nd) {
-          case 32: kernel = MatchAvx2_16x32; break;
-          case 64: kernel = MatchAvx2_16x64; break;
-          case 128: kernel = MatchAvx2_16x128; break;
-          default: kernel = MatchAvx2_16; break;
-        }
-      }
-#endif
-    } else {
-      if (cost32_.size() < cost_size * stripes) cost32_.resize(cost_size * stripes);
-      job.right = right_filtered_.ptr<uint8_t>();
-      job.right_step = right_filtered_.step1();
-      kernel = MatchPortable32;
-#if defined(__x86_64__) || defined(__i386__)
-      if (avx2) kernel = MatchAvx2_32;
-#endif
-    }
-    // Each stripe starts its window afresh (its own cost and texture buffers): the sums are exact
-    // integers, so the output is the same as one pass over all rows.
-    std::vector<Job> jobs(static_cast<size_t>(stripes), job);
-    for (int s = 0; s < stripes; ++s) {
-      Job& stripe = jobs[static_cast<size_t>(s)];
-      stripe.y0 = y0 + (y1 - y0) * s / stripes;
-      stripe.y1 = y0 + (y1 - y0) * (s + 1) / stripes;
-      stripe.texture_col = texture_col_.data() + texture_size * s;
-      stripe.cost = costs16 ? static_cast<void*>(cost16_.data() + cost_size * s)
-                            : static_cast<void*>(cost32_.data() + cost_size * s);
-    }
-    std::vector<std::thread> helpers;
-    for (int s = 1; s < stripes; ++s) helpers.emplace_back(kernel, std::cref(jobs[s]));
-    kernel(jobs[0]);
-    for (std::thread& helper : helpers) helper.join();
-  }
-
-  // OpenCV's overrun past the row end (see the top of this file): pixels computed one by one.
-  for (int x = w; x < lofs + width1; ++x) {
-    const int y = y1 - 1;
-    sad_scalar_.assign(static_cast<size_t>(nd), 0);
-    int tsum = 0;
-    for (int r = y - half; r <= y + half; ++r) {
-      const uint8_t* lrow = left_filtered_.ptr<uint8_t>(r);
-      const uint8_t* rrow = right_filtered_.ptr<uint8_t>(r);
-      for (int j = x - half; j <= x + half; ++j) {
-        const int lv = lrow[std::clamp(j, 0, w - 1)];
-        const uint8_t* rp = rrow + std::clamp(j - max_disp, 0, w - nd);
-        for (int k = 0; k < nd; ++k) sad_scalar_[k] += std::abs(lv - rp[k]);
-        tsum += std::abs(lv - cap);
-      }
-    }
-    const int* sad = sad_scalar_.data();
-    const int best = static_cast<int>(std::min_element(sad, sad + nd) - sad);
-    const int thresh = sad[best] + sad[best] * p_.uniqueness_ratio / 100;
-    bool unique = true;
-    for (int k = 0; k < nd && p_.uniqueness_ratio > 0; ++k) {
-      if ((k < best - 1 || k > best + 1) && sad[k] <= thresh) unique = false;
-    }
-    int16_t& out = disparity.at<int16_t>(y + 1, x - w);
-    out = tsum < p_.texture_threshold || !unique ? filtered : Interpolated(sad, best, nd, max_disp);
-  }
+  if (x1 > x0) RunKernel(x0, x1, y0, y1, disparity);
+  ComputeOverrun(lofs + width1, y1, disparity);
 
   if (p_.speckle_window_size > 0) {
     cv::filterSpeckles(disparity, filtered, p_.speckle_window_size, p_.speckle_range,

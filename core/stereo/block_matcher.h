@@ -50,6 +50,13 @@ class SadBlockMatcher {
   static bool UsesAvx2();
 
  private:
+  // The vector kernel over the valid rectangle [x0, x1) x [y0, y1) of the pre-filtered images, in
+  // row stripes on threads of their own.
+  void RunKernel(int x0, int x1, int y0, int y1, cv::Mat& disparity);
+  // OpenCV's overrun past the row end (block_matcher.cc's top comment): columns w .. x_end - 1 of
+  // the last matched row y1 - 1, computed one by one into the next row's first pixels.
+  void ComputeOverrun(int x_end, int y1, cv::Mat& disparity);
+
   SadBlockMatcherParams p_;
   cv::Mat left_filtered_, right_filtered_;  // CV_8UC1 pre-filtered images
   cv::Mat right_wide_;                      // CV_16SC1 copy of right_filtered_ (16-bit kernel)
