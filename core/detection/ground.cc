@@ -46,13 +46,10 @@ std::vector<std::string> GroundOptions::Validate() const {
   return problems;
 }
 
-std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
-                                     const GroundOptions& options) {
-  const cv::Mat1s& fixed = disparity.fixed;
-  if (fixed.empty()) return std::nullopt;
-  const int max_bin = std::max(1, disparity.min_disparity + disparity.num_disparities) + 1;
+namespace {
 
-  // The mode of each row (1 px bins), kept when it dominates the row.
+// The mode of each row (1 px bins), kept when it dominates the row.
+std::vector<RowMode> RowModes(const cv::Mat1s& fixed, int max_bin, const GroundOptions& options) {
   std::vector<RowMode> modes;
   std::vector<int> bins(max_bin);
   std::vector<int64_t> sums(max_bin);  // of fixed-point values: exact
@@ -85,6 +82,74 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
       *best = 0;
     }
   }
+  return modes;
+}
+
+// Model selection against the other surface that fills rows at one disparity per row: a
+// fronto-parallel wall (a building front, a hangar) is a line of slope 0 in v-disparity. When
+// one constant disparity explains nearly as many of the supporting rows as the slanted line
+// does, and those rows are filled only across part of the view (the ground fills its rows from
+// edge to edge, bar what stands on it), the rows are a wall seen where the ground went
+// unmatched, and no ground is modelled: taking the wall for ground would drop the obstacle as
+// terrain. (Far ground seen from high up also spans little disparity, but fills its rows.)
+bool LooksLikeAWall(const std::vector<const RowMode*>& inliers, double best_score,
+                    const GroundOptions& options) {
+  std::vector<double> ds, spreads;
+  ds.reserve(inliers.size());
+  spreads.reserve(inliers.size());
+  for (const RowMode* m : inliers) {
+    ds.push_back(m->disparity_px);
+    spreads.push_back(m->spread);
+  }
+  std::nth_element(ds.begin(), ds.begin() + static_cast<std::ptrdiff_t>(ds.size() / 2), ds.end());
+  std::nth_element(spreads.begin(), spreads.begin() + static_cast<std::ptrdiff_t>(spreads.size() / 2),
+                   spreads.end());
+  const double wall_d = ds[ds.size() / 2];
+  const double median_spread = spreads[spreads.size() / 2];
+  double wall_score = 0, last_row = -1;
+  for (const RowMode* m : inliers) {
+    if (std::abs(m->disparity_px - wall_d) <= options.inlier_px && m->row != last_row) {
+      wall_score += 1;
+      last_row = m->row;
+    }
+  }
+  return wall_score >= kWallShare * best_score && median_spread < kGroundSpread;
+}
+
+// Least squares d = s * row + c over the inlier rows, weighted by their pixel counts; nullopt when
+// the line does not get nearer towards the bottom or its horizon is far off the image.
+std::optional<GroundModel> FitLine(const std::vector<const RowMode*>& inliers, int rows, double best_score) {
+  double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (const RowMode* m : inliers) {
+    const double w = m->count;
+    sw += w;
+    sx += w * m->row;
+    sy += w * m->disparity_px;
+    sxx += w * m->row * m->row;
+    sxy += w * m->row * m->disparity_px;
+  }
+  const double denominator = sw * sxx - sx * sx;
+  if (std::abs(denominator) < 1e-9) return std::nullopt;
+  const double slope = (sw * sxy - sx * sy) / denominator;
+  const double intercept = (sy - slope * sx) / sw;
+  if (!(slope > 1e-3)) return std::nullopt;
+  GroundModel model;
+  model.slope = slope;
+  model.horizon_row = -intercept / slope;
+  if (model.horizon_row < -rows || model.horizon_row > 2.0 * rows) return std::nullopt;
+  model.support_rows = static_cast<int>(best_score);
+  return model;
+}
+
+}  // namespace
+
+std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
+                                     const GroundOptions& options) {
+  const cv::Mat1s& fixed = disparity.fixed;
+  if (fixed.empty()) return std::nullopt;
+  const int max_bin = std::max(1, disparity.min_disparity + disparity.num_disparities) + 1;
+
+  const std::vector<RowMode> modes = RowModes(fixed, max_bin, options);
   if (static_cast<int>(modes.size()) < options.min_support_rows) return std::nullopt;
 
   // RANSAC over pairs of rows: the line with the most supporting rows. Rows count alike: far
@@ -129,57 +194,8 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
     hi = std::max(hi, m->disparity_px);
   }
   if (hi - lo < options.min_span_px) return std::nullopt;
-  // Model selection against the other surface that fills rows at one disparity per row: a
-  // fronto-parallel wall (a building front, a hangar) is a line of slope 0 in v-disparity. When
-  // one constant disparity explains nearly as many of the supporting rows as the slanted line
-  // does, and those rows are filled only across part of the view (the ground fills its rows from
-  // edge to edge, bar what stands on it), the rows are a wall seen where the ground went
-  // unmatched, and no ground is modelled: taking the wall for ground would drop the obstacle as
-  // terrain. (Far ground seen from high up also spans little disparity, but fills its rows.)
-  {
-    std::vector<double> ds, spreads;
-    ds.reserve(inliers.size());
-    spreads.reserve(inliers.size());
-    for (const RowMode* m : inliers) {
-      ds.push_back(m->disparity_px);
-      spreads.push_back(m->spread);
-    }
-    std::nth_element(ds.begin(), ds.begin() + static_cast<std::ptrdiff_t>(ds.size() / 2), ds.end());
-    std::nth_element(spreads.begin(), spreads.begin() + static_cast<std::ptrdiff_t>(spreads.size() / 2),
-                     spreads.end());
-    const double wall_d = ds[ds.size() / 2];
-    const double median_spread = spreads[spreads.size() / 2];
-    double wall_score = 0, last_row = -1;
-    for (const RowMode* m : inliers) {
-      if (std::abs(m->disparity_px - wall_d) <= options.inlier_px && m->row != last_row) {
-        wall_score += 1;
-        last_row = m->row;
-      }
-    }
-    if (wall_score >= kWallShare * best_score && median_spread < kGroundSpread) return std::nullopt;
-  }
-
-  // Least squares d = s * row + c over the inlier rows.
-  double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
-  for (const RowMode* m : inliers) {
-    const double w = m->count;
-    sw += w;
-    sx += w * m->row;
-    sy += w * m->disparity_px;
-    sxx += w * m->row * m->row;
-    sxy += w * m->row * m->disparity_px;
-  }
-  const double denominator = sw * sxx - sx * sx;
-  if (std::abs(denominator) < 1e-9) return std::nullopt;
-  const double slope = (sw * sxy - sx * sy) / denominator;
-  const double intercept = (sy - slope * sx) / sw;
-  if (!(slope > 1e-3)) return std::nullopt;
-  GroundModel model;
-  model.slope = slope;
-  model.horizon_row = -intercept / slope;
-  if (model.horizon_row < -fixed.rows || model.horizon_row > 2.0 * fixed.rows) return std::nullopt;
-  model.support_rows = static_cast<int>(best_score);
-  return model;
+  if (LooksLikeAWall(inliers, best_score, options)) return std::nullopt;
+  return FitLine(inliers, fixed.rows, best_score);
 }
 
 bool StandsOutFromGround(const std::optional<GroundModel>& ground, double row, double d_px,

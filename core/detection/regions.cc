@@ -271,25 +271,29 @@ cv::Mat1b ClassifyPixels(const stereo::DisparityMap& disparity, const geometry::
   return out;
 }
 
-std::optional<RefinedDisparity> RefineDisparity(const cv::Mat1b& left, const cv::Mat1b& right,
-                                                const cv::Mat1b& mask, const cv::Rect& box,
-                                                double initial_px) {
-  if (left.empty() || right.empty() || left.size() != right.size() || !(initial_px > 0)) {
-    return std::nullopt;
-  }
-  // Patches: on a grid of cells (5 px, larger for large objects, so that about twice
-  // kMaxRefinePatches cells cover the box), in each cell's middle row the mask pixel of strongest
-  // horizontal gradient, so that the patches barely overlap and their errors are nearly
-  // independent.
-  constexpr int kHalf = 3;          // 7 x 7 patches
-  constexpr double kSearchPx = 2.0; // how far a patch may move from the initial disparity
+namespace {
+
+// RefineDisparity's patches: 7 x 7, each moving at most kPatchSearchPx from the initial disparity.
+constexpr int kHalf = 3;
+constexpr double kSearchPx = 2.0;
+constexpr int kSide = 2 * kHalf + 1, kCount = kSide * kSide;
+constexpr int kOuter = kSide + 2;  // one more pixel around, for the right image's gradients
+
+struct Seed {
+  int gx;
+  cv::Point at;
+};
+
+// The patches' centres: on a grid of cells (5 px, larger for large objects, so that about twice
+// kMaxRefinePatches cells cover the box), in each cell's middle row the mask pixel of strongest
+// horizontal gradient, so that the patches barely overlap and their errors are nearly
+// independent. At most kMaxRefinePatches (an even subsample); fewer than kMinRefinePatches are
+// too few to refine with.
+std::vector<Seed> PatchSeeds(const cv::Mat1b& left, const cv::Mat1b& mask, const cv::Rect& box,
+                             double initial_px) {
   const int cell = std::max(5, static_cast<int>(std::lround(std::sqrt(
                                   static_cast<double>(box.area()) / (2.0 * kMaxRefinePatches)))));
   const int margin = kHalf + 3;
-  struct Seed {
-    int gx;
-    cv::Point at;
-  };
   std::vector<Seed> seeds;
   for (int cy = 0; cy < box.height; cy += cell) {
     const int y = std::min(cy + cell / 2, box.height - 1);
@@ -311,7 +315,7 @@ std::optional<RefinedDisparity> RefineDisparity(const cv::Mat1b& left, const cv:
       if (best.gx >= 2) seeds.push_back(best);
     }
   }
-  if (static_cast<int>(seeds.size()) < kMinRefinePatches) return std::nullopt;
+  if (static_cast<int>(seeds.size()) < kMinRefinePatches) return seeds;
   if (static_cast<int>(seeds.size()) > kMaxRefinePatches) {
     // An even subsample: every part of the object counts alike.
     std::vector<Seed> kept;
@@ -321,85 +325,103 @@ std::optional<RefinedDisparity> RefineDisparity(const cv::Mat1b& left, const cv:
     seeds.swap(kept);
   }
 
-  // Each patch: zero-mean SSD (a gain and an offset between the views drop out), translation
-  // (dx, dy) by Gauss-Newton from the initial disparity: the vertical term takes up a residual
-  // misalignment of the rectification.
-  constexpr int kSide = 2 * kHalf + 1, kCount = kSide * kSide;
-  constexpr int kOuter = kSide + 2;  // one more pixel around, for the right image's gradients
-  std::vector<double> estimates;
-  estimates.reserve(seeds.size());
+  return seeds;
+}
+
+// One patch: zero-mean SSD (a gain and an offset between the views drop out), translation
+// (dx, dy) by Gauss-Newton from the initial disparity: the vertical term takes up a residual
+// misalignment of the rectification. nullopt for a flat patch, one that leaves the image or the
+// search range, or an ill-conditioned fit.
+std::optional<double> PatchDisparity(const cv::Mat1b& left, const cv::Mat1b& right, const Seed& seed,
+                                     double initial_px) {
   std::array<float, kCount> l{};
   std::array<float, kOuter * kOuter> r{};
+  double l_mean = 0;
+  for (int j = 0, i = 0; j < kSide; ++j) {
+    const uchar* row = left[seed.at.y - kHalf + j];
+    for (int k = 0; k < kSide; ++k, ++i) {
+      l[i] = row[seed.at.x - kHalf + k];
+      l_mean += l[i];
+    }
+  }
+  l_mean /= kCount;
+  double l_energy = 0;
+  for (float& v : l) {
+    v = static_cast<float>(v - l_mean);
+    l_energy += v * v;
+  }
+  if (l_energy < 4.0 * kCount) return std::nullopt;  // flat: below a grey level rms
+  double d = initial_px, e = 0;
+  bool ok = true;
+  for (int iteration = 0; iteration < 5 && ok; ++iteration) {
+    // The right image around the patch's match, shifted by (d, e): every sample of the
+    // iteration shares the sub-pixel weights.
+    const double x0 = seed.at.x - kHalf - 1 - d, y0 = seed.at.y - kHalf - 1 + e;
+    const int ix = static_cast<int>(std::floor(x0)), iy = static_cast<int>(std::floor(y0));
+    if (ix < 0 || iy < 0 || ix + kOuter + 1 >= right.cols || iy + kOuter + 1 >= right.rows) {
+      ok = false;
+      break;
+    }
+    const float fx = static_cast<float>(x0 - ix), fy = static_cast<float>(y0 - iy);
+    const float w00 = (1 - fx) * (1 - fy), w10 = fx * (1 - fy), w01 = (1 - fx) * fy, w11 = fx * fy;
+    for (int j = 0; j < kOuter; ++j) {
+      const uchar* r0 = right[iy + j] + ix;
+      const uchar* r1 = right[iy + j + 1] + ix;
+      float* out = &r[j * kOuter];
+      for (int k = 0; k < kOuter; ++k) {
+        out[k] = w00 * r0[k] + w10 * r0[k + 1] + w01 * r1[k] + w11 * r1[k + 1];
+      }
+    }
+    double r_mean = 0;
+    for (int j = 1; j <= kSide; ++j) {
+      for (int k = 1; k <= kSide; ++k) r_mean += r[j * kOuter + k];
+    }
+    r_mean /= kCount;
+    // residual = L - R(x - d, y + e): d(res)/dd = Rx, d(res)/de = -Ry.
+    double a11 = 0, a12 = 0, a22 = 0, b1 = 0, b2 = 0;
+    for (int j = 1, i = 0; j <= kSide; ++j) {
+      const float* row = &r[j * kOuter];
+      for (int k = 1; k <= kSide; ++k, ++i) {
+        const double res = l[i] - (row[k] - r_mean);
+        const double jd = 0.5 * (row[k + 1] - row[k - 1]);
+        const double je = -0.5 * (row[k + kOuter] - row[k - kOuter]);
+        a11 += jd * jd;
+        a12 += jd * je;
+        a22 += je * je;
+        b1 += jd * res;
+        b2 += je * res;
+      }
+    }
+    const double det = a11 * a22 - a12 * a12;
+    if (a11 < 1.0 || det <= 1e-9 * a11 * a22) {
+      ok = false;
+      break;
+    }
+    const double step_d = -(a22 * b1 - a12 * b2) / det;
+    const double step_e = -(a11 * b2 - a12 * b1) / det;
+    d += std::clamp(step_d, -0.5, 0.5);
+    e = std::clamp(e + std::clamp(step_e, -0.5, 0.5), -1.0, 1.0);
+    if (std::abs(d - initial_px) > kSearchPx) ok = false;
+    if (std::abs(step_d) < 2e-3 && std::abs(step_e) < 2e-3) break;
+  }
+  if (!ok) return std::nullopt;
+  return d;
+}
+
+}  // namespace
+
+std::optional<RefinedDisparity> RefineDisparity(const cv::Mat1b& left, const cv::Mat1b& right,
+                                                const cv::Mat1b& mask, const cv::Rect& box,
+                                                double initial_px) {
+  if (left.empty() || right.empty() || left.size() != right.size() || !(initial_px > 0)) {
+    return std::nullopt;
+  }
+  const std::vector<Seed> seeds = PatchSeeds(left, mask, box, initial_px);
+  if (static_cast<int>(seeds.size()) < kMinRefinePatches) return std::nullopt;
+  std::vector<double> estimates;
+  estimates.reserve(seeds.size());
   for (const Seed& seed : seeds) {
-    double l_mean = 0;
-    for (int j = 0, i = 0; j < kSide; ++j) {
-      const uchar* row = left[seed.at.y - kHalf + j];
-      for (int k = 0; k < kSide; ++k, ++i) {
-        l[i] = row[seed.at.x - kHalf + k];
-        l_mean += l[i];
-      }
-    }
-    l_mean /= kCount;
-    double l_energy = 0;
-    for (float& v : l) {
-      v = static_cast<float>(v - l_mean);
-      l_energy += v * v;
-    }
-    if (l_energy < 4.0 * kCount) continue;  // flat: below a grey level rms
-    double d = initial_px, e = 0;
-    bool ok = true;
-    for (int iteration = 0; iteration < 5 && ok; ++iteration) {
-      // The right image around the patch's match, shifted by (d, e): every sample of the
-      // iteration shares the sub-pixel weights.
-      const double x0 = seed.at.x - kHalf - 1 - d, y0 = seed.at.y - kHalf - 1 + e;
-      const int ix = static_cast<int>(std::floor(x0)), iy = static_cast<int>(std::floor(y0));
-      if (ix < 0 || iy < 0 || ix + kOuter + 1 >= right.cols || iy + kOuter + 1 >= right.rows) {
-        ok = false;
-        break;
-      }
-      const float fx = static_cast<float>(x0 - ix), fy = static_cast<float>(y0 - iy);
-      const float w00 = (1 - fx) * (1 - fy), w10 = fx * (1 - fy), w01 = (1 - fx) * fy, w11 = fx * fy;
-      for (int j = 0; j < kOuter; ++j) {
-        const uchar* r0 = right[iy + j] + ix;
-        const uchar* r1 = right[iy + j + 1] + ix;
-        float* out = &r[j * kOuter];
-        for (int k = 0; k < kOuter; ++k) {
-          out[k] = w00 * r0[k] + w10 * r0[k + 1] + w01 * r1[k] + w11 * r1[k + 1];
-        }
-      }
-      double r_mean = 0;
-      for (int j = 1; j <= kSide; ++j) {
-        for (int k = 1; k <= kSide; ++k) r_mean += r[j * kOuter + k];
-      }
-      r_mean /= kCount;
-      // residual = L - R(x - d, y + e): d(res)/dd = Rx, d(res)/de = -Ry.
-      double a11 = 0, a12 = 0, a22 = 0, b1 = 0, b2 = 0;
-      for (int j = 1, i = 0; j <= kSide; ++j) {
-        const float* row = &r[j * kOuter];
-        for (int k = 1; k <= kSide; ++k, ++i) {
-          const double res = l[i] - (row[k] - r_mean);
-          const double jd = 0.5 * (row[k + 1] - row[k - 1]);
-          const double je = -0.5 * (row[k + kOuter] - row[k - kOuter]);
-          a11 += jd * jd;
-          a12 += jd * je;
-          a22 += je * je;
-          b1 += jd * res;
-          b2 += je * res;
-        }
-      }
-      const double det = a11 * a22 - a12 * a12;
-      if (a11 < 1.0 || det <= 1e-9 * a11 * a22) {
-        ok = false;
-        break;
-      }
-      const double step_d = -(a22 * b1 - a12 * b2) / det;
-      const double step_e = -(a11 * b2 - a12 * b1) / det;
-      d += std::clamp(step_d, -0.5, 0.5);
-      e = std::clamp(e + std::clamp(step_e, -0.5, 0.5), -1.0, 1.0);
-      if (std::abs(d - initial_px) > kSearchPx) ok = false;
-      if (std::abs(step_d) < 2e-3 && std::abs(step_e) < 2e-3) break;
-    }
-    if (ok) estimates.push_back(d);
+    if (const std::optional<double> d = PatchDisparity(left, right, seed, initial_px)) estimates.push_back(*d);
   }
   const int n = static_cast<int>(estimates.size());
   if (n < kMinRefinePatches) return std::nullopt;
