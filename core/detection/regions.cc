@@ -124,17 +124,6 @@ int Find(std::vector<int>& parent, int i) {
   return i;
 }
 
-inline float Bilinear(const cv::Mat1b& image, double x, double y) {
-  const int x0 = static_cast<int>(std::floor(x));
-  const int y0 = static_cast<int>(std::floor(y));
-  const float fx = static_cast<float>(x - x0), fy = static_cast<float>(y - y0);
-  const uchar* r0 = image[y0];
-  const uchar* r1 = image[y0 + 1];
-  const float top = r0[x0] + fx * (r0[x0 + 1] - r0[x0]);
-  const float bottom = r1[x0] + fx * (r1[x0 + 1] - r1[x0]);
-  return top + fy * (bottom - top);
-}
-
 // The fraction of trusted disparities in a ring around the label's mask that lie at its range
 // (see StereoBlobOptions::max_attached_fraction). -1 when the ring holds too few.
 double AttachedFraction(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
