@@ -5,6 +5,7 @@
 #include <cmath>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <sstream>
 
 #include <opencv2/calib3d.hpp>
@@ -241,30 +242,34 @@ std::string WorstPairs(const std::vector<PairCorners>& pairs, const cv::Mat1d& e
   return out;
 }
 
-Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const CalibrationOptions& options) {
-  const BoardSpec& board = options.board;
-  const CalibrationModel& model = options.model;
-  const int n_pairs = static_cast<int>(detected.pairs.size());
+// ---- Checks before solving --------------------------------------------------------------------
 
-  if (n_pairs == 0) {
-    bool any_board = false, any_decoded = false;
-    for (const RejectedPair& r : detected.rejected) {
-      any_board |= r.reason == RejectReason::kNoBoardLeft || r.reason == RejectReason::kNoBoardRight;
-      any_decoded |= r.reason == RejectReason::kNoBoardLeft || r.reason == RejectReason::kNoBoardRight ||
-                     r.reason == RejectReason::kNoBoard;
-    }
-    if (!any_decoded) {
-      return Invalid("no usable pair: every one of the " + std::to_string(detected.pairs_given) +
-                     " pairs was rejected before detection: " + RejectionSummary(detected.rejected));
-    }
-    if (!any_board) {
-      return Invalid("no board of " + board.Name() +
-                     " inner corners found in any pair; check the board size (inner corners, "
-                     "columns x rows) and that the whole board is in view");
-    }
-    return Invalid("no pair has the board of " + board.Name() +
-                   " inner corners in both images: " + RejectionSummary(detected.rejected));
+// Why no pair has the board in both images: every pair was rejected before detection, no image
+// had the board (its size is probably wrong), or each pair had it in one image only.
+Error NoPairError(const DetectedPairs& detected, const BoardSpec& board) {
+  bool any_board = false, any_decoded = false;
+  for (const RejectedPair& r : detected.rejected) {
+    any_board |= r.reason == RejectReason::kNoBoardLeft || r.reason == RejectReason::kNoBoardRight;
+    any_decoded |= r.reason == RejectReason::kNoBoardLeft || r.reason == RejectReason::kNoBoardRight ||
+                   r.reason == RejectReason::kNoBoard;
   }
+  if (!any_decoded) {
+    return Invalid("no usable pair: every one of the " + std::to_string(detected.pairs_given) +
+                   " pairs was rejected before detection: " + RejectionSummary(detected.rejected));
+  }
+  if (!any_board) {
+    return Invalid("no board of " + board.Name() +
+                   " inner corners found in any pair; check the board size (inner corners, "
+                   "columns x rows) and that the whole board is in view");
+  }
+  return Invalid("no pair has the board of " + board.Name() +
+                 " inner corners in both images: " + RejectionSummary(detected.rejected));
+}
+
+// An error when the pairs are too few to solve, or the image size is not set.
+std::optional<Error> CheckPairCount(const DetectedPairs& detected, const CalibrationOptions& options) {
+  const int n_pairs = static_cast<int>(detected.pairs.size());
+  if (n_pairs == 0) return NoPairError(detected, options.board);
   if (n_pairs < kMinSolvablePairs) {
     return Invalid("too few pairs: " + std::to_string(n_pairs) + " of " +
                    std::to_string(detected.pairs_given) +
@@ -276,61 +281,97 @@ Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const 
   if (image_size.width <= 0 || image_size.height <= 0) {
     return Invalid("image_size: must be > 0 (got " + SizeText(image_size) + ")");
   }
-  const std::vector<cv::Point3f> object = board.ObjectPoints();
-  for (const PairCorners& p : detected.pairs) {
+  return std::nullopt;
+}
+
+// An error naming the first pair whose corners do not fit the board.
+std::optional<Error> CheckCorners(const std::vector<PairCorners>& pairs, const BoardSpec& board,
+                                  const std::vector<cv::Point3f>& object) {
+  for (const PairCorners& p : pairs) {
     if (p.left.size() != object.size() || p.right.size() != object.size()) {
       return Invalid("pair " + PairLabel(p.index, p.name) + ": " + std::to_string(p.left.size()) + " and " +
                      std::to_string(p.right.size()) + " corners, the board of " + board.Name() + " has " +
                      std::to_string(object.size()));
     }
   }
+  return std::nullopt;
+}
 
-  // Solve; drop pairs far worse than the rest (a mis-numbered or mis-detected board) and solve again.
-  std::vector<PairCorners> used = detected.pairs;
-  std::vector<RejectedPair> rejected = detected.rejected;
+// ---- The solve, without outlier pairs ---------------------------------------------------------
+
+// The pairs of a solution whose error is far above the median pair's.
+struct Outliers {
+  std::vector<double> worst;  // per pair: its RMS error in the worse camera (pixels)
+  double median = 0;          // the median of worst
+  std::vector<int> pairs;     // the outliers' positions, increasing
+};
+
+Outliers FindOutliers(const cv::Mat1d& errors, double outlier_factor) {
+  Outliers o;
+  for (int i = 0; i < errors.rows; ++i) o.worst.push_back(std::max(errors(i, 0), errors(i, 1)));
+  std::vector<double> sorted = o.worst;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  o.median = sorted[sorted.size() / 2];
+  for (int i = 0; i < static_cast<int>(o.worst.size()); ++i) {
+    if (o.worst[i] > outlier_factor * o.median && o.worst[i] > kOutlierMinDropPx) o.pairs.push_back(i);
+  }
+  return o;
+}
+
+// Moves the outliers from `used` to `rejected` (kOutlier, with their error), the last first.
+void LeaveOut(const Outliers& outliers, const cv::Mat1d& errors, std::vector<PairCorners>& used,
+              std::vector<RejectedPair>& rejected) {
+  const double median = outliers.median;
+  for (auto it = outliers.pairs.rbegin(); it != outliers.pairs.rend(); ++it) {
+    const PairCorners& p = used[*it];
+    const double worst = outliers.worst[*it];
+    const bool left_worse = errors(*it, 0) >= errors(*it, 1);
+    rejected.push_back({p.index, p.name, RejectReason::kOutlier,
+                        "RMS error " + Fixed(worst, 2) + " px in the " + (left_worse ? "left" : "right") +
+                            " image, " + Fixed(worst / median, 1) + " times the median pair's (" +
+                            Fixed(median, 3) + " px): left out and solved again"});
+    used.erase(used.begin() + *it);
+  }
+}
+
+// A solution and the pairs it was solved from; the pairs left out, by index.
+struct Fit {
+  std::vector<PairCorners> used;
+  std::vector<RejectedPair> rejected;
+  Solution solution;
+};
+
+// Solves; drops pairs far worse than the rest (a mis-numbered or mis-detected board) and solves
+// again: at most 3 rounds, and max_outlier_fraction of the pairs in all.
+Result<Fit> SolveWithoutOutliers(const DetectedPairs& detected, const std::vector<cv::Point3f>& object,
+                                 const CalibrationOptions& options) {
+  const int n_pairs = static_cast<int>(detected.pairs.size());
+  Fit fit{detected.pairs, detected.rejected, {}};
   const int max_outliers = static_cast<int>(options.max_outlier_fraction * n_pairs);
   int dropped = 0;
-  Solution solution;
   for (int round = 0;; ++round) {
-    Result<Solution> solved = Solve(used, object, image_size, model);
+    Result<Solution> solved = Solve(fit.used, object, detected.image_size, options.model);
     if (!solved.ok()) return solved.error();
-    solution = std::move(*solved);
+    fit.solution = std::move(*solved);
     if (options.outlier_factor <= 0 || round >= 3) break;
-    std::vector<double> worst;
-    for (int i = 0; i < solution.errors.rows; ++i) worst.push_back(std::max(solution.errors(i, 0), solution.errors(i, 1)));
-    std::vector<double> sorted = worst;
-    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-    const double median = sorted[sorted.size() / 2];
-    std::vector<int> outliers;
-    for (int i = 0; i < static_cast<int>(worst.size()); ++i) {
-      if (worst[i] > options.outlier_factor * median && worst[i] > kOutlierMinDropPx) outliers.push_back(i);
-    }
-    if (outliers.empty() || dropped + static_cast<int>(outliers.size()) > max_outliers ||
-        static_cast<int>(used.size() - outliers.size()) < kMinSolvablePairs) {
+    const Outliers outliers = FindOutliers(fit.solution.errors, options.outlier_factor);
+    const int n_outliers = static_cast<int>(outliers.pairs.size());
+    if (outliers.pairs.empty() || dropped + n_outliers > max_outliers ||
+        static_cast<int>(fit.used.size() - outliers.pairs.size()) < kMinSolvablePairs) {
       break;
     }
-    for (auto it = outliers.rbegin(); it != outliers.rend(); ++it) {
-      const PairCorners& p = used[*it];
-      const bool left_worse = solution.errors(*it, 0) >= solution.errors(*it, 1);
-      rejected.push_back({p.index, p.name, RejectReason::kOutlier,
-                          "RMS error " + Fixed(worst[*it], 2) + " px in the " + (left_worse ? "left" : "right") +
-                              " image, " + Fixed(worst[*it] / median, 1) + " times the median pair's (" +
-                              Fixed(median, 3) + " px): left out and solved again"});
-      used.erase(used.begin() + *it);
-    }
-    dropped += static_cast<int>(outliers.size());
+    LeaveOut(outliers, fit.solution.errors, fit.used, fit.rejected);
+    dropped += n_outliers;
   }
-  std::stable_sort(rejected.begin(), rejected.end(),
+  std::stable_sort(fit.rejected.begin(), fit.rejected.end(),
                    [](const RejectedPair& a, const RejectedPair& b) { return a.index < b.index; });
-  const int n_used = static_cast<int>(used.size());
-  std::vector<std::vector<cv::Point2f>> left_points, right_points;
-  for (const PairCorners& p : used) {
-    left_points.push_back(p.left);
-    right_points.push_back(p.right);
-  }
-  const double rms = solution.rms;
-  cv::Mat1d errors = solution.errors;  // n x 2: RMS of each view in camera 1 and camera 2
+  return fit;
+}
 
+// ---- The calibration --------------------------------------------------------------------------
+
+// The solution as a calibration (not rectified), camera 1 being the input's left camera.
+geometry::StereoCalibration ToCalibration(const Solution& solution, cv::Size image_size) {
   geometry::StereoCalibration c;
   c.image_size = image_size;
   c.M1 = cv::Matx33d(solution.K1);
@@ -339,63 +380,78 @@ Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const 
   c.D2 = solution.D2;
   c.R = cv::Matx33d(solution.R);
   c.T = cv::Vec3d(solution.T.reshape(1, 3));
-  cv::Matx33d e(solution.E), f(solution.F);
+  c.E = cv::Matx33d(solution.E);
+  c.F = cv::Matx33d(solution.F);
+  return c;
+}
 
-  // The left/right swap: x_right = R x_left + T puts the right camera's centre at -R^T T in the
-  // left frame; T_x > 0 means the camera named left is on the right. Swap the roles exactly:
-  // R' = R^T, T' = -R^T T, E' = E^T, F' = F^T.
-  const bool swap = c.T[0] > 0;
-  if (swap) {
-    std::swap(c.M1, c.M2);
-    std::swap(c.D1, c.D2);
-    const cv::Matx33d r_old = c.R;
-    c.R = r_old.t();
-    c.T = -(r_old.t() * c.T);
-    e = e.t();
-    f = f.t();
-    for (int i = 0; i < errors.rows; ++i) std::swap(errors(i, 0), errors(i, 1));
-    std::swap(left_points, right_points);
-  }
-  c.E = e;
-  c.F = f;
+// The left/right swap: x_right = R x_left + T puts the right camera's centre at -R^T T in the
+// left frame; T_x > 0 means the camera named left is on the right. Swap the roles exactly:
+// R' = R^T, T' = -R^T T, E' = E^T, F' = F^T.
+void SwapCameras(geometry::StereoCalibration& c) {
+  std::swap(c.M1, c.M2);
+  std::swap(c.D1, c.D2);
+  const cv::Matx33d r_old = c.R;
+  c.R = r_old.t();
+  c.T = -(r_old.t() * c.T);
+  c.E = c.E->t();
+  c.F = c.F->t();
+}
 
+// Bouguet's rectification (zero disparity at infinity): R1 R2 P1 P2 Q.
+void Rectify(geometry::StereoCalibration& c, double alpha) {
   cv::Mat R1, R2, P1, P2, Q;
-  cv::stereoRectify(cv::Mat(c.M1), c.D1, cv::Mat(c.M2), c.D2, image_size, cv::Mat(c.R), cv::Mat(c.T), R1,
-                    R2, P1, P2, Q, cv::CALIB_ZERO_DISPARITY, options.rectify_alpha);
+  cv::stereoRectify(cv::Mat(c.M1), c.D1, cv::Mat(c.M2), c.D2, c.image_size, cv::Mat(c.R), cv::Mat(c.T), R1,
+                    R2, P1, P2, Q, cv::CALIB_ZERO_DISPARITY, alpha);
   c.R1 = cv::Matx33d(R1);
   c.R2 = cv::Matx33d(R2);
   c.P1 = cv::Matx34d(P1);
   c.P2 = cv::Matx34d(P2);
   c.Q = cv::Matx44d(Q);
-  if (std::vector<std::string> problems = c.Validate(); !problems.empty()) {
-    Error err = Error::Invalid(problems);
-    err.code = ErrorCode::kInternal;
-    err.message = "the stereo calibration gave an invalid result (" + err.message + "); RMS " + Fixed(rms, 2) +
-                  " px, worst pairs: " + WorstPairs(used, errors);
-    return err;
-  }
+}
 
-  CalibrationResult result;
-  result.calibration = c;
-  CalibrationReport& report = result.report;
+// kInternal for a calibration that fails Validate(), with the RMS and the worst pairs.
+Error InvalidResult(const std::vector<std::string>& problems, double rms, const std::vector<PairCorners>& used,
+                    const cv::Mat1d& errors) {
+  Error err = Error::Invalid(problems);
+  err.code = ErrorCode::kInternal;
+  err.message = "the stereo calibration gave an invalid result (" + err.message + "); RMS " + Fixed(rms, 2) +
+                " px, worst pairs: " + WorstPairs(used, errors);
+  return err;
+}
+
+// ---- The report -------------------------------------------------------------------------------
+
+// What was calibrated and from what: time, image, board, detector, pairs, the solve's RMS.
+void DescribeInput(const DetectedPairs& detected, const Fit& fit, bool swap, const CalibrationOptions& options,
+                   CalibrationReport& report) {
   report.created_unix_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
                                std::chrono::system_clock::now().time_since_epoch()).count();
-  report.image_size = image_size;
-  report.board = board;
+  report.image_size = detected.image_size;
+  report.board = options.board;
   report.detector = std::string(CornerDetectorName(options.detection.detector)) + " + " +
                     std::string(CornerRefinementName(options.detection.refinement));
   report.pairs_given = detected.pairs_given;
-  report.pairs_used = n_used;
-  report.rejected = rejected;
-  report.rms_px = rms;
+  report.pairs_used = static_cast<int>(fit.used.size());
+  report.rejected = fit.rejected;
+  report.rms_px = fit.solution.rms;
   report.swap_left_right = swap;
   report.coverage_grid = options.coverage_grid;
+}
 
+// Each pair's RMS error, epipolar error after rectification and coverage, and their totals.
+// `errors` and the calibration's cameras are those of the result: with `swap`, camera 1 has the
+// input's right images.
+void MeasurePairs(const std::vector<PairCorners>& used, const cv::Mat1d& errors, bool swap,
+                  const geometry::StereoCalibration& c, cv::Size grid, CalibrationReport& report) {
+  const int n_used = static_cast<int>(used.size());
   double sum_left = 0, sum_right = 0, epi_sum = 0, epi_max = 0;
   std::size_t epi_n = 0;
   std::vector<std::vector<cv::Point2f>> hulls_left, hulls_right;
   double coverage_sum = 0, coverage_min = 1;
   for (int i = 0; i < n_used; ++i) {
+    const std::vector<cv::Point2f>& left_points = swap ? used[i].right : used[i].left;
+    const std::vector<cv::Point2f>& right_points = swap ? used[i].left : used[i].right;
     PairReport p;
     p.index = used[i].index;
     p.name = used[i].name;
@@ -403,8 +459,8 @@ Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const 
     p.rms_right_px = errors(i, 1);
     sum_left += p.rms_left_px * p.rms_left_px;
     sum_right += p.rms_right_px * p.rms_right_px;
-    const std::vector<cv::Point2f> rect_left = RectifyPoints(left_points[i], c.M1, c.D1, *c.R1, *c.P1);
-    const std::vector<cv::Point2f> rect_right = RectifyPoints(right_points[i], c.M2, c.D2, *c.R2, *c.P2);
+    const std::vector<cv::Point2f> rect_left = RectifyPoints(left_points, c.M1, c.D1, *c.R1, *c.P1);
+    const std::vector<cv::Point2f> rect_right = RectifyPoints(right_points, c.M2, c.D2, *c.R2, *c.P2);
     double pair_sum = 0;
     for (std::size_t k = 0; k < rect_left.size(); ++k) {
       const double dy = std::abs(static_cast<double>(rect_left[k].y) - rect_right[k].y);
@@ -416,8 +472,8 @@ Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const 
     epi_n += rect_left.size();
     hulls_left.emplace_back();
     hulls_right.emplace_back();
-    p.coverage_left = HullCoverage(left_points[i], image_size, hulls_left.back());
-    p.coverage_right = HullCoverage(right_points[i], image_size, hulls_right.back());
+    p.coverage_left = HullCoverage(left_points, c.image_size, hulls_left.back());
+    p.coverage_right = HullCoverage(right_points, c.image_size, hulls_right.back());
     coverage_sum += p.coverage_left + p.coverage_right;
     coverage_min = std::min({coverage_min, p.coverage_left, p.coverage_right});
     report.pairs.push_back(p);
@@ -428,17 +484,24 @@ Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const 
   report.epipolar_max_px = epi_max;
   report.coverage_mean_view = coverage_sum / (2.0 * n_used);
   report.coverage_min_view = coverage_min;
-  report.coverage_union_left = UnionCoverage(hulls_left, image_size, options.coverage_grid);
-  report.coverage_union_right = UnionCoverage(hulls_right, image_size, options.coverage_grid);
+  report.coverage_union_left = UnionCoverage(hulls_left, c.image_size, grid);
+  report.coverage_union_right = UnionCoverage(hulls_right, c.image_size, grid);
+}
+
+// Focal lengths, baseline and the rectified focal length of the calibration.
+void SummariseCalibration(const geometry::StereoCalibration& c, CalibrationReport& report) {
   report.fx_left_px = c.M1(0, 0);
   report.fy_left_px = c.M1(1, 1);
   report.fx_right_px = c.M2(0, 0);
   report.fy_right_px = c.M2(1, 1);
   report.baseline_m = cv::norm(c.T);
   report.rectified_f_px = (*c.P1)(0, 0);
+}
 
-  // Gates.
-  const QualityGates& gates = options.gates;
+// The quality gates: failures, and passed when there is none.
+void CheckGates(const QualityGates& gates, CalibrationReport& report) {
+  const int n_used = report.pairs_used;
+  const double rms = report.rms_px;
   if (n_used < gates.min_pairs) {
     report.failures.push_back({"min_pairs", static_cast<double>(n_used), static_cast<double>(gates.min_pairs),
                                std::to_string(n_used) + " pairs used < " + std::to_string(gates.min_pairs) +
@@ -455,9 +518,28 @@ Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const 
                                    " px > " + Fixed(gates.max_epipolar_px, 3) + " px (max_epipolar_px)"});
   }
   report.passed = report.failures.empty();
+}
 
-  // Advice.
-  if (swap) {
+// Warnings for the pairs whose error is far above the median pair's.
+void WarnAboutOutliers(CalibrationReport& report) {
+  std::vector<double> pair_rms;
+  for (const PairReport& p : report.pairs) pair_rms.push_back(std::max(p.rms_left_px, p.rms_right_px));
+  std::nth_element(pair_rms.begin(), pair_rms.begin() + pair_rms.size() / 2, pair_rms.end());
+  const double median = pair_rms[pair_rms.size() / 2];
+  for (const PairReport& p : report.pairs) {
+    const double worst = std::max(p.rms_left_px, p.rms_right_px);
+    if (worst > kOutlierFactor * median && worst > kOutlierMinPx) {
+      report.warnings.push_back("pair " + PairLabel(p.index, p.name) + " has an RMS error of " + Fixed(worst, 2) +
+                                " px, " + Fixed(worst / median, 1) +
+                                " times the median: check its corners (motion blur, a mis-detection)");
+    }
+  }
+}
+
+// Advice that fails no gate: the swap, few pairs, low coverage, pairs with a large error.
+void AddAdvice(const geometry::StereoCalibration& c, cv::Size grid, CalibrationReport& report) {
+  const int n_used = report.pairs_used;
+  if (report.swap_left_right) {
     report.warnings.push_back(
         "left and right swapped: the camera named left sits to the right of the other (solved T_x = +" +
         Fixed(-c.T[0] * 1000, 1) + " mm); this calibration's camera 1 is the input's right camera, so "
@@ -475,22 +557,42 @@ Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const 
   const double union_min = std::min(report.coverage_union_left, report.coverage_union_right);
   if (union_min < kAdvisedUnionCoverage) {
     report.warnings.push_back("the boards reached only " + Fixed(100 * union_min, 0) + " % of the " +
-                              SizeText(options.coverage_grid) +
+                              SizeText(grid) +
                               " grid cells; the distortion is extrapolated elsewhere (move the board "
                               "into the corners and edges)");
   }
-  std::vector<double> pair_rms;
-  for (const PairReport& p : report.pairs) pair_rms.push_back(std::max(p.rms_left_px, p.rms_right_px));
-  std::nth_element(pair_rms.begin(), pair_rms.begin() + pair_rms.size() / 2, pair_rms.end());
-  const double median = pair_rms[pair_rms.size() / 2];
-  for (const PairReport& p : report.pairs) {
-    const double worst = std::max(p.rms_left_px, p.rms_right_px);
-    if (worst > kOutlierFactor * median && worst > kOutlierMinPx) {
-      report.warnings.push_back("pair " + PairLabel(p.index, p.name) + " has an RMS error of " + Fixed(worst, 2) +
-                                " px, " + Fixed(worst / median, 1) +
-                                " times the median: check its corners (motion blur, a mis-detection)");
-    }
+  WarnAboutOutliers(report);
+}
+
+Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const CalibrationOptions& options) {
+  if (std::optional<Error> error = CheckPairCount(detected, options)) return *error;
+  const std::vector<cv::Point3f> object = options.board.ObjectPoints();
+  if (std::optional<Error> error = CheckCorners(detected.pairs, options.board, object)) return *error;
+
+  Result<Fit> solved = SolveWithoutOutliers(detected, object, options);
+  if (!solved.ok()) return solved.error();
+  const Fit& fit = *solved;
+  cv::Mat1d errors = fit.solution.errors;  // n x 2: RMS of each view in camera 1 and camera 2
+
+  geometry::StereoCalibration c = ToCalibration(fit.solution, detected.image_size);
+  const bool swap = c.T[0] > 0;
+  if (swap) {
+    SwapCameras(c);
+    for (int i = 0; i < errors.rows; ++i) std::swap(errors(i, 0), errors(i, 1));
   }
+  Rectify(c, options.rectify_alpha);
+  if (std::vector<std::string> problems = c.Validate(); !problems.empty()) {
+    return InvalidResult(problems, fit.solution.rms, fit.used, errors);
+  }
+
+  CalibrationResult result;
+  result.calibration = c;
+  CalibrationReport& report = result.report;
+  DescribeInput(detected, fit, swap, options, report);
+  MeasurePairs(fit.used, errors, swap, c, options.coverage_grid, report);
+  SummariseCalibration(c, report);
+  CheckGates(options.gates, report);
+  AddAdvice(c, options.coverage_grid, report);
   return result;
 }
 

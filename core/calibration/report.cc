@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <iomanip>
+#include <optional>
 #include <sstream>
 
 namespace stevi::calibration {
@@ -85,6 +86,9 @@ class Reader {
     for (const cv::FileNode& element : node) out.push_back(element);
     return out;
   }
+
+  // Appends a problem of its own ("board: expected a map").
+  void Problem(const std::string& problem) { problems_.push_back(problem); }
 
  private:
   std::vector<std::string>& problems_;
@@ -227,8 +231,10 @@ Result<std::string> ReportToYaml(const CalibrationReport& r) {
   }
 }
 
-Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
-  cv::FileStorage fs;
+namespace {
+
+// Opens the YAML text for reading ("%YAML:1.0" is put in front of a text without it).
+std::optional<Error> OpenYaml(const std::string& yaml_text, cv::FileStorage& fs) {
   try {
     std::string text = yaml_text;
     if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
@@ -238,6 +244,121 @@ Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
   } catch (const cv::Exception& e) {
     return Error{ErrorCode::kInvalidArgument, "calibration report: not valid YAML (" + e.err + ")"};
   }
+  return std::nullopt;
+}
+
+// The single values: time, verdict, image, board, detector, pair counts and the figures.
+void ReadFigures(Reader& read, const cv::FileNode& root, CalibrationReport& r) {
+  const std::string created = read.String(root, "created_unix_ms");
+  if (!created.empty()) {
+    char* end = nullptr;
+    r.created_unix_ms = std::strtoll(created.c_str(), &end, 10);
+    if (*end != '\0') read.Problem("created_unix_ms: expected a decimal integer");
+  }
+  r.passed = read.Int(root, "passed") != 0;
+  r.swap_left_right = read.Int(root, "swap_left_right") != 0;
+  r.image_size = cv::Size(read.Int(root, "image_width"), read.Int(root, "image_height"));
+  const cv::FileNode board = read.Node(root, "board", "");
+  if (board.isMap()) {
+    r.board.inner_cols = read.Int(board, "inner_cols", "board.");
+    r.board.inner_rows = read.Int(board, "inner_rows", "board.");
+    r.board.square_size_m = read.Double(board, "square_size_m", "board.");
+  } else if (!board.empty() && !board.isNone()) {
+    read.Problem("board: expected a map");
+  }
+  r.detector = read.String(root, "detector");
+  r.pairs_given = read.Int(root, "pairs_given");
+  r.pairs_used = read.Int(root, "pairs_used");
+  r.rms_px = read.Double(root, "rms_px");
+  r.rms_left_px = read.Double(root, "rms_left_px");
+  r.rms_right_px = read.Double(root, "rms_right_px");
+  r.epipolar_mean_px = read.Double(root, "epipolar_mean_px");
+  r.epipolar_max_px = read.Double(root, "epipolar_max_px");
+  r.coverage_grid = cv::Size(read.Int(root, "coverage_grid_cols"), read.Int(root, "coverage_grid_rows"));
+  r.coverage_mean_view = read.Double(root, "coverage_mean_view");
+  r.coverage_min_view = read.Double(root, "coverage_min_view");
+  r.coverage_union_left = read.Double(root, "coverage_union_left");
+  r.coverage_union_right = read.Double(root, "coverage_union_right");
+  r.fx_left_px = read.Double(root, "fx_left_px");
+  r.fy_left_px = read.Double(root, "fy_left_px");
+  r.fx_right_px = read.Double(root, "fx_right_px");
+  r.fy_right_px = read.Double(root, "fy_right_px");
+  r.baseline_m = read.Double(root, "baseline_m");
+  r.rectified_f_px = read.Double(root, "rectified_f_px");
+}
+
+// Each element of the list `key`, read by read_one(read, element, "key[i].").
+template <typename T, typename ReadOne>
+std::vector<T> ReadList(Reader& read, const cv::FileNode& root, const std::string& key,
+                        ReadOne read_one) {
+  std::vector<T> out;
+  const std::vector<cv::FileNode> elements = read.Seq(root, key);
+  for (std::size_t i = 0; i < elements.size(); ++i) {
+    out.push_back(read_one(read, elements[i], Where(key, i)));
+  }
+  return out;
+}
+
+GateFailure ReadFailure(Reader& read, const cv::FileNode& node, const std::string& where) {
+  GateFailure f;
+  f.gate = read.String(node, "gate", where);
+  f.measured = read.Double(node, "measured", where);
+  f.limit = read.Double(node, "limit", where);
+  f.message = read.String(node, "message", where);
+  return f;
+}
+
+std::vector<std::string> ReadWarnings(Reader& read, const cv::FileNode& root) {
+  std::vector<std::string> out;
+  const cv::FileNode warnings = read.Node(root, "warnings", "");
+  if (warnings.isSeq()) {
+    for (const cv::FileNode& w : warnings) {
+      if (w.isString()) {
+        out.push_back(static_cast<std::string>(w));
+      } else {
+        read.Problem("warnings: expected strings");
+      }
+    }
+  } else if (!warnings.empty() && !warnings.isNone()) {
+    read.Problem("warnings: expected a list");
+  }
+  return out;
+}
+
+RejectedPair ReadRejectedPair(Reader& read, const cv::FileNode& node, const std::string& where) {
+  RejectedPair p;
+  p.index = read.Int(node, "index", where);
+  p.name = read.String(node, "name", where);
+  const std::string reason = read.String(node, "reason", where);
+  bool known = false;
+  for (RejectReason candidate : kAllReasons) {
+    if (RejectReasonName(candidate) == reason) {
+      p.reason = candidate;
+      known = true;
+    }
+  }
+  if (!known) read.Problem(where + "reason: unknown value \"" + reason + "\"");
+  p.detail = read.String(node, "detail", where);
+  return p;
+}
+
+PairReport ReadPairReport(Reader& read, const cv::FileNode& node, const std::string& where) {
+  PairReport p;
+  p.index = read.Int(node, "index", where);
+  p.name = read.String(node, "name", where);
+  p.rms_left_px = read.Double(node, "rms_left_px", where);
+  p.rms_right_px = read.Double(node, "rms_right_px", where);
+  p.epipolar_mean_px = read.Double(node, "epipolar_mean_px", where);
+  p.coverage_left = read.Double(node, "coverage_left", where);
+  p.coverage_right = read.Double(node, "coverage_right", where);
+  return p;
+}
+
+}  // namespace
+
+Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
+  cv::FileStorage fs;
+  if (std::optional<Error> error = OpenYaml(yaml_text, fs)) return *error;
   std::vector<std::string> problems;
   CalibrationReport r;
   try {
@@ -246,96 +367,11 @@ Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
       return Error{ErrorCode::kInvalidArgument, "calibration report: expected a map at the top level"};
     }
     Reader read(problems);
-    const std::string created = read.String(root, "created_unix_ms");
-    if (!created.empty()) {
-      char* end = nullptr;
-      r.created_unix_ms = std::strtoll(created.c_str(), &end, 10);
-      if (*end != '\0') problems.push_back("created_unix_ms: expected a decimal integer");
-    }
-    r.passed = read.Int(root, "passed") != 0;
-    r.swap_left_right = read.Int(root, "swap_left_right") != 0;
-    r.image_size = cv::Size(read.Int(root, "image_width"), read.Int(root, "image_height"));
-    const cv::FileNode board = read.Node(root, "board", "");
-    if (board.isMap()) {
-      r.board.inner_cols = read.Int(board, "inner_cols", "board.");
-      r.board.inner_rows = read.Int(board, "inner_rows", "board.");
-      r.board.square_size_m = read.Double(board, "square_size_m", "board.");
-    } else if (!board.empty() && !board.isNone()) {
-      problems.push_back("board: expected a map");
-    }
-    r.detector = read.String(root, "detector");
-    r.pairs_given = read.Int(root, "pairs_given");
-    r.pairs_used = read.Int(root, "pairs_used");
-    r.rms_px = read.Double(root, "rms_px");
-    r.rms_left_px = read.Double(root, "rms_left_px");
-    r.rms_right_px = read.Double(root, "rms_right_px");
-    r.epipolar_mean_px = read.Double(root, "epipolar_mean_px");
-    r.epipolar_max_px = read.Double(root, "epipolar_max_px");
-    r.coverage_grid = cv::Size(read.Int(root, "coverage_grid_cols"), read.Int(root, "coverage_grid_rows"));
-    r.coverage_mean_view = read.Double(root, "coverage_mean_view");
-    r.coverage_min_view = read.Double(root, "coverage_min_view");
-    r.coverage_union_left = read.Double(root, "coverage_union_left");
-    r.coverage_union_right = read.Double(root, "coverage_union_right");
-    r.fx_left_px = read.Double(root, "fx_left_px");
-    r.fy_left_px = read.Double(root, "fy_left_px");
-    r.fx_right_px = read.Double(root, "fx_right_px");
-    r.fy_right_px = read.Double(root, "fy_right_px");
-    r.baseline_m = read.Double(root, "baseline_m");
-    r.rectified_f_px = read.Double(root, "rectified_f_px");
-
-    const std::vector<cv::FileNode> failures = read.Seq(root, "failures");
-    for (std::size_t i = 0; i < failures.size(); ++i) {
-      const std::string where = Where("failures", i);
-      GateFailure f;
-      f.gate = read.String(failures[i], "gate", where);
-      f.measured = read.Double(failures[i], "measured", where);
-      f.limit = read.Double(failures[i], "limit", where);
-      f.message = read.String(failures[i], "message", where);
-      r.failures.push_back(f);
-    }
-    const cv::FileNode warnings = read.Node(root, "warnings", "");
-    if (warnings.isSeq()) {
-      for (const cv::FileNode& w : warnings) {
-        if (w.isString()) {
-          r.warnings.push_back(static_cast<std::string>(w));
-        } else {
-          problems.push_back("warnings: expected strings");
-        }
-      }
-    } else if (!warnings.empty() && !warnings.isNone()) {
-      problems.push_back("warnings: expected a list");
-    }
-    const std::vector<cv::FileNode> rejected = read.Seq(root, "rejected");
-    for (std::size_t i = 0; i < rejected.size(); ++i) {
-      const std::string where = Where("rejected", i);
-      RejectedPair p;
-      p.index = read.Int(rejected[i], "index", where);
-      p.name = read.String(rejected[i], "name", where);
-      const std::string reason = read.String(rejected[i], "reason", where);
-      bool known = false;
-      for (RejectReason candidate : kAllReasons) {
-        if (RejectReasonName(candidate) == reason) {
-          p.reason = candidate;
-          known = true;
-        }
-      }
-      if (!known) problems.push_back(where + "reason: unknown value \"" + reason + "\"");
-      p.detail = read.String(rejected[i], "detail", where);
-      r.rejected.push_back(p);
-    }
-    const std::vector<cv::FileNode> pairs = read.Seq(root, "pairs");
-    for (std::size_t i = 0; i < pairs.size(); ++i) {
-      const std::string where = Where("pairs", i);
-      PairReport p;
-      p.index = read.Int(pairs[i], "index", where);
-      p.name = read.String(pairs[i], "name", where);
-      p.rms_left_px = read.Double(pairs[i], "rms_left_px", where);
-      p.rms_right_px = read.Double(pairs[i], "rms_right_px", where);
-      p.epipolar_mean_px = read.Double(pairs[i], "epipolar_mean_px", where);
-      p.coverage_left = read.Double(pairs[i], "coverage_left", where);
-      p.coverage_right = read.Double(pairs[i], "coverage_right", where);
-      r.pairs.push_back(p);
-    }
+    ReadFigures(read, root, r);
+    r.failures = ReadList<GateFailure>(read, root, "failures", ReadFailure);
+    r.warnings = ReadWarnings(read, root);
+    r.rejected = ReadList<RejectedPair>(read, root, "rejected", ReadRejectedPair);
+    r.pairs = ReadList<PairReport>(read, root, "pairs", ReadPairReport);
     if (static_cast<int>(r.pairs.size()) != r.pairs_used && problems.empty()) {
       problems.push_back("pairs_used: " + std::to_string(r.pairs_used) + " but " +
                          std::to_string(r.pairs.size()) + " pairs are listed");

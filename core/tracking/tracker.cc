@@ -360,32 +360,32 @@ Tracker::Entry Tracker::NewEntry(const detection::Detection& d, const CameraMode
   return e;
 }
 
-std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& detections,
-                                   int64_t t_ns, const CameraModel& camera) {
-  if (std::vector<std::string> problems = camera.Validate(); !problems.empty()) {
-    throw std::invalid_argument("Tracker::Update: camera: " + Error::Invalid(problems).message);
-  }
+double Tracker::TimeStep(int64_t t_ns) {
   double dt = 0;
   if (last_t_ns_) {
     dt = static_cast<double>(t_ns - *last_t_ns_) * 1e-9;
     dt = std::clamp(dt, 0.0, options_.max_dt_s);
   }
   last_t_ns_ = t_ns;
+  return dt;
+}
 
+void Tracker::SelectUsable(const std::vector<detection::Detection>& detections) {
   usable_.clear();
   for (int i = 0; i < static_cast<int>(detections.size()); ++i) {
     if (Usable(detections[i], options_.min_score)) usable_.push_back(i);
   }
-  const int num_tracks = static_cast<int>(tracks_.size());
-  const int num_detections = static_cast<int>(usable_.size());
-  FindCuts(detections, camera);
+}
 
-  // Every track predicted once, with its covariance: the gates use it, and a track that gets a
-  // detection is updated from it.
+void Tracker::PredictTracks(double dt, const CameraModel& camera) {
+  const int num_tracks = static_cast<int>(tracks_.size());
   predictions_.resize(num_tracks);
   for (int t = 0; t < num_tracks; ++t) predictions_[t] = Predict(tracks_[t], dt, camera);
+}
 
-  // How many tracks' predicted boxes each detection covers (a blob covering two is a merge).
+void Tracker::CountMerges(const std::vector<detection::Detection>& detections) {
+  const int num_tracks = static_cast<int>(tracks_.size());
+  const int num_detections = static_cast<int>(usable_.size());
   merged_.assign(num_detections, 0);
   for (int t = 0; t < num_tracks; ++t) {
     const Prediction& p = predictions_[t];
@@ -395,12 +395,42 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
       if (Area(box & detections[usable_[k]].bbox) >= kSharedCover * Area(box)) ++merged_[k];
     }
   }
+}
 
-  // Cost: pixel distance between the detection's centre (re-anchored when its size differs) and
-  // the track's predicted centre. Only the pairs inside every gate are listed; all others are
-  // forbidden and never assigned.
+std::optional<double> Tracker::PairCost(const Entry& e, const Prediction& p,
+                                        const detection::Detection& d, int k) const {
   const GateOptions& gates = options_.gates;
   const double max_distance2 = gates.max_distance_px * gates.max_distance_px;
+  if (!DepthConsistent(p, d)) return std::nullopt;
+  const Measured m = Measure(e, p, d, cuts_[k], merged_[k] > 1);
+  const double dx = m.centre.x - p.u, dy = m.centre.y - p.v;
+  const double distance2 = dx * dx + dy * dy;
+  if (!(distance2 <= max_distance2)) return std::nullopt;
+  // A larger blob than the last on a track measured last frame, neither cut: another obstacle
+  // (or several) when it is much larger. A smaller one is a partial view and passes.
+  if (e.misses == 0 && !cuts_[k].any() && !e.last_cut) {
+    if (d.area_px > e.last.area_px &&
+        !WithinRatio(d.area_px, e.last.area_px, gates.max_area_ratio)) {
+      return std::nullopt;
+    }
+    if (d.perimeter_px > e.last.perimeter_px &&
+        !WithinRatio(d.perimeter_px, e.last.perimeter_px, gates.max_perimeter_ratio)) {
+      return std::nullopt;
+    }
+  }
+  // Cost: the distance, plus half the size difference of a re-anchored blob: of two blobs
+  // that both fit, the one of the obstacle's own size (not a sliver or a merge) wins.
+  double cost = std::sqrt(distance2);
+  if (m.anchored) {
+    cost += 0.5 * (std::abs(d.bbox.width - p.size.width) + std::abs(d.bbox.height - p.size.height));
+  }
+  return cost;
+}
+
+void Tracker::Associate(const std::vector<detection::Detection>& detections) {
+  const int num_tracks = static_cast<int>(tracks_.size());
+  const int num_detections = static_cast<int>(usable_.size());
+  const GateOptions& gates = options_.gates;
   allowed_.clear();
   for (int t = 0; t < num_tracks; ++t) {
     const Entry& e = tracks_[t];
@@ -411,39 +441,107 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
     for (int k = 0; k < num_detections; ++k) {
       const detection::Detection& d = detections[usable_[k]];
       if ((gate_box & d.bbox).empty()) continue;
-      if (!DepthConsistent(p, d)) continue;
-      const Measured m = Measure(e, p, d, cuts_[k], merged_[k] > 1);
-      const double dx = m.centre.x - p.u, dy = m.centre.y - p.v;
-      const double distance2 = dx * dx + dy * dy;
-      if (!(distance2 <= max_distance2)) continue;
-      // A larger blob than the last on a track measured last frame, neither cut: another obstacle
-      // (or several) when it is much larger. A smaller one is a partial view and passes.
-      if (e.misses == 0 && !cuts_[k].any() && !e.last_cut) {
-        if (d.area_px > e.last.area_px &&
-            !WithinRatio(d.area_px, e.last.area_px, gates.max_area_ratio)) {
-          continue;
-        }
-        if (d.perimeter_px > e.last.perimeter_px &&
-            !WithinRatio(d.perimeter_px, e.last.perimeter_px, gates.max_perimeter_ratio)) {
-          continue;
-        }
+      if (const std::optional<double> cost = PairCost(e, p, d, k)) {
+        allowed_.push_back({.row = t, .col = k, .cost = *cost});
       }
-      // Cost: the distance, plus half the size difference of a re-anchored blob: of two blobs
-      // that both fit, the one of the obstacle's own size (not a sliver or a merge) wins.
-      double cost = std::sqrt(distance2);
-      if (m.anchored) {
-        cost += 0.5 * (std::abs(d.bbox.width - p.size.width) + std::abs(d.bbox.height - p.size.height));
-      }
-      allowed_.push_back({.row = t, .col = k, .cost = cost});
     }
   }
   solver_.SolveSparse(num_tracks, num_detections, allowed_, track_to_detection_);
-
-  const KalmanOptions& kalman = options_.kalman;
   detection_used_.assign(num_detections, 0);
   for (int t = 0; t < num_tracks; ++t) {
     if (track_to_detection_[t] >= 0) detection_used_[track_to_detection_[t]] = 1;
   }
+}
+
+void Tracker::UpdateMeasured(Entry& e, const Prediction& p, const detection::Detection& d, int k,
+                             const CameraModel& camera) {
+  Correct(e, p, d, cuts_[k], merged_[k] > 1, camera);
+  e.range_filter.Update(RawRange(d), e.since_measured_s);
+  e.since_measured_s = 0;
+  e.last = d;
+  ++e.hits;
+  e.misses = 0;
+  if (e.state != TrackState::kTentative || e.hits >= options_.confirm_hits) {
+    e.state = TrackState::kConfirmed;
+  }
+}
+
+int Tracker::FindSharedBlob(const Prediction& p,
+                            const std::vector<detection::Detection>& detections) const {
+  int found = -1;
+  const cv::Rect predicted = PredictedBox(p, 0, 0);
+  double best_error = std::numeric_limits<double>::infinity();
+  for (int j = 0; j < static_cast<int>(usable_.size()); ++j) {
+    const detection::Detection& d = detections[usable_[j]];
+    if (Area(predicted & d.bbox) < kSharedCover * Area(predicted)) continue;
+    const double tol_u = std::max(kEdgeAgreePx, kEdgeAgreeSigmas * p.sigma_u);
+    const double lo_error = std::abs(d.bbox.x - predicted.x);
+    const double hi_error = std::abs(d.bbox.br().x - predicted.br().x);
+    const bool wider = d.bbox.width > p.size.width +
+                                          std::max(kSizeTolerancePx, kSizeTolerance * p.size.width);
+    const double error = std::min(lo_error, hi_error);
+    if (!wider || error > tol_u || error >= best_error) continue;
+    // Each obstacle of a merged blob is a substantial part of it; a sliver along its edge (a
+    // side face seen at another depth, a speck) is not measured by it.
+    if (p.size.width < kSharedMinFraction * d.bbox.width) continue;
+    best_error = error;
+    found = j;
+  }
+  return found;
+}
+
+void Tracker::UpdatePositionOnly(int t, int k, const std::vector<detection::Detection>& detections,
+                                 const CameraModel& camera) {
+  Entry& e = tracks_[t];
+  const Prediction& p = predictions_[t];
+  const detection::Detection& d = detections[usable_[k]];
+  Measured m = Measure(e, p, d, cuts_[k], true);
+  e.kalman = p.kalman;
+  const AngleDepth pseudo = MeasureAngleDepth(camera, m.centre.x, m.centre.y, p.z,
+                                              kNoDepthSigmaFraction * p.z,
+                                              options_.kalman.measurement_noise);
+  Eigen::Matrix3d covariance = pseudo.covariance;
+  const double f2 = camera.f_px * camera.f_px;
+  covariance(0, 0) = m.var_u / f2;
+  covariance(1, 1) = m.var_v / f2;
+  e.kalman.Update(pseudo.s, covariance);
+  // Its box: the full box at the new centre within the blob, less what the track that took the
+  // blob covers (the nearer obstacle hides that part).
+  e.position_only = true;
+  e.box = PredictedBox(Predict(e, 0, camera), 0, 0) & d.bbox;
+  const int num_tracks = static_cast<int>(track_to_detection_.size());
+  for (int o = 0; o < num_tracks; ++o) {
+    if (o != t && track_to_detection_[o] == k && predictions_[o].valid) {
+      e.box = Subtract(e.box, PredictedBox(predictions_[o], 0, 0));
+    }
+  }
+  ++e.hits;
+  e.misses = 0;
+  e.state = TrackState::kConfirmed;
+}
+
+void Tracker::Coast(Entry& e, double dt, const CameraModel& camera) {
+  const KalmanOptions& kalman = options_.kalman;
+  e.kalman.PredictAngleDepth(dt, kalman.occluded_process_noise);
+  const Eigen::Vector3d s = e.kalman.position();
+  if (s.z() > kMinDepthM) {
+    const AngleDepth pseudo = MeasureAngleDepth(
+        camera, camera.cx + camera.f_px * s.x(), camera.cy + camera.f_px * s.y(), s.z(), 0,
+        kalman.occluded_measurement_noise);
+    e.kalman.Update(pseudo.s, pseudo.covariance);
+    if (e.full_size.width > 0) {
+      const double scale = e.full_depth_m > 0 ? e.full_depth_m / s.z() : 1.0;
+      e.box = RectAround(camera.cx + camera.f_px * s.x(), camera.cy + camera.f_px * s.y(),
+                         e.full_size.width * scale, e.full_size.height * scale);
+    }
+  }
+  ++e.misses;
+  if (e.state == TrackState::kConfirmed) e.state = TrackState::kCoasting;
+}
+
+void Tracker::UpdateTracks(const std::vector<detection::Detection>& detections, double dt,
+                           const CameraModel& camera) {
+  const int num_tracks = static_cast<int>(tracks_.size());
   for (int t = 0; t < num_tracks; ++t) {
     Entry& e = tracks_[t];
     const Prediction& p = predictions_[t];
@@ -451,88 +549,28 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
     ++e.age_frames;
     e.since_measured_s += dt;
     if (k >= 0) {
-      const detection::Detection& d = detections[usable_[k]];
-      Correct(e, p, d, cuts_[k], merged_[k] > 1, camera);
-      e.range_filter.Update(RawRange(d), e.since_measured_s);
-      e.since_measured_s = 0;
-      e.last = d;
-      ++e.hits;
-      e.misses = 0;
-      if (e.state != TrackState::kTentative || e.hits >= options_.confirm_hits) {
-        e.state = TrackState::kConfirmed;
-      }
+      UpdateMeasured(e, p, detections[usable_[k]], k, camera);
       continue;
     }
     // No detection of its own. A confirmed track whose predicted box lies in a larger blob that
     // shares one of its edges (two obstacles merged into one blob, whose depth is the other's) is
     // measured there in position only: the blob says where its edge is, not how far it is.
     if (e.state != TrackState::kTentative && p.valid && p.size.width > 0) {
-      const cv::Rect predicted = PredictedBox(p, 0, 0);
-      double best_error = std::numeric_limits<double>::infinity();
-      for (int j = 0; j < num_detections; ++j) {
-        const detection::Detection& d = detections[usable_[j]];
-        if (Area(predicted & d.bbox) < kSharedCover * Area(predicted)) continue;
-        const double tol_u = std::max(kEdgeAgreePx, kEdgeAgreeSigmas * p.sigma_u);
-        const double lo_error = std::abs(d.bbox.x - predicted.x);
-        const double hi_error = std::abs(d.bbox.br().x - predicted.br().x);
-        const bool wider = d.bbox.width > p.size.width +
-                                              std::max(kSizeTolerancePx, kSizeTolerance * p.size.width);
-        const double error = std::min(lo_error, hi_error);
-        if (!wider || error > tol_u || error >= best_error) continue;
-        // Each obstacle of a merged blob is a substantial part of it; a sliver along its edge (a
-        // side face seen at another depth, a speck) is not measured by it.
-        if (p.size.width < kSharedMinFraction * d.bbox.width) continue;
-        best_error = error;
-        k = j;
-      }
+      k = FindSharedBlob(p, detections);
     }
     if (k >= 0) {
-      const detection::Detection& d = detections[usable_[k]];
-      Measured m = Measure(e, p, d, cuts_[k], true);
-      e.kalman = p.kalman;
-      const AngleDepth pseudo = MeasureAngleDepth(camera, m.centre.x, m.centre.y, p.z,
-                                                  kNoDepthSigmaFraction * p.z, kalman.measurement_noise);
-      Eigen::Matrix3d covariance = pseudo.covariance;
-      const double f2 = camera.f_px * camera.f_px;
-      covariance(0, 0) = m.var_u / f2;
-      covariance(1, 1) = m.var_v / f2;
-      e.kalman.Update(pseudo.s, covariance);
-      // Its box: the full box at the new centre within the blob, less what the track that took the
-      // blob covers (the nearer obstacle hides that part).
-      e.position_only = true;
-      e.box = PredictedBox(Predict(e, 0, camera), 0, 0) & d.bbox;
-      for (int o = 0; o < num_tracks; ++o) {
-        if (o != t && track_to_detection_[o] == k && predictions_[o].valid) {
-          e.box = Subtract(e.box, PredictedBox(predictions_[o], 0, 0));
-        }
-      }
-      ++e.hits;
-      e.misses = 0;
-      e.state = TrackState::kConfirmed;
+      UpdatePositionOnly(t, k, detections, camera);
       continue;
     }
     // Occluded (or missed): free prediction with the occlusion noises. The pseudo-measurement is
     // the prediction itself, so it leaves the state and only (barely) shrinks the covariance.
-    e.kalman.PredictAngleDepth(dt, kalman.occluded_process_noise);
-    const Eigen::Vector3d s = e.kalman.position();
-    if (s.z() > kMinDepthM) {
-      const AngleDepth pseudo = MeasureAngleDepth(
-          camera, camera.cx + camera.f_px * s.x(), camera.cy + camera.f_px * s.y(), s.z(), 0,
-          kalman.occluded_measurement_noise);
-      e.kalman.Update(pseudo.s, pseudo.covariance);
-      if (e.full_size.width > 0) {
-        const double scale = e.full_depth_m > 0 ? e.full_depth_m / s.z() : 1.0;
-        e.box = RectAround(camera.cx + camera.f_px * s.x(), camera.cy + camera.f_px * s.y(),
-                           e.full_size.width * scale, e.full_size.height * scale);
-      }
-    }
-    ++e.misses;
-    if (e.state == TrackState::kConfirmed) e.state = TrackState::kCoasting;
+    Coast(e, dt, camera);
   }
+}
 
-  // A detection no track took: inside a track's predicted box at a depth that track allows, it is
-  // a fragment of that obstacle (its box joins the track's); at a depth the track rules out, it
-  // starts a child track, deleted at its first miss while tentative; elsewhere a new track.
+void Tracker::StartTracks(const std::vector<detection::Detection>& detections, int num_tracks,
+                          const CameraModel& camera) {
+  const int num_detections = static_cast<int>(usable_.size());
   for (int k = 0; k < num_detections; ++k) {
     if (detection_used_[k]) continue;
     const detection::Detection& d = detections[usable_[k]];
@@ -553,26 +591,31 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
     tracks_.push_back(NewEntry(d, camera));
     tracks_.back().child = inside;
   }
+}
 
-  // Two tracks on one obstacle (their boxes overlap at merge_iou, depths consistent): the younger
-  // is merged into the older, which takes its measurement when it had none of its own.
+bool Tracker::SameObstacle(const Entry& a, const Entry& b) const {
+  const GateOptions& gates = options_.gates;
+  // One obstacle: the boxes overlap at merge_iou, or one lies mostly inside the other (a
+  // fragment that started a track of its own, e.g. in the first frame).
+  const double inter = Area(a.box & b.box);
+  if (IoURect(a.box, b.box) < options_.merge_iou &&
+      inter < kInsideFraction * std::min(Area(a.box), Area(b.box))) {
+    return false;
+  }
+  const double za = a.kalman.position().z(), zb = b.kalman.position().z();
+  if (!WithinRatio(za, zb, gates.max_depth_ratio)) return false;  // the hard cap, as for a pair
+  const double floor = gates.min_depth_sigma_fraction * std::max(za, zb);
+  const double var = a.kalman.covariance()(2, 2) + b.kalman.covariance()(2, 2) + floor * floor;
+  return !((za - zb) * (za - zb) > gates.depth_sigmas * gates.depth_sigmas * var);
+}
+
+void Tracker::MergeTracks() {
   for (size_t i = 0; i < tracks_.size(); ++i) {
     for (size_t j = i + 1; j < tracks_.size(); ++j) {
       Entry& a = tracks_[i];
       Entry& b = tracks_[j];
       if (a.id == 0 || b.id == 0) continue;
-      // One obstacle: the boxes overlap at merge_iou, or one lies mostly inside the other (a
-      // fragment that started a track of its own, e.g. in the first frame).
-      const double inter = Area(a.box & b.box);
-      if (IoURect(a.box, b.box) < options_.merge_iou &&
-          inter < kInsideFraction * std::min(Area(a.box), Area(b.box))) {
-        continue;
-      }
-      const double za = a.kalman.position().z(), zb = b.kalman.position().z();
-      if (!WithinRatio(za, zb, gates.max_depth_ratio)) continue;  // the hard cap, as for a pair
-      const double floor = gates.min_depth_sigma_fraction * std::max(za, zb);
-      const double var = a.kalman.covariance()(2, 2) + b.kalman.covariance()(2, 2) + floor * floor;
-      if ((za - zb) * (za - zb) > gates.depth_sigmas * gates.depth_sigmas * var) continue;
+      if (!SameObstacle(a, b)) continue;
       Entry& older = a.id < b.id ? a : b;
       Entry& younger = a.id < b.id ? b : a;
       if (older.misses > 0 && younger.misses == 0 && older.state != TrackState::kTentative) {
@@ -588,22 +631,53 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
       younger.id = 0;  // merged: removed below
     }
   }
+}
 
+bool Tracker::Expired(const Entry& e, const CameraModel& camera) const {
+  if (e.id == 0) return true;
+  const int limit = e.state == TrackState::kTentative
+                        ? (e.child ? 1 : options_.tentative_delete_misses)
+                        : options_.delete_misses;
+  if (e.misses >= limit) return true;
+  if (e.misses == 0 || camera.width <= 0 || camera.height <= 0) return false;
+  const Eigen::Vector3d s = e.kalman.position();
+  const double u = camera.cx + camera.f_px * s.x(), v = camera.cy + camera.f_px * s.y();
+  return s.z() <= kMinDepthM || u + 0.5 * e.full_size.width < 0 ||
+         u - 0.5 * e.full_size.width > camera.width || v + 0.5 * e.full_size.height < 0 ||
+         v - 0.5 * e.full_size.height > camera.height;
+}
+
+std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& detections,
+                                   int64_t t_ns, const CameraModel& camera) {
+  if (std::vector<std::string> problems = camera.Validate(); !problems.empty()) {
+    throw std::invalid_argument("Tracker::Update: camera: " + Error::Invalid(problems).message);
+  }
+  const double dt = TimeStep(t_ns);
+  SelectUsable(detections);
+  const int num_tracks = static_cast<int>(tracks_.size());
+  FindCuts(detections, camera);
+
+  // Every track predicted once, with its covariance: the gates use it, and a track that gets a
+  // detection is updated from it.
+  PredictTracks(dt, camera);
+  // How many tracks' predicted boxes each detection covers (a blob covering two is a merge).
+  CountMerges(detections);
+  // Cost: pixel distance between the detection's centre (re-anchored when its size differs) and
+  // the track's predicted centre. Only the pairs inside every gate are listed; all others are
+  // forbidden and never assigned.
+  Associate(detections);
+  // Each track measured by its detection, in position only by a blob it shares, or coasting.
+  UpdateTracks(detections, dt, camera);
+  // A detection no track took: inside a track's predicted box at a depth that track allows, it is
+  // a fragment of that obstacle (its box joins the track's); at a depth the track rules out, it
+  // starts a child track, deleted at its first miss while tentative; elsewhere a new track.
+  StartTracks(detections, num_tracks, camera);
+  // Two tracks on one obstacle (their boxes overlap at merge_iou, depths consistent): the younger
+  // is merged into the older, which takes its measurement when it had none of its own.
+  MergeTracks();
   // Deleted: merged, after too many misses, or predicted wholly out of the image (nothing can be
   // seen there; an obstacle that left the view is gone).
-  std::erase_if(tracks_, [&](const Entry& e) {
-    if (e.id == 0) return true;
-    const int limit = e.state == TrackState::kTentative
-                          ? (e.child ? 1 : options_.tentative_delete_misses)
-                          : options_.delete_misses;
-    if (e.misses >= limit) return true;
-    if (e.misses == 0 || camera.width <= 0 || camera.height <= 0) return false;
-    const Eigen::Vector3d s = e.kalman.position();
-    const double u = camera.cx + camera.f_px * s.x(), v = camera.cy + camera.f_px * s.y();
-    return s.z() <= kMinDepthM || u + 0.5 * e.full_size.width < 0 ||
-           u - 0.5 * e.full_size.width > camera.width || v + 0.5 * e.full_size.height < 0 ||
-           v - 0.5 * e.full_size.height > camera.height;
-  });
+  std::erase_if(tracks_, [&](const Entry& e) { return Expired(e, camera); });
 
   std::vector<Track> out;
   out.reserve(tracks_.size());

@@ -213,6 +213,48 @@ class Tracker {
   Entry NewEntry(const detection::Detection& detection, const CameraModel& camera);
   Track Output(const Entry& entry, const CameraModel& camera) const;
 
+  // The stages of Update(), in order. The interval since the previous update (clamped to
+  // [0, max_dt_s]), remembering t_ns.
+  double TimeStep(int64_t t_ns);
+  // usable_: the detections that can be tracked.
+  void SelectUsable(const std::vector<detection::Detection>& detections);
+  // predictions_: every track predicted by dt.
+  void PredictTracks(double dt, const CameraModel& camera);
+  // merged_: how many confirmed tracks' predicted boxes each usable detection covers.
+  void CountMerges(const std::vector<detection::Detection>& detections);
+  // allowed_ (the pairs inside every gate, with their cost), the assignment track_to_detection_
+  // and detection_used_.
+  void Associate(const std::vector<detection::Detection>& detections);
+  // The cost of pairing track `e` with usable detection `k` (`d`) whose box is in the position
+  // gate; nullopt when a gate (depth, distance, area, perimeter) forbids the pair.
+  std::optional<double> PairCost(const Entry& e, const Prediction& p, const detection::Detection& d,
+                                 int k) const;
+  // Each track: measured by its detection, in position only by a blob it shares, or coasting.
+  void UpdateTracks(const std::vector<detection::Detection>& detections, double dt,
+                    const CameraModel& camera);
+  void UpdateMeasured(Entry& e, const Prediction& p, const detection::Detection& d, int k,
+                      const CameraModel& camera);
+  // The usable detection wider than the track that covers half its predicted box or more, with its
+  // left or right edge where the prediction's is (the closest wins); -1 when there is none.
+  int FindSharedBlob(const Prediction& p,
+                     const std::vector<detection::Detection>& detections) const;
+  // Track t measured in position only in usable detection k, a blob another track may have taken.
+  void UpdatePositionOnly(int t, int k, const std::vector<detection::Detection>& detections,
+                          const CameraModel& camera);
+  // No detection: free prediction with the occlusion noises.
+  void Coast(Entry& e, double dt, const CameraModel& camera);
+  // New tracks from the detections no track took that are not fragments of the first num_tracks
+  // tracks (the tracks that were predicted).
+  void StartTracks(const std::vector<detection::Detection>& detections, int num_tracks,
+                   const CameraModel& camera);
+  // Two tracks on one obstacle: boxes that overlap (merge_iou, or one mostly inside the other)
+  // and depths consistent within the depth gate.
+  bool SameObstacle(const Entry& a, const Entry& b) const;
+  // Merges the younger of two tracks on one obstacle into the older (id 0 marks it merged).
+  void MergeTracks();
+  // Merged, missed too often, or predicted wholly out of the image.
+  bool Expired(const Entry& e, const CameraModel& camera) const;
+
   TrackerOptions options_;
   std::vector<Entry> tracks_;
   std::uint64_t next_id_ = 1;

@@ -293,13 +293,8 @@ Shape MakeShape(Rng& rng, const std::string& kind, const FamilySpec& spec) {
   return Building(rng, rng.LogUniform(8.0, 40.0) * k);
 }
 
-// The rig, sky, ground and sensor of the family; returns its placement spec.
-FamilySpec SetUpFamily(const std::string& family, Rng& rng, Camera& cam, SyntheticOptions& o) {
-  Scene& scene = o.scene;
-  scene = Scene{};
-  FamilySpec spec;
-  cv::Size size;
-  // Sky and ground defaults, changed per family below.
+// The sky and ground every family starts from (some families change them).
+void DrawSkyAndGround(Rng& rng, Scene& scene) {
   scene.sky_horizon = rng.Uniform(0.6, 0.95);
   scene.sky_top = std::max(0.05, scene.sky_horizon - rng.Uniform(0.0, 0.4));
   scene.ground_albedo = rng.Uniform(0.25, 0.6);
@@ -310,98 +305,144 @@ FamilySpec SetUpFamily(const std::string& family, Rng& rng, Camera& cam, Synthet
     scene.cloud_grey = rng.Uniform(-0.25, 0.25);
     scene.cloud_scale = rng.LogUniform(0.15, 0.6);
   }
+}
+
+// A family's range of rigs: image sizes AllSizes()[first_size..last_size], focal lengths
+// (log-uniform) and baselines.
+struct RigRange {
+  size_t first_size, last_size;
+  double f_lo, f_hi;                // pixels
+  double baseline_lo, baseline_hi;  // metres
+};
+
+// Draws the rig's image size, focal length and baseline from `range`.
+void DrawRig(Rng& rng, const RigRange& range, Camera& cam) {
+  const cv::Size size = PickSize(rng, range.first_size, range.last_size);
+  cam.w = size.width;
+  cam.h = size.height;
+  cam.f = rng.LogUniform(range.f_lo, range.f_hi);
+  cam.baseline = rng.Uniform(range.baseline_lo, range.baseline_hi);
+}
+
+// "sky": the camera high up, or low and pitched up; aircraft, drones and balloons against the sky.
+FamilySpec SetUpSky(Rng& rng, Camera& cam) {
+  DrawRig(rng, {0, AllSizes().size() - 1, 500.0, 2500.0, 0.2, 1.0}, cam);
+  if (rng.Chance(0.6)) {
+    cam.height = rng.LogUniform(60.0, 400.0);
+    cam.pitch_deg = rng.Uniform(0.0, 12.0);
+  } else {
+    cam.height = rng.Uniform(2.0, 30.0);
+    cam.pitch_deg = rng.Uniform(10.0, 25.0);
+  }
+  return FamilySpec{.kinds = {{"aircraft", 0.4}, {"drone", 0.35}, {"balloon", 0.25}},
+                    .z_lo = 10.0,
+                    .z_hi = 800.0,
+                    .prefer_sky = true};
+}
+
+// A runway along z: asphalt, edge lines and a dashed centreline.
+void AddRunway(Rng& rng, Scene& scene) {
+  const double x = rng.Uniform(-60.0, 60.0), half = rng.Uniform(12.0, 22.0);
+  const double asphalt = rng.Uniform(0.2, 0.38);
+  GroundMark m;
+  m.area_xz_m = cv::Rect2d(x - half, 0.0, 2 * half, 3000.0);
+  m.albedo = asphalt;
+  m.contrast = 0.1;
+  scene.marks.push_back(m);
+  for (const double edge : {x - half, x + half - 0.9}) {
+    m.area_xz_m = cv::Rect2d(edge, 0.0, 0.9, 3000.0);
+    m.albedo = 0.85;
+    m.contrast = 0.03;
+    scene.marks.push_back(m);
+  }
+  DashedLine centre;
+  centre.x_m = x;
+  centre.z_start_m = rng.Uniform(0.0, 40.0);
+  centre.z_end_m = 3000.0;
+  scene.dashed_lines.push_back(centre);
+}
+
+// A far ridge: one to three hills 400..900 m away, the camera `height` up.
+void AddRidge(Rng& rng, double height, Scene& scene) {
+  const int n = rng.Int(1, 3);
+  for (int k = 0; k < n; ++k) {
+    Hill hill;
+    const double z = rng.Uniform(400.0, 900.0);
+    hill.radii_m = {rng.Uniform(80.0, 250.0), rng.Uniform(20.0, 60.0), rng.Uniform(40.0, 90.0)};
+    hill.centre_m = {rng.Uniform(-400.0, 400.0), height + rng.Uniform(0.0, 10.0), z};
+    hill.albedo = rng.Uniform(0.4, 0.55);
+    hill.contrast = rng.Uniform(0.1, 0.25);
+    hill.texture_cell_m = rng.Uniform(1.0, 3.0);
+    scene.hills.push_back(hill);
+  }
+}
+
+// "airfield": the camera low over textured ground, sometimes a runway and a far ridge; things
+// standing on the ground, aircraft parked or flying, drones.
+FamilySpec SetUpAirfield(Rng& rng, Camera& cam, Scene& scene) {
+  DrawRig(rng, {0, AllSizes().size() - 1, 400.0, 1600.0, 0.2, 0.8}, cam);
+  cam.height = rng.LogUniform(2.0, 30.0);
+  cam.pitch_deg = rng.Uniform(-10.0, 5.0);
+  if (rng.Chance(0.5)) AddRunway(rng, scene);
+  if (rng.Chance(0.3)) AddRidge(rng, cam.height, scene);
+  return FamilySpec{.kinds = {{"tower", 0.2},
+                              {"pole", 0.2},
+                              {"building", 0.2},
+                              {"aircraft", 0.25},
+                              {"drone", 0.15}},
+                    .z_lo = 15.0,
+                    .z_hi = 400.0,
+                    .parked = 0.3};
+}
+
+// "long_range": a telephoto rig near the ground, in haze; far aircraft, towers and buildings.
+FamilySpec SetUpLongRange(Rng& rng, Camera& cam, Scene& scene) {
+  DrawRig(rng, {4, AllSizes().size() - 1, 2000.0, 6000.0, 0.3, 1.0}, cam);
+  cam.height = rng.Uniform(2.0, 20.0);
+  cam.pitch_deg = rng.Uniform(0.0, 5.0);
+  // Haze: a pale, flat sky, faint ground texture, faint clouds.
+  scene.sky_horizon = rng.Uniform(0.75, 0.95);
+  scene.sky_top = scene.sky_horizon - rng.Uniform(0.0, 0.12);
+  scene.ground_albedo = rng.Uniform(0.45, 0.65);
+  scene.ground_contrast = rng.Uniform(0.03, 0.15);
+  scene.ground_texture_cell_m = rng.LogUniform(0.5, 3.0);
+  scene.cloud_grey = std::clamp(scene.cloud_grey, -0.1, 0.1);
+  return FamilySpec{.kinds = {{"aircraft", 0.7}, {"tower", 0.15}, {"building", 0.15}},
+                    .z_lo = 200.0,
+                    .z_hi = 1500.0,
+                    .contrast_hi = 0.5,
+                    .prefer_sky = true};
+}
+
+// "close": a wide-angle rig a few metres up; drones, poles and small balloons nearby.
+FamilySpec SetUpClose(Rng& rng, Camera& cam) {
+  DrawRig(rng, {0, 4, 300.0, 600.0, 0.1, 0.3}, cam);
+  cam.height = rng.Uniform(1.5, 10.0);
+  cam.pitch_deg = rng.Uniform(-5.0, 10.0);
+  return FamilySpec{.kinds = {{"drone", 0.5}, {"pole", 0.35}, {"balloon", 0.15}},
+                    .z_lo = 5.0,
+                    .z_hi = 40.0,
+                    .scale = 0.5};
+}
+
+// The rig, sky, ground and sensor of the family; returns its placement spec.
+FamilySpec SetUpFamily(const std::string& family, Rng& rng, Camera& cam, SyntheticOptions& o) {
+  Scene& scene = o.scene;
+  scene = Scene{};
+  // Sky and ground defaults, changed per family.
+  DrawSkyAndGround(rng, scene);
+  FamilySpec spec;
   if (family == "sky") {
-    size = PickSize(rng, 0, AllSizes().size() - 1);
-    cam.f = rng.LogUniform(500.0, 2500.0);
-    cam.baseline = rng.Uniform(0.2, 1.0);
-    if (rng.Chance(0.6)) {
-      cam.height = rng.LogUniform(60.0, 400.0);
-      cam.pitch_deg = rng.Uniform(0.0, 12.0);
-    } else {
-      cam.height = rng.Uniform(2.0, 30.0);
-      cam.pitch_deg = rng.Uniform(10.0, 25.0);
-    }
-    spec.kinds = {{"aircraft", 0.4}, {"drone", 0.35}, {"balloon", 0.25}};
-    spec.z_lo = 10.0;
-    spec.z_hi = 800.0;
-    spec.prefer_sky = true;
+    spec = SetUpSky(rng, cam);
   } else if (family == "airfield") {
-    size = PickSize(rng, 0, AllSizes().size() - 1);
-    cam.f = rng.LogUniform(400.0, 1600.0);
-    cam.baseline = rng.Uniform(0.2, 0.8);
-    cam.height = rng.LogUniform(2.0, 30.0);
-    cam.pitch_deg = rng.Uniform(-10.0, 5.0);
-    spec.kinds = {{"tower", 0.2},    {"pole", 0.2},  {"building", 0.2},
-                  {"aircraft", 0.25}, {"drone", 0.15}};
-    spec.z_lo = 15.0;
-    spec.z_hi = 400.0;
-    spec.parked = 0.3;
-    if (rng.Chance(0.5)) {  // a runway along z, with edge lines and a dashed centreline
-      const double x = rng.Uniform(-60.0, 60.0), half = rng.Uniform(12.0, 22.0);
-      const double asphalt = rng.Uniform(0.2, 0.38);
-      GroundMark m;
-      m.area_xz_m = cv::Rect2d(x - half, 0.0, 2 * half, 3000.0);
-      m.albedo = asphalt;
-      m.contrast = 0.1;
-      scene.marks.push_back(m);
-      for (const double edge : {x - half, x + half - 0.9}) {
-        m.area_xz_m = cv::Rect2d(edge, 0.0, 0.9, 3000.0);
-        m.albedo = 0.85;
-        m.contrast = 0.03;
-        scene.marks.push_back(m);
-      }
-      DashedLine centre;
-      centre.x_m = x;
-      centre.z_start_m = rng.Uniform(0.0, 40.0);
-      centre.z_end_m = 3000.0;
-      scene.dashed_lines.push_back(centre);
-    }
-    if (rng.Chance(0.3)) {  // a far ridge
-      const int n = rng.Int(1, 3);
-      for (int k = 0; k < n; ++k) {
-        Hill hill;
-        const double z = rng.Uniform(400.0, 900.0);
-        hill.radii_m = {rng.Uniform(80.0, 250.0), rng.Uniform(20.0, 60.0), rng.Uniform(40.0, 90.0)};
-        hill.centre_m = {rng.Uniform(-400.0, 400.0), cam.height + rng.Uniform(0.0, 10.0), z};
-        hill.albedo = rng.Uniform(0.4, 0.55);
-        hill.contrast = rng.Uniform(0.1, 0.25);
-        hill.texture_cell_m = rng.Uniform(1.0, 3.0);
-        scene.hills.push_back(hill);
-      }
-    }
+    spec = SetUpAirfield(rng, cam, scene);
   } else if (family == "long_range") {
-    size = PickSize(rng, 4, AllSizes().size() - 1);
-    cam.f = rng.LogUniform(2000.0, 6000.0);
-    cam.baseline = rng.Uniform(0.3, 1.0);
-    cam.height = rng.Uniform(2.0, 20.0);
-    cam.pitch_deg = rng.Uniform(0.0, 5.0);
-    spec.kinds = {{"aircraft", 0.7}, {"tower", 0.15}, {"building", 0.15}};
-    spec.z_lo = 200.0;
-    spec.z_hi = 1500.0;
-    spec.contrast_hi = 0.5;
-    spec.prefer_sky = true;
-    // Haze: a pale, flat sky, faint ground texture, faint clouds.
-    scene.sky_horizon = rng.Uniform(0.75, 0.95);
-    scene.sky_top = scene.sky_horizon - rng.Uniform(0.0, 0.12);
-    scene.ground_albedo = rng.Uniform(0.45, 0.65);
-    scene.ground_contrast = rng.Uniform(0.03, 0.15);
-    scene.ground_texture_cell_m = rng.LogUniform(0.5, 3.0);
-    scene.cloud_grey = std::clamp(scene.cloud_grey, -0.1, 0.1);
+    spec = SetUpLongRange(rng, cam, scene);
   } else if (family == "close") {
-    size = PickSize(rng, 0, 4);
-    cam.f = rng.LogUniform(300.0, 600.0);
-    cam.baseline = rng.Uniform(0.1, 0.3);
-    cam.height = rng.Uniform(1.5, 10.0);
-    cam.pitch_deg = rng.Uniform(-5.0, 10.0);
-    spec.kinds = {{"drone", 0.5}, {"pole", 0.35}, {"balloon", 0.15}};
-    spec.z_lo = 5.0;
-    spec.z_hi = 40.0;
-    spec.scale = 0.5;
+    spec = SetUpClose(rng, cam);
   } else {
     throw std::invalid_argument("unknown random scene family '" + family + "'");
   }
-  cam.w = size.width;
-  cam.h = size.height;
   cam.Finish();
   scene.camera_height_m = cam.height;
   scene.camera_pitch_deg = cam.pitch_deg;
@@ -423,6 +464,177 @@ double SkyGreyAt(const Scene& scene, const Camera& cam, double v) {
   if (v >= horizon) return scene.sky_horizon;
   const double frac = std::min(1.0, (horizon - v) / cam.cy);
   return scene.sky_horizon + (scene.sky_top - scene.sky_horizon) * frac;
+}
+
+// What placing the obstacles of one scene needs: the rig, the family's spec, the usable camera
+// depths and the sequence's last time.
+struct Placing {
+  const Camera& cam;
+  const FamilySpec& spec;
+  double z_lo, z_hi;
+  double t_end;
+};
+
+// Where an obstacle goes in the image, and at what camera depth.
+struct ImageSpot {
+  double u = 0, v = 0, z = 0;
+  bool overlapping = false;  // partly over an earlier obstacle
+};
+
+// Draws obstacle k's image spot and depth: anywhere (above the horizon where the family prefers
+// the sky), or sometimes partly over an earlier airborne obstacle of `placed`, at another range.
+ImageSpot DrawSpot(Rng& rng, const Placing& p, int k, bool standing, const RandomScene& placed) {
+  const Camera& cam = p.cam;
+  ImageSpot spot;
+  spot.z = rng.LogUniform(p.z_lo, p.z_hi);
+  spot.u = rng.Uniform(0.12, 0.88) * cam.w;
+  const double horizon = cam.HorizonRow();
+  if (!standing && k > 0 && rng.Chance(0.3)) {
+    const int j = rng.Int(0, k - 1);
+    const RandomObstacleInfo& prev = placed.obstacles[static_cast<size_t>(j)];
+    if (!prev.standing) {
+      const Obstacle& pob = placed.scenario.options.scene.obstacles[static_cast<size_t>(j)];
+      const cv::Point2d c = cam.Project(pob.path.start);
+      const double ratio = rng.Chance(0.5) ? rng.Uniform(1.4, 3.0) : 1.0 / rng.Uniform(1.4, 3.0);
+      spot.z = std::clamp(prev.depth_m * ratio, p.z_lo, p.z_hi);
+      const double size_px = cam.f * prev.extent_m / prev.depth_m;
+      spot.u = c.x + rng.Uniform(-0.6, 0.6) * size_px;
+      spot.v = c.y + rng.Uniform(-0.4, 0.4) * size_px;
+      spot.overlapping = true;
+    }
+  }
+  if (!spot.overlapping) {
+    double v_hi = 0.9 * cam.h;
+    if (p.spec.prefer_sky) v_hi = std::min(v_hi, horizon - 0.03 * cam.h);
+    if (v_hi < 0.1 * cam.h + 1) v_hi = 0.9 * cam.h;
+    spot.v = rng.Uniform(0.1 * cam.h, v_hi);
+  }
+  return spot;
+}
+
+// Draws an airborne obstacle's velocity (world, m/s) at camera depth `depth`, and its image speed
+// (px per frame) into speed_px: aircraft cross or approach along their heading, balloons drift,
+// drones fly any way.
+cv::Vec3d DrawVelocity(Rng& rng, const Camera& cam, const std::string& kind, const Shape& shape,
+                       double depth, double& speed_px) {
+  cv::Vec3d velocity(0, 0, 0);
+  const double m_per_px = depth / cam.f;
+  if (kind == "aircraft" && shape.heading_axis == 2) {
+    velocity[2] = -shape.heading_sign * depth * rng.Uniform(0.005, 0.02) * kFps;
+    speed_px = rng.Uniform(0.0, 1.0);
+    velocity[0] = (rng.Chance(0.5) ? 1 : -1) * speed_px * kFps * m_per_px;
+  } else if (kind == "aircraft") {
+    speed_px = rng.Uniform(0.5, 3.0);
+    velocity[0] = shape.heading_sign * speed_px * kFps * m_per_px;
+  } else if (kind == "balloon") {
+    speed_px = rng.Uniform(0.2, 1.0);
+    velocity[0] = (rng.Chance(0.5) ? 1 : -1) * speed_px * kFps * m_per_px;
+    velocity[1] = rng.Uniform(-0.3, 0.3) * speed_px * kFps * m_per_px;
+  } else {
+    speed_px = rng.Uniform(0.5, 3.0);
+    const double angle = rng.Uniform(0.0, 2.0 * kPi);
+    velocity[0] = std::cos(angle) * speed_px * kFps * m_per_px;
+    velocity[1] = std::sin(angle) * speed_px * kFps * m_per_px;
+    velocity[2] = rng.Uniform(-0.01, 0.01) * depth * kFps;
+  }
+  return velocity;
+}
+
+// Whether the obstacle is mostly in frame, big enough to be seen and (airborne) clear of the
+// ground at both ends of the sequence.
+bool StaysInView(const Placing& p, const Shape& shape, const cv::Vec3d& position,
+                 const cv::Vec3d& velocity) {
+  bool ok = true;
+  for (const double t : {0.0, p.t_end}) {
+    const cv::Vec3d at = position + velocity * t;
+    if (!shape.standing && at[1] + shape.hi[1] > p.cam.height - 0.2) ok = false;
+    const cv::Rect2d r = p.cam.ProjectBox(at + shape.lo, at + shape.hi);
+    if (p.cam.InFrameFraction(r) < 0.6 || std::max(r.width, r.height) < 6.0) ok = false;
+  }
+  return ok;
+}
+
+// One attempt at obstacle k of `placed`'s scene: a kind, a shape, a spot, a motion and a contrast
+// against the background at its centre row. False (ob and info untouched) when it does not fit:
+// in the ground, out of the disparity range, or not in view.
+bool TryObstacle(Rng& rng, const Placing& p, int k, const RandomScene& placed, Obstacle& ob,
+                 RandomObstacleInfo& info) {
+  const Camera& cam = p.cam;
+  const Scene& scene = placed.scenario.options.scene;
+  const std::string kind = PickKind(rng, p.spec);
+  Shape shape = MakeShape(rng, kind, p.spec);
+  const bool standing = shape.standing;
+  const ImageSpot spot = DrawSpot(rng, p, k, standing, placed);
+  cv::Vec3d position;
+  if (standing) {
+    // World z about z; the base on the ground.
+    const cv::Vec3d at = cam.BackProject(spot.u, cam.cy, spot.z);
+    position = cv::Vec3d(at[0], cam.height - shape.hi[1], at[2]);
+  } else {
+    position = cam.BackProject(spot.u, spot.v, spot.z);
+    if (position[1] + shape.hi[1] > cam.height - 0.5) return false;  // in the ground
+  }
+  const cv::Vec3d centre = position + (shape.lo + shape.hi) * 0.5;
+  const double depth = cam.ToCam(centre)[2];
+  if (!(depth > 1.0)) return false;
+  const double disparity = cam.fb() / depth;
+  if (disparity < 3.0 || disparity > cam.w / 12.0) return false;
+  double speed_px = 0;
+  const cv::Vec3d velocity =
+      standing ? cv::Vec3d(0, 0, 0) : DrawVelocity(rng, cam, kind, shape, depth, speed_px);
+  if (!StaysInView(p, shape, position, velocity)) return false;
+
+  // Contrast against the background at the centre row.
+  const double v_centre = cam.Project(centre).y;
+  const bool against_sky = v_centre < cam.HorizonRow();
+  const double bg = against_sky ? SkyGreyAt(scene, cam, v_centre) : scene.ground_albedo;
+  const double c = rng.Uniform(p.spec.contrast_lo, p.spec.contrast_hi);
+  bool darker = rng.Chance(0.7);
+  if (1.0 - bg < 0.15) darker = true;
+  if (bg < 0.15) darker = false;
+  const double albedo = darker ? bg * (1.0 - c) : bg + c * (1.0 - bg);
+
+  ob = Obstacle{};
+  ob.id = k + 1;
+  ob.kind = kind;
+  ob.name = kind + "-" + std::to_string(k + 1);
+  ob.parts = shape.parts;
+  ob.size_m = shape.hi - shape.lo;
+  ob.albedo = std::clamp(albedo, 0.0, 1.0);
+  ob.contrast = std::clamp(c * rng.Uniform(0.2, 0.4), 0.0, 1.0);
+  ob.texture_cell_m =
+      std::max(shape.extent_m * rng.Uniform(0.015, 0.05), depth / cam.f * rng.Uniform(1.5, 4.0));
+  ob.path.kind = standing ? Path::Kind::kStatic : Path::Kind::kLinear;
+  ob.path.start = position;
+  ob.path.velocity_mps = velocity;
+  ob.path.period_s = 0.0;
+
+  info = RandomObstacleInfo{};
+  info.id = ob.id;
+  info.kind = kind;
+  info.depth_m = depth;
+  info.range_m = cv::norm(centre);
+  info.disparity_px = disparity;
+  info.extent_m = shape.extent_m;
+  info.contrast = c;
+  info.grey_step = ob.albedo - bg;
+  info.background_grey = bg;
+  info.standing = standing;
+  info.overlapping = spot.overlapping;
+  info.speed_px_per_frame = speed_px;
+  return true;
+}
+
+// The scenario's description: the rig and how many obstacles.
+std::string Describe(const std::string& family, uint64_t seed, const SyntheticOptions& o,
+                     const Camera& cam) {
+  return "random '" + family + "' scene " + std::to_string(seed) + ": " + std::to_string(o.width) +
+         "x" + std::to_string(o.height) +
+         ", f = " + std::to_string(static_cast<int>(std::lround(o.f_px))) +
+         " px, B = " + std::to_string(o.baseline_m).substr(0, 4) + " m, camera " +
+         std::to_string(static_cast<int>(std::lround(cam.height))) + " m up, pitch " +
+         std::to_string(static_cast<int>(std::lround(cam.pitch_deg))) + " deg, " +
+         std::to_string(o.scene.obstacles.size()) + " obstacles";
 }
 
 }  // namespace
@@ -454,148 +666,24 @@ RandomScene GenerateRandomScene(const std::string& family, uint64_t seed) {
   o.seed = SplitMix64(rng.Bits());
   sc.frames = rng.Int(4, 6);
   Scene& scene = o.scene;
-  const double t_end = (sc.frames - 1) / kFps;
-  const double max_disparity = cam.w / 12.0;
+  const Placing placing{cam, spec, z_lo, z_hi, (sc.frames - 1) / kFps};
 
   const int n = rng.Int(1, 5);
   for (int k = 0; k < n; ++k) {
-    Obstacle best_ob;
-    RandomObstacleInfo best_info;
+    Obstacle ob;
+    RandomObstacleInfo info;
     bool placed = false;
     for (int attempt = 0; attempt < 60 && !placed; ++attempt) {
-      const std::string kind = PickKind(rng, spec);
-      Shape shape = MakeShape(rng, kind, spec);
-      const bool standing = shape.standing;
-      double z = rng.LogUniform(z_lo, z_hi);
-      double u = rng.Uniform(0.12, 0.88) * cam.w;
-      const double horizon = cam.HorizonRow();
-      double v = 0;
-      bool overlapping = false;
-      // Sometimes partly over an earlier airborne obstacle, at another range.
-      if (!standing && k > 0 && rng.Chance(0.3)) {
-        const int j = rng.Int(0, k - 1);
-        const RandomObstacleInfo& prev = out.obstacles[static_cast<size_t>(j)];
-        if (!prev.standing) {
-          const Obstacle& pob = scene.obstacles[static_cast<size_t>(j)];
-          const cv::Point2d c = cam.Project(pob.path.start);
-          const double ratio = rng.Chance(0.5) ? rng.Uniform(1.4, 3.0) : 1.0 / rng.Uniform(1.4, 3.0);
-          z = std::clamp(prev.depth_m * ratio, z_lo, z_hi);
-          const double size_px = cam.f * prev.extent_m / prev.depth_m;
-          u = c.x + rng.Uniform(-0.6, 0.6) * size_px;
-          v = c.y + rng.Uniform(-0.4, 0.4) * size_px;
-          overlapping = true;
-        }
-      }
-      if (!overlapping) {
-        double v_hi = 0.9 * cam.h;
-        if (spec.prefer_sky) v_hi = std::min(v_hi, horizon - 0.03 * cam.h);
-        if (v_hi < 0.1 * cam.h + 1) v_hi = 0.9 * cam.h;
-        v = rng.Uniform(0.1 * cam.h, v_hi);
-      }
-      cv::Vec3d position;
-      if (standing) {
-        // World z about z; the base on the ground.
-        const cv::Vec3d p = cam.BackProject(u, cam.cy, z);
-        position = cv::Vec3d(p[0], cam.height - shape.hi[1], p[2]);
-      } else {
-        position = cam.BackProject(u, v, z);
-        if (position[1] + shape.hi[1] > cam.height - 0.5) continue;  // in the ground
-      }
-      const cv::Vec3d centre = position + (shape.lo + shape.hi) * 0.5;
-      const double depth = cam.ToCam(centre)[2];
-      if (!(depth > 1.0)) continue;
-      const double disparity = cam.fb() / depth;
-      if (disparity < 3.0 || disparity > max_disparity) continue;
-      // Motion.
-      cv::Vec3d velocity(0, 0, 0);
-      double speed_px = 0;
-      if (!standing) {
-        const double m_per_px = depth / cam.f;
-        if (kind == "aircraft" && shape.heading_axis == 2) {
-          velocity[2] = -shape.heading_sign * depth * rng.Uniform(0.005, 0.02) * kFps;
-          speed_px = rng.Uniform(0.0, 1.0);
-          velocity[0] = (rng.Chance(0.5) ? 1 : -1) * speed_px * kFps * m_per_px;
-        } else if (kind == "aircraft") {
-          speed_px = rng.Uniform(0.5, 3.0);
-          velocity[0] = shape.heading_sign * speed_px * kFps * m_per_px;
-        } else if (kind == "balloon") {
-          speed_px = rng.Uniform(0.2, 1.0);
-          velocity[0] = (rng.Chance(0.5) ? 1 : -1) * speed_px * kFps * m_per_px;
-          velocity[1] = rng.Uniform(-0.3, 0.3) * speed_px * kFps * m_per_px;
-        } else {
-          speed_px = rng.Uniform(0.5, 3.0);
-          const double angle = rng.Uniform(0.0, 2.0 * kPi);
-          velocity[0] = std::cos(angle) * speed_px * kFps * m_per_px;
-          velocity[1] = std::sin(angle) * speed_px * kFps * m_per_px;
-          velocity[2] = rng.Uniform(-0.01, 0.01) * depth * kFps;
-        }
-      }
-      // Mostly in frame and big enough to be seen at both ends of the sequence.
-      bool ok = true;
-      for (const double t : {0.0, t_end}) {
-        const cv::Vec3d p = position + velocity * t;
-        if (!standing && p[1] + shape.hi[1] > cam.height - 0.2) ok = false;
-        const cv::Rect2d r = cam.ProjectBox(p + shape.lo, p + shape.hi);
-        if (cam.InFrameFraction(r) < 0.6 || std::max(r.width, r.height) < 6.0) ok = false;
-      }
-      if (!ok) continue;
-
-      // Contrast against the background at the centre row.
-      const double v_centre = cam.Project(centre).y;
-      const bool against_sky = v_centre < cam.HorizonRow();
-      const double bg = against_sky ? SkyGreyAt(scene, cam, v_centre) : scene.ground_albedo;
-      const double c = rng.Uniform(spec.contrast_lo, spec.contrast_hi);
-      bool darker = rng.Chance(0.7);
-      if (1.0 - bg < 0.15) darker = true;
-      if (bg < 0.15) darker = false;
-      const double albedo = darker ? bg * (1.0 - c) : bg + c * (1.0 - bg);
-
-      Obstacle ob;
-      ob.id = k + 1;
-      ob.kind = kind;
-      ob.name = kind + "-" + std::to_string(k + 1);
-      ob.parts = shape.parts;
-      ob.size_m = shape.hi - shape.lo;
-      ob.albedo = std::clamp(albedo, 0.0, 1.0);
-      ob.contrast = std::clamp(c * rng.Uniform(0.2, 0.4), 0.0, 1.0);
-      ob.texture_cell_m = std::max(shape.extent_m * rng.Uniform(0.015, 0.05),
-                                   depth / cam.f * rng.Uniform(1.5, 4.0));
-      ob.path.kind = standing ? Path::Kind::kStatic : Path::Kind::kLinear;
-      ob.path.start = position;
-      ob.path.velocity_mps = velocity;
-      ob.path.period_s = 0.0;
-
-      RandomObstacleInfo info;
-      info.id = ob.id;
-      info.kind = kind;
-      info.depth_m = depth;
-      info.range_m = cv::norm(centre);
-      info.disparity_px = disparity;
-      info.extent_m = shape.extent_m;
-      info.contrast = c;
-      info.grey_step = ob.albedo - bg;
-      info.background_grey = bg;
-      info.standing = standing;
-      info.overlapping = overlapping;
-      info.speed_px_per_frame = speed_px;
-      best_ob = std::move(ob);
-      best_info = std::move(info);
-      placed = true;
+      placed = TryObstacle(rng, placing, k, out, ob, info);
     }
     if (!placed) continue;
-    best_ob.id = static_cast<int>(scene.obstacles.size()) + 1;
-    best_ob.name = best_ob.kind + "-" + std::to_string(best_ob.id);
-    best_info.id = best_ob.id;
-    scene.obstacles.push_back(std::move(best_ob));
-    out.obstacles.push_back(std::move(best_info));
+    ob.id = static_cast<int>(scene.obstacles.size()) + 1;
+    ob.name = ob.kind + "-" + std::to_string(ob.id);
+    info.id = ob.id;
+    scene.obstacles.push_back(std::move(ob));
+    out.obstacles.push_back(std::move(info));
   }
-  sc.description = "random '" + family + "' scene " + std::to_string(seed) + ": " +
-                   std::to_string(o.width) + "x" + std::to_string(o.height) +
-                   ", f = " + std::to_string(static_cast<int>(std::lround(o.f_px))) +
-                   " px, B = " + std::to_string(o.baseline_m).substr(0, 4) + " m, camera " +
-                   std::to_string(static_cast<int>(std::lround(cam.height))) + " m up, pitch " +
-                   std::to_string(static_cast<int>(std::lround(cam.pitch_deg))) + " deg, " +
-                   std::to_string(scene.obstacles.size()) + " obstacles";
+  sc.description = Describe(family, seed, o, cam);
   return out;
 }
 

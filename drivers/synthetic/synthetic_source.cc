@@ -170,6 +170,286 @@ struct FrameSetup {
   cv::Vec3d rig_offset{0.0, 0.0, 0.0};  // the moving rig's offset from its rest position
 };
 
+// A solid that one row may see: a box with its y and z slabs, or an ellipsoid with its row terms
+// of the ray-ellipsoid quadratic (as the hills').
+struct SolidCandidate {
+  int index;  // in FrameSetup::boxes
+  int u0, u1;
+  double ty_min, ty_max;
+  double tz_min, tz_max;
+  bool y_enters_hi;
+  double a_row, b_row, os_x, qc;  // ellipsoids
+};
+
+// A hill that one row may see, with the row's terms of the ray-ellipsoid quadratic
+// A t^2 + 2 B t + C = 0 in the hill's scaled frame: A = (a/rx)^2 + a_row,
+// B = ox_s a / rx + b_row.
+struct HillCandidate {
+  int index;  // in the renderer's hills
+  int u0, u1;
+  double a_row, b_row;
+};
+
+// Room for a row's candidates: N on the stack, the heap only past that.
+template <typename T, size_t N>
+struct RowStorage {
+  T local[N];
+  std::vector<T> many;
+
+  T* Reserve(size_t n) {
+    if (n <= N) return local;
+    many.resize(n);
+    return many.data();
+  }
+};
+
+// One row of one view, as its pixels need it: the rays, and what they may hit (the candidates
+// live in RenderRow's storage).
+struct RowScene {
+  int view = 0;
+  double ox = 0.0;           // the view's camera centre x, metres
+  double vr = 0.0;           // the row coordinate the rays go through
+  double b = 0.0, dz = 1.0;  // the rays' world y and z direction (x: a = (u - cx) / f)
+  const SolidCandidate* solids = nullptr;
+  int n_solids = 0;
+  const HillCandidate* hills = nullptr;
+  int n_hills = 0;
+  const MarkCandidate* marks = nullptr;  // only when shading a row that sees the ground
+  int n_marks = 0;
+  bool sees_ground = false;  // the row looks down
+  double ground_t = 0.0;     // the ground's depth, the same across the row
+  double ground_footprint = 0.0;
+};
+
+// The nearest surface along one pixel's ray.
+struct PixelHit {
+  double t = std::numeric_limits<double>::infinity();
+  int solid = -1;          // the solid's candidate index (-1: none, or a hill is nearer)
+  int axis = 2;            // the box face's axis; -1 for an ellipsoid
+  bool enters_hi = false;  // the ray enters the box through its high face on that axis
+  int hill = -1;           // the hill's candidate index (-1: none)
+  bool ground = false;     // the ground is nearer than any solid or hill
+};
+
+// The solids row v of `row.view` may see, with their per-row terms; returns how many (`out` holds
+// one per box).
+int CollectSolids(const FrameSetup& setup, const RowScene& row, int v, SolidCandidate* out) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  const double b = row.b, dz = row.dz;
+  int n = 0;
+  for (size_t i = 0; i < setup.boxes.size(); ++i) {
+    const PixelRect& r = setup.rects[row.view][i];
+    if (v < r.v0 || v > r.v1 || r.u0 > r.u1) continue;
+    const Box& box = setup.boxes[i];
+    SolidCandidate c{static_cast<int>(i), r.u0, r.u1, 0, 0, 0, 0, false, 0, 0, 0, 0};
+    if (box.ellipsoid) {
+      const double os_y = -box.centre[1] * box.inv_r[1];
+      const double os_z = -box.centre[2] * box.inv_r[2];
+      c.os_x = (row.ox - box.centre[0]) * box.inv_r[0];
+      c.qc = c.os_x * c.os_x + os_y * os_y + os_z * os_z - 1.0;
+      if (c.qc <= 0.0) continue;  // the camera is inside: it sees nothing of it
+      const double by = b * box.inv_r[1], bz = dz * box.inv_r[2];
+      c.a_row = by * by + bz * bz;
+      c.b_row = os_y * by + os_z * bz;
+      out[n++] = c;
+      continue;
+    }
+    if (dz > 0.0) {
+      c.tz_min = box.lo[2] / dz;
+      c.tz_max = box.hi[2] / dz;
+    } else if (dz < 0.0) {
+      c.tz_min = box.hi[2] / dz;
+      c.tz_max = box.lo[2] / dz;
+    } else {
+      if (box.lo[2] > 0.0 || box.hi[2] < 0.0) continue;
+      c.tz_min = -kInf;
+      c.tz_max = kInf;
+    }
+    if (b != 0.0) {
+      const double t1 = box.lo[1] / b, t2 = box.hi[1] / b;
+      c.ty_min = std::min(t1, t2);
+      c.ty_max = std::max(t1, t2);
+      c.y_enters_hi = b < 0.0;
+    } else {
+      if (box.lo[1] > 0.0 || box.hi[1] < 0.0) continue;
+      c.ty_min = -kInf;
+      c.ty_max = kInf;
+    }
+    out[n++] = c;
+  }
+  return n;
+}
+
+// The hills row v of `row.view` may see; returns how many (`out` holds one per hill).
+int CollectHills(const std::vector<HillGeom>& hills, const RowScene& row, int v,
+                 HillCandidate* out) {
+  int n = 0;
+  for (size_t i = 0; i < hills.size(); ++i) {
+    const HillGeom& g = hills[i];
+    const PixelRect& r = g.rect[row.view];
+    if (v < r.v0 || v > r.v1 || r.u0 > r.u1) continue;
+    const double by = row.b * g.inv_r[1];
+    const double bz = row.dz * g.inv_r[2];
+    out[n++] = HillCandidate{static_cast<int>(i), r.u0, r.u1, by * by + bz * bz,
+                             g.origin_s[row.view][1] * by + g.origin_s[row.view][2] * bz};
+  }
+  return n;
+}
+
+// Where a ray from a camera outside an ellipsoid enters it: the nearer root t of the quadratic
+// qa t^2 + 2 qb t + qc = 0 in the ellipsoid's scaled frame (qc > 0), in the cancellation-free
+// form qc / (-qb + sqrt(qb^2 - qa qc)); -1 when the ray misses it or both roots are behind.
+inline double EllipsoidEntry(double qa, double qb, double qc) {
+  if (qb >= 0.0) return -1.0;  // the camera is outside: both roots are behind
+  const double disc = qb * qb - qa * qc;
+  if (disc < 0.0) return -1.0;
+  return qc / (-qb + std::sqrt(disc));
+}
+
+// The nearest solid along pixel u's ray (x-direction a); solid -1 when there is none.
+inline PixelHit NearestSolid(const std::vector<Box>& boxes, const RowScene& row, int u, double a) {
+  // Scalars, not the PixelHit: they stay in registers.
+  double best_t = std::numeric_limits<double>::infinity();
+  int best = -1;
+  int best_axis = 2;
+  bool best_enters_hi = false;
+  for (int k = 0; k < row.n_solids; ++k) {
+    const SolidCandidate& c = row.solids[k];
+    if (u < c.u0 || u > c.u1) continue;
+    const Box& box = boxes[c.index];
+    if (box.ellipsoid) {
+      const double ax = a * box.inv_r[0];
+      const double t_hit = EllipsoidEntry(ax * ax + c.a_row, c.os_x * ax + c.b_row, c.qc);
+      if (t_hit > kNearM && t_hit < best_t) {
+        best_t = t_hit;
+        best = k;
+        best_axis = -1;
+      }
+      continue;
+    }
+    double tmin = c.tz_min, tmax = c.tz_max;
+    int axis = 2;
+    bool enters_hi = false;
+    if (c.ty_min > tmin) {
+      tmin = c.ty_min;
+      axis = 1;
+      enters_hi = c.y_enters_hi;
+    }
+    tmax = std::min(tmax, c.ty_max);
+    if (a != 0.0) {
+      const double t1 = (box.lo[0] - row.ox) / a, t2 = (box.hi[0] - row.ox) / a;
+      const double tx_min = std::min(t1, t2), tx_max = std::max(t1, t2);
+      if (tx_min > tmin) {
+        tmin = tx_min;
+        axis = 0;
+        enters_hi = a < 0.0;
+      }
+      tmax = std::min(tmax, tx_max);
+    } else if (row.ox < box.lo[0] || row.ox > box.hi[0]) {
+      continue;
+    }
+    if (tmin <= tmax && tmin > kNearM && tmin < best_t) {
+      best_t = tmin;
+      best = k;
+      best_axis = axis;
+      best_enters_hi = enters_hi;
+    }
+  }
+  return PixelHit{.t = best_t, .solid = best, .axis = best_axis, .enters_hi = best_enters_hi};
+}
+
+// What pixel u's ray (x-direction a) hits first: a solid, a hill, the ground or nothing (the sky).
+inline PixelHit NearestHit(const std::vector<Box>& boxes, const std::vector<HillGeom>& hills,
+                           const RowScene& row, int u, double a) {
+  PixelHit hit = NearestSolid(boxes, row, u, a);
+  // Hills: the nearest entry into an ellipsoid. An entry below the ground plane is always
+  // farther than the ray's ground hit (the ray crosses the plane first, outside the hill), so
+  // the plain nearest-hit rule is exact for the half-buried hills.
+  double best_t = hit.t;
+  int best_hill = -1;
+  for (int k = 0; k < row.n_hills; ++k) {
+    const HillCandidate& c = row.hills[k];
+    if (u < c.u0 || u > c.u1) continue;
+    const HillGeom& g = hills[c.index];
+    const double ax = a * g.inv_r[0];
+    const double t_hit =
+        EllipsoidEntry(ax * ax + c.a_row, g.origin_s[row.view][0] * ax + c.b_row, g.c[row.view]);
+    if (t_hit > kNearM && t_hit < best_t) {
+      best_t = t_hit;
+      best_hill = k;
+    }
+  }
+  hit.t = best_t;
+  hit.hill = best_hill;
+  if (best_hill >= 0) hit.solid = -1;
+  hit.ground = row.sees_ground && row.ground_t < best_t;
+  return hit;
+}
+
+// The truth of pixel u: its exact disparity (fb = f B), its object id (0 ground and hills, -1
+// sky), and its obstacle's row statistics.
+inline void WriteTruth(const std::vector<Box>& boxes, const RowScene& row, PixelHit hit, double fb,
+                       int u, float* disparity, int* ids, RowStat* stats) {
+  if (hit.ground) {
+    disparity[u] = static_cast<float>(fb / row.ground_t);
+    ids[u] = 0;
+  } else if (hit.hill >= 0) {
+    disparity[u] = static_cast<float>(fb / hit.t);
+    ids[u] = 0;
+  } else if (hit.solid >= 0) {
+    disparity[u] = static_cast<float>(fb / hit.t);
+    const Box& box = boxes[row.solids[hit.solid].index];
+    ids[u] = box.id;
+    RowStat& st = stats[box.obstacle];
+    st.min_u = std::min(st.min_u, u);
+    st.max_u = std::max(st.max_u, u);
+    ++st.count;
+  } else {
+    disparity[u] = 0.0f;
+    ids[u] = -1;
+  }
+}
+
+// Grey of the box face `hit` entered, at the world point (x, y, z), f the focal length in pixels.
+// Textured in the box's own frame, so the texture moves with the box; shaded by the face's
+// orientation.
+inline float ShadeBoxFace(const Box& box, PixelHit hit, double x, double y, double z, double f) {
+  const double px = x - box.centre[0];
+  const double py = y - box.centre[1];
+  const double pz = z - box.centre[2];
+  double s = px, t = py;
+  float shade = kShadeFront;
+  if (hit.axis == 0) {
+    s = pz;
+    shade = kShadeSide;
+  } else if (hit.axis == 1) {
+    t = pz;
+    shade = hit.enters_hi ? kShadeBottom : kShadeTop;
+  }
+  const float n = Texture(box.seed[hit.axis], s, t, box.cell_m, hit.t / f);
+  return shade * (box.albedo + 2.0f * box.contrast * n);
+}
+
+// Per obstacle, the exact disparities of its visible pixels in the left image's truth.
+std::vector<std::vector<float>> VisibleDisparities(const std::vector<Obstacle>& obstacles,
+                                                   const cv::Mat1f& disparity,
+                                                   const cv::Mat1i& ids) {
+  std::map<int, size_t> index_of_id;
+  for (size_t i = 0; i < obstacles.size(); ++i) index_of_id[obstacles[i].id] = i;
+  std::vector<std::vector<float>> visible(obstacles.size());
+  const int w = ids.cols, h = ids.rows;
+  for (int v = 0; v < h; ++v) {
+    const int* id_row = ids[v];
+    const float* d_row = disparity[v];
+    for (int u = 0; u < w; ++u) {
+      if (id_row[u] <= 0) continue;
+      const auto it = index_of_id.find(id_row[u]);
+      if (it != index_of_id.end()) visible[it->second].push_back(d_row[u]);
+    }
+  }
+  return visible;
+}
+
 }  // namespace
 
 struct SyntheticRenderer::Impl {
@@ -483,6 +763,76 @@ struct SyntheticRenderer::Impl {
     return shade * (box.albedo + 2.0f * box.contrast * tex);
   }
 
+  // The marks and dashed lines the ground of `row` may show, with their coverage of the row's z
+  // footprint (only to shade: the truth does not need them). `out` holds one per mark and line.
+  int CollectMarks(const RowScene& row, MarkCandidate* out) const {
+    const Scene& scene = options.scene;
+    int n = 0;
+    // The row's footprint on the ground: world z seen by rays through vr - 0.5 .. vr + 0.5.
+    double b_far = 0.0, dz_far = 1.0, b_near = 0.0, dz_near = 1.0;
+    RowDirection(row.vr - 0.5, b_far, dz_far);
+    RowDirection(row.vr + 0.5, b_near, dz_near);
+    const double z_near = scene.camera_height_m * dz_near / b_near;
+    const double z_far = b_far > 0.0 ? scene.camera_height_m * dz_far / b_far
+                                     : std::numeric_limits<double>::infinity();
+    for (const GroundMark& m : scene.marks) {
+      const double mz0 = m.area_xz_m.y, mz1 = m.area_xz_m.y + m.area_xz_m.height;
+      if (!std::isfinite(z_far)) continue;  // a finite mark covers none of an endless row
+      const double covered = std::min(z_far, mz1) - std::max(z_near, mz0);
+      if (!(covered > 0.0)) continue;
+      out[n++] = MarkCandidate{m.area_xz_m.x, m.area_xz_m.x + m.area_xz_m.width,
+                               covered / (z_far - z_near), static_cast<float>(m.albedo),
+                               static_cast<float>(m.contrast)};
+    }
+    for (const DashedLine& line : scene.dashed_lines) {
+      const double cover = DashedCoverZ(line, z_near, z_far);
+      if (!(cover > 0.0)) continue;
+      out[n++] = MarkCandidate{line.x_m - 0.5 * line.width_m, line.x_m + 0.5 * line.width_m, cover,
+                               static_cast<float>(line.albedo), static_cast<float>(line.contrast)};
+    }
+    return n;
+  }
+
+  // Grey of the ground at the pixel whose ray has x-direction a: its texture (in world x, z,
+  // moving with the rig) under the marks that cover the pixel's footprint.
+  float ShadeGround(const FrameSetup& setup, const RowScene& row, double a) const {
+    const Scene& scene = options.scene;
+    const double x = row.ox + a * row.ground_t;
+    const float n =
+        Texture(ground_seed, x + setup.rig_offset[0], row.dz * row.ground_t + setup.rig_offset[2],
+                scene.ground_texture_cell_m, row.ground_footprint);
+    float value = static_cast<float>(scene.ground_albedo) +
+                  2.0f * static_cast<float>(scene.ground_contrast) * n;
+    if (row.n_marks > 0) {
+      // Box filter of the pixel's footprint: ground_t / f wide in x, the row's z footprint.
+      const double half = 0.5 * row.ground_t / options.f_px;
+      for (int k = 0; k < row.n_marks; ++k) {
+        const MarkCandidate& m = row.marks[k];
+        const double covered_x = std::min(x + half, m.x1) - std::max(x - half, m.x0);
+        if (!(covered_x > 0.0)) continue;
+        const auto cover = static_cast<float>(std::min(1.0, covered_x / (2.0 * half)) * m.cover_z);
+        const float paint = m.albedo + 2.0f * m.contrast * n;
+        value += cover * (paint - value);
+      }
+    }
+    return value;
+  }
+
+  // Grey of what the pixel's ray (x-direction a) hits: the ground, a hill or a solid; `sky` when
+  // it hits nothing.
+  float ShadePixel(const FrameSetup& setup, const RowScene& row, PixelHit hit, double a,
+                   float sky) const {
+    const double t = hit.t;
+    if (hit.ground) return ShadeGround(setup, row, a);
+    if (hit.hill >= 0) {
+      return ShadeHill(hills[row.hills[hit.hill].index], row.ox + a * t, row.b * t, row.dz * t);
+    }
+    if (hit.solid < 0) return sky;
+    const Box& box = setup.boxes[row.solids[hit.solid].index];
+    if (hit.axis < 0) return ShadeEllipsoid(box, row.ox + a * t, row.b * t, row.dz * t, t);
+    return ShadeBoxFace(box, hit, row.ox + a * t, row.b * t, row.dz * t, options.f_px);
+  }
+
   // Ray-casts and shades row v of one view. `grey` (nullable) gets the 8-bit image row with its
   // noise, or `linear` (nullable) the row's grey 0..255 before any sensor effect; `disparity`,
   // `ids` and `stats` (all nullable; stats per obstacle) the truth of the row.
@@ -491,294 +841,48 @@ struct SyntheticRenderer::Impl {
     const Scene& scene = options.scene;
     const double f = options.f_px;
     const double fb = options.f_px * options.baseline_m;
-    const double ox = setup.origin_x[view];
-    const double vr = RayRow(view, v);
+    RowScene row;
+    row.view = view;
+    row.ox = setup.origin_x[view];
+    row.vr = RayRow(view, v);
     // The ray's world y- and z-direction (level camera: b = (v - cy) / f and dz = 1; the x
     // direction is a = (u - cx) / f, and the ray parameter t is the camera depth).
-    double b = 0.0, dz = 1.0;
-    RowDirection(vr, b, dz);
+    RowDirection(row.vr, row.b, row.dz);
     const bool shading = grey != nullptr || linear != nullptr;
-    const float sky = SkyGrey(vr);
+    const float sky = SkyGrey(row.vr);
     const float* sky_px = sky_layer[view].empty() ? nullptr : sky_layer[view][v];
     const double sigma = options.noise_sigma;
 
-    // Solids this row may see: a box with its y and z slabs, or an ellipsoid with its row terms
-    // of the ray-ellipsoid quadratic (as the hills below).
-    struct Candidate {
-      int index;
-      int u0, u1;
-      double ty_min, ty_max;
-      double tz_min, tz_max;
-      bool y_enters_hi;
-      double a_row, b_row, os_x, qc;  // ellipsoids
-    };
-    Candidate candidates[64];
-    std::vector<Candidate> many;
-    Candidate* cand = candidates;
-    if (setup.boxes.size() > 64) {
-      many.resize(setup.boxes.size());
-      cand = many.data();
-    }
-    constexpr double kInf = std::numeric_limits<double>::infinity();
-    int n_cand = 0;
-    for (size_t i = 0; i < setup.boxes.size(); ++i) {
-      const PixelRect& r = setup.rects[view][i];
-      if (v < r.v0 || v > r.v1 || r.u0 > r.u1) continue;
-      const Box& box = setup.boxes[i];
-      Candidate c{static_cast<int>(i), r.u0, r.u1, 0, 0, 0, 0, false, 0, 0, 0, 0};
-      if (box.ellipsoid) {
-        const double os_y = -box.centre[1] * box.inv_r[1];
-        const double os_z = -box.centre[2] * box.inv_r[2];
-        c.os_x = (ox - box.centre[0]) * box.inv_r[0];
-        c.qc = c.os_x * c.os_x + os_y * os_y + os_z * os_z - 1.0;
-        if (c.qc <= 0.0) continue;  // the camera is inside: it sees nothing of it
-        const double by = b * box.inv_r[1], bz = dz * box.inv_r[2];
-        c.a_row = by * by + bz * bz;
-        c.b_row = os_y * by + os_z * bz;
-        cand[n_cand++] = c;
-        continue;
-      }
-      if (dz > 0.0) {
-        c.tz_min = box.lo[2] / dz;
-        c.tz_max = box.hi[2] / dz;
-      } else if (dz < 0.0) {
-        c.tz_min = box.hi[2] / dz;
-        c.tz_max = box.lo[2] / dz;
-      } else {
-        if (box.lo[2] > 0.0 || box.hi[2] < 0.0) continue;
-        c.tz_min = -kInf;
-        c.tz_max = kInf;
-      }
-      if (b != 0.0) {
-        const double t1 = box.lo[1] / b, t2 = box.hi[1] / b;
-        c.ty_min = std::min(t1, t2);
-        c.ty_max = std::max(t1, t2);
-        c.y_enters_hi = b < 0.0;
-      } else {
-        if (box.lo[1] > 0.0 || box.hi[1] < 0.0) continue;
-        c.ty_min = -kInf;
-        c.ty_max = kInf;
-      }
-      cand[n_cand++] = c;
-    }
-
+    // What this row may see, on the stack (the heap only for crowded scenes).
+    RowStorage<SolidCandidate, 64> solid_storage;
+    SolidCandidate* solids = solid_storage.Reserve(setup.boxes.size());
+    row.n_solids = CollectSolids(setup, row, v, solids);
+    row.solids = solids;
+    RowStorage<HillCandidate, 16> hill_storage;
+    HillCandidate* hill_cand = hill_storage.Reserve(hills.size());
+    row.n_hills = CollectHills(hills, row, v, hill_cand);
+    row.hills = hill_cand;
     // The ground, if this row looks down: the same depth across the row.
-    const bool sees_ground = b > 0.0;
-    const double ground_t = sees_ground ? scene.camera_height_m / b : 0.0;
-    const double ground_footprint =
-        sees_ground ? ground_t / f * std::max(1.0, ground_t / scene.camera_height_m) : 0.0;
-    const float ground_albedo = static_cast<float>(scene.ground_albedo);
-    const float ground_contrast = static_cast<float>(scene.ground_contrast);
-
-    // Hills this row may see, with the row's terms of the ray-ellipsoid quadratic
-    // A t^2 + 2 B t + C = 0 in the hill's scaled frame: A = (a/rx)^2 + a_row,
-    // B = ox_s a / rx + b_row.
-    struct HillCandidate {
-      int index;
-      int u0, u1;
-      double a_row, b_row;
-    };
-    HillCandidate hill_candidates[16];
-    std::vector<HillCandidate> many_hills;
-    HillCandidate* hill_cand = hill_candidates;
-    if (hills.size() > 16) {
-      many_hills.resize(hills.size());
-      hill_cand = many_hills.data();
-    }
-    int n_hill = 0;
-    for (size_t i = 0; i < hills.size(); ++i) {
-      const HillGeom& g = hills[i];
-      const PixelRect& r = g.rect[view];
-      if (v < r.v0 || v > r.v1 || r.u0 > r.u1) continue;
-      const double by = b * g.inv_r[1];
-      const double bz = dz * g.inv_r[2];
-      hill_cand[n_hill++] = HillCandidate{static_cast<int>(i), r.u0, r.u1, by * by + bz * bz,
-                                          g.origin_s[view][1] * by + g.origin_s[view][2] * bz};
-    }
-
-    // Marks this row's ground may show (only to shade: the truth does not need them).
-    MarkCandidate mark_candidates[32];
-    std::vector<MarkCandidate> many_marks;
-    MarkCandidate* mark_cand = mark_candidates;
-    int n_mark = 0;
+    row.sees_ground = row.b > 0.0;
+    row.ground_t = row.sees_ground ? scene.camera_height_m / row.b : 0.0;
+    row.ground_footprint =
+        row.sees_ground ? row.ground_t / f * std::max(1.0, row.ground_t / scene.camera_height_m)
+                        : 0.0;
+    RowStorage<MarkCandidate, 32> mark_storage;
     const size_t n_paint = scene.marks.size() + scene.dashed_lines.size();
-    if (shading && sees_ground && n_paint > 0) {
-      if (n_paint > 32) {
-        many_marks.resize(n_paint);
-        mark_cand = many_marks.data();
-      }
-      // The row's footprint on the ground: world z seen by rays through vr - 0.5 .. vr + 0.5.
-      double b_far = 0.0, dz_far = 1.0, b_near = 0.0, dz_near = 1.0;
-      RowDirection(vr - 0.5, b_far, dz_far);
-      RowDirection(vr + 0.5, b_near, dz_near);
-      const double z_near = scene.camera_height_m * dz_near / b_near;
-      const double z_far = b_far > 0.0 ? scene.camera_height_m * dz_far / b_far
-                                       : std::numeric_limits<double>::infinity();
-      for (const GroundMark& m : scene.marks) {
-        const double mz0 = m.area_xz_m.y, mz1 = m.area_xz_m.y + m.area_xz_m.height;
-        if (!std::isfinite(z_far)) continue;  // a finite mark covers none of an endless row
-        const double covered = std::min(z_far, mz1) - std::max(z_near, mz0);
-        if (!(covered > 0.0)) continue;
-        mark_cand[n_mark++] = MarkCandidate{m.area_xz_m.x, m.area_xz_m.x + m.area_xz_m.width,
-                                            covered / (z_far - z_near),
-                                            static_cast<float>(m.albedo),
-                                            static_cast<float>(m.contrast)};
-      }
-      for (const DashedLine& line : scene.dashed_lines) {
-        const double cover = DashedCoverZ(line, z_near, z_far);
-        if (!(cover > 0.0)) continue;
-        mark_cand[n_mark++] = MarkCandidate{line.x_m - 0.5 * line.width_m,
-                                            line.x_m + 0.5 * line.width_m, cover,
-                                            static_cast<float>(line.albedo),
-                                            static_cast<float>(line.contrast)};
-      }
+    if (shading && row.sees_ground && n_paint > 0) {
+      MarkCandidate* marks = mark_storage.Reserve(n_paint);
+      row.n_marks = CollectMarks(row, marks);
+      row.marks = marks;
     }
 
     for (int u = 0; u < options.width; ++u) {
       const double a = (u - cx) / f;  // ray x-direction
-      double best_t = std::numeric_limits<double>::infinity();
-      int best = -1;  // candidate index
-      int best_axis = 2;  // the box face's axis; -1 for an ellipsoid
-      bool best_enters_hi = false;
-      for (int k = 0; k < n_cand; ++k) {
-        const Candidate& c = cand[k];
-        if (u < c.u0 || u > c.u1) continue;
-        const Box& box = setup.boxes[c.index];
-        if (box.ellipsoid) {
-          const double ax = a * box.inv_r[0];
-          const double qa = ax * ax + c.a_row;
-          const double qb = c.os_x * ax + c.b_row;
-          if (qb >= 0.0) continue;  // the camera is outside: both roots are behind
-          const double disc = qb * qb - qa * c.qc;
-          if (disc < 0.0) continue;
-          const double t_hit = c.qc / (-qb + std::sqrt(disc));
-          if (t_hit > kNearM && t_hit < best_t) {
-            best_t = t_hit;
-            best = k;
-            best_axis = -1;
-          }
-          continue;
-        }
-        double tmin = c.tz_min, tmax = c.tz_max;
-        int axis = 2;
-        bool enters_hi = false;
-        if (c.ty_min > tmin) {
-          tmin = c.ty_min;
-          axis = 1;
-          enters_hi = c.y_enters_hi;
-        }
-        tmax = std::min(tmax, c.ty_max);
-        if (a != 0.0) {
-          const double t1 = (box.lo[0] - ox) / a, t2 = (box.hi[0] - ox) / a;
-          const double tx_min = std::min(t1, t2), tx_max = std::max(t1, t2);
-          if (tx_min > tmin) {
-            tmin = tx_min;
-            axis = 0;
-            enters_hi = a < 0.0;
-          }
-          tmax = std::min(tmax, tx_max);
-        } else if (ox < box.lo[0] || ox > box.hi[0]) {
-          continue;
-        }
-        if (tmin <= tmax && tmin > kNearM && tmin < best_t) {
-          best_t = tmin;
-          best = k;
-          best_axis = axis;
-          best_enters_hi = enters_hi;
-        }
-      }
-      // Hills: the nearest entry into an ellipsoid. An entry below the ground plane is always
-      // farther than the ray's ground hit (the ray crosses the plane first, outside the hill),
-      // so the plain nearest-hit rule is exact for the half-buried hills.
-      int best_hill = -1;
-      for (int k = 0; k < n_hill; ++k) {
-        const HillCandidate& c = hill_cand[k];
-        if (u < c.u0 || u > c.u1) continue;
-        const HillGeom& g = hills[c.index];
-        const double ax = a * g.inv_r[0];
-        const double qa = ax * ax + c.a_row;
-        const double qb = g.origin_s[view][0] * ax + c.b_row;
-        const double qc = g.c[view];
-        if (qb >= 0.0) continue;  // the camera is outside (qc > 0): both roots are behind
-        const double disc = qb * qb - qa * qc;
-        if (disc < 0.0) continue;
-        // The nearer root, in the cancellation-free form C / (-B + sqrt(B^2 - A C)).
-        const double t_hit = qc / (-qb + std::sqrt(disc));
-        if (t_hit > kNearM && t_hit < best_t) {
-          best_t = t_hit;
-          best_hill = k;
-        }
-      }
-      if (best_hill >= 0) best = -1;
-      const bool ground = sees_ground && ground_t < best_t;
-
-      if (disparity != nullptr) {
-        if (ground) {
-          disparity[u] = static_cast<float>(fb / ground_t);
-          ids[u] = 0;
-        } else if (best_hill >= 0) {
-          disparity[u] = static_cast<float>(fb / best_t);
-          ids[u] = 0;
-        } else if (best >= 0) {
-          disparity[u] = static_cast<float>(fb / best_t);
-          const Box& box = setup.boxes[cand[best].index];
-          ids[u] = box.id;
-          RowStat& st = stats[box.obstacle];
-          st.min_u = std::min(st.min_u, u);
-          st.max_u = std::max(st.max_u, u);
-          ++st.count;
-        } else {
-          disparity[u] = 0.0f;
-          ids[u] = -1;
-        }
-      }
+      const PixelHit hit = NearestHit(setup.boxes, hills, row, u, a);
+      if (disparity != nullptr) WriteTruth(setup.boxes, row, hit, fb, u, disparity, ids, stats);
       if (!shading) continue;
 
-      float value = sky_px != nullptr ? sky_px[u] : sky;
-      if (ground) {
-        const double x = ox + a * ground_t;
-        const float n = Texture(ground_seed, x + setup.rig_offset[0],
-                                dz * ground_t + setup.rig_offset[2], scene.ground_texture_cell_m,
-                                ground_footprint);
-        value = ground_albedo + 2.0f * ground_contrast * n;
-        if (n_mark > 0) {
-          // Box filter of the pixel's footprint: ground_t / f wide in x, the row's z footprint.
-          const double half = 0.5 * ground_t / f;
-          for (int k = 0; k < n_mark; ++k) {
-            const MarkCandidate& m = mark_cand[k];
-            const double covered_x = std::min(x + half, m.x1) - std::max(x - half, m.x0);
-            if (!(covered_x > 0.0)) continue;
-            const auto cover = static_cast<float>(std::min(1.0, covered_x / (2.0 * half)) *
-                                                  m.cover_z);
-            const float paint = m.albedo + 2.0f * m.contrast * n;
-            value += cover * (paint - value);
-          }
-        }
-      } else if (best_hill >= 0) {
-        value = ShadeHill(hills[hill_cand[best_hill].index], ox + a * best_t, b * best_t,
-                          dz * best_t);
-      } else if (best >= 0) {
-        const Box& box = setup.boxes[cand[best].index];
-        if (best_axis < 0) {
-          value = ShadeEllipsoid(box, ox + a * best_t, b * best_t, dz * best_t, best_t);
-        } else {
-          // Surface point in the box's own frame, so the texture moves with the box.
-          const double px = ox + a * best_t - box.centre[0];
-          const double py = b * best_t - box.centre[1];
-          const double pz = dz * best_t - box.centre[2];
-          double s = px, t = py;
-          float shade = kShadeFront;
-          if (best_axis == 0) {
-            s = pz;
-            shade = kShadeSide;
-          } else if (best_axis == 1) {
-            t = pz;
-            shade = best_enters_hi ? kShadeBottom : kShadeTop;
-          }
-          const float n = Texture(box.seed[best_axis], s, t, box.cell_m, best_t / f);
-          value = shade * (box.albedo + 2.0f * box.contrast * n);
-        }
-      }
+      const float value = ShadePixel(setup, row, hit, a, sky_px != nullptr ? sky_px[u] : sky);
       if (linear != nullptr) {
         linear[u] = std::clamp(value, 0.0f, 1.0f) * 255.0f;
         continue;
@@ -896,23 +1000,13 @@ struct SyntheticRenderer::Impl {
     truth->t_s = t_s;
     truth->disparity_px = disparity;
     truth->object_id = ids;
-    truth->obstacles.clear();
+    truth->obstacles = ObstacleTruths(setup, disparity, ids, stats);
+  }
 
-    // The exact disparities of each obstacle's visible pixels, for their medians.
-    std::map<int, size_t> index_of_id;
-    for (size_t i = 0; i < n_obstacles; ++i) index_of_id[options.scene.obstacles[i].id] = i;
-    std::vector<std::vector<float>> visible(n_obstacles);
-    for (int v = 0; v < h; ++v) {
-      const int* id_row = ids[v];
-      const float* d_row = disparity[v];
-      for (int u = 0; u < w; ++u) {
-        if (id_row[u] <= 0) continue;
-        const auto it = index_of_id.find(id_row[u]);
-        if (it != index_of_id.end()) visible[it->second].push_back(d_row[u]);
-      }
-    }
-
-    // Per obstacle: the bounding box of its solids (world), for its reference point.
+  // Per obstacle, its reference point in the camera frame: the centre of the face towards the
+  // camera of its single box, or of its solids' bounding box.
+  std::vector<cv::Vec3d> ReferencePoints(const FrameSetup& setup) const {
+    const size_t n_obstacles = options.scene.obstacles.size();
     std::vector<cv::Vec3d> lo(n_obstacles, cv::Vec3d::all(std::numeric_limits<double>::max()));
     std::vector<cv::Vec3d> hi(n_obstacles, cv::Vec3d::all(-std::numeric_limits<double>::max()));
     std::vector<int> solids(n_obstacles, 0);
@@ -926,6 +1020,26 @@ struct SyntheticRenderer::Impl {
       centre[i] = box.centre;
       ++solids[i];
     }
+    std::vector<cv::Vec3d> points(n_obstacles);
+    for (size_t i = 0; i < n_obstacles; ++i) {
+      // A single box: its own centre, exactly; a composite: its bounding box's.
+      const cv::Vec3d c = solids[i] == 1 ? centre[i] : (lo[i] + hi[i]) * 0.5;
+      cv::Vec3d p(c[0], c[1], lo[i][2]);
+      if (pitched) p = cv::Vec3d(p[0], p[1] * cp + p[2] * sp, p[2] * cp - p[1] * sp);
+      points[i] = p;
+    }
+    return points;
+  }
+
+  // The truth of every obstacle of the frame, from its truth images and row statistics.
+  std::vector<ObstacleTruth> ObstacleTruths(const FrameSetup& setup, const cv::Mat1f& disparity,
+                                            const cv::Mat1i& ids,
+                                            const std::vector<RowStat>& stats) const {
+    const size_t n_obstacles = options.scene.obstacles.size();
+    std::vector<std::vector<float>> visible =
+        VisibleDisparities(options.scene.obstacles, disparity, ids);
+    const std::vector<cv::Vec3d> points = ReferencePoints(setup);
+    std::vector<ObstacleTruth> out;
     for (size_t i = 0; i < n_obstacles; ++i) {
       const Obstacle& ob = options.scene.obstacles[i];
       ObstacleTruth ot;
@@ -933,7 +1047,7 @@ struct SyntheticRenderer::Impl {
       ot.name = ob.name;
       ot.kind = ob.kind;
       int u0 = std::numeric_limits<int>::max(), u1 = -1, v0 = -1, v1 = -1;
-      for (int v = 0; v < h; ++v) {
+      for (int v = 0; v < options.height; ++v) {
         const RowStat& st = stats[static_cast<size_t>(v) * n_obstacles + i];
         if (st.count == 0) continue;
         ot.visible_px += st.count;
@@ -943,12 +1057,8 @@ struct SyntheticRenderer::Impl {
         v1 = v;
       }
       if (ot.visible_px > 0) ot.bbox = cv::Rect(u0, v0, u1 - u0 + 1, v1 - v0 + 1);
-      // A single box: its own centre, exactly; a composite: its bounding box's.
-      const cv::Vec3d c = solids[i] == 1 ? centre[i] : (lo[i] + hi[i]) * 0.5;
-      cv::Vec3d p(c[0], c[1], lo[i][2]);
-      if (pitched) p = cv::Vec3d(p[0], p[1] * cp + p[2] * sp, p[2] * cp - p[1] * sp);
-      ot.position_cam_m = p;
-      ot.depth_m = p[2];
+      ot.position_cam_m = points[i];
+      ot.depth_m = points[i][2];
       ot.range_m = cv::norm(ot.position_cam_m);
       std::vector<float>& d = visible[i];
       if (!d.empty()) {
@@ -956,8 +1066,9 @@ struct SyntheticRenderer::Impl {
         std::nth_element(d.begin(), mid, d.end());
         ot.median_disparity_px = *mid;
       }
-      truth->obstacles.push_back(std::move(ot));
+      out.push_back(std::move(ot));
     }
+    return out;
   }
 };
 
