@@ -23,9 +23,7 @@ double Dot(const Ned& a, const Ned& b) { return a.n * b.n + a.e * b.e + a.d * b.
 
 Ned Minus(const Ned& a, const Ned& b) { return {a.n - b.n, a.e - b.e, a.d - b.d}; }
 
-bool Finite(const Ned& a) {
-  return std::isfinite(a.n) && std::isfinite(a.e) && std::isfinite(a.d);
-}
+bool Finite(const Ned& a) { return std::isfinite(a.n) && std::isfinite(a.e) && std::isfinite(a.d); }
 
 bool Finite(const Encounter& e) {
   return std::isfinite(e.bearing_deg) && std::isfinite(e.distance_m) && std::isfinite(e.t_cpa_s) &&
@@ -149,11 +147,11 @@ Encounter Assess(const OwnVehicle& own, const Obstacle& obstacle, const AvoidOpt
   // Speed towards the vehicle along the line of sight; it must stand out of the velocity noise.
   const double closing_speed = e.distance_m > 0 ? -Dot(p, v) / e.distance_m : 0.0;
   const bool established = obstacle.hits == 0 || obstacle.hits >= options.min_hits_to_extrapolate;
-  const bool closing =
-      established && vv > 0 && Dot(p, v) < 0 &&
-      closing_speed > options.sigma_factor * obstacle.range_rate_sigma_mps;
+  const bool closing = established && vv > 0 && Dot(p, v) < 0 &&
+                       closing_speed > options.sigma_factor * obstacle.range_rate_sigma_mps;
   if (!closing && e.distance_m >= e.protected_radius_m) {
-    e.level = e.distance_m < options.caution_range_m ? AdvisoryLevel::kCaution : AdvisoryLevel::kClear;
+    e.level =
+        e.distance_m < options.caution_range_m ? AdvisoryLevel::kCaution : AdvisoryLevel::kClear;
   } else {
     e.level = Classify(e.distance_m, e.t_cpa_s, e.d_cpa_m, e.protected_radius_m, options);
   }

@@ -36,8 +36,8 @@ enum class ObstacleState {
 
 struct Obstacle {
   std::uint64_t track_id = 0;
-  Ned position_m;     // local NED
-  Ned velocity_mps;   // over the ground
+  Ned position_m;    // local NED
+  Ned velocity_mps;  // over the ground
   // 1-sigma of the position, metres, >= 0: per horizontal axis (north and east each) and down.
   double sigma_horizontal_m = 0;
   double sigma_vertical_m = 0;
@@ -53,7 +53,7 @@ struct Obstacle {
 
 // Ordered by severity: a larger value is worse. kNoData is not a severity but the absence of one.
 enum class AdvisoryLevel {
-  kNoData,   // no fresh tracks: the obstacle picture is unknown, never read as clear
+  kNoData,  // no fresh tracks: the obstacle picture is unknown, never read as clear
   kClear,
   kCaution,
   kWarning,
@@ -119,10 +119,10 @@ struct Encounter {
   // Of the obstacle from the vehicle now, degrees clockwise from north, [0, 360). 0 when the
   // obstacle is straight above or below.
   double bearing_deg = 0;
-  double distance_m = 0;            // 3-D, now
-  double t_cpa_s = 0;               // seconds from now, >= 0
-  double d_cpa_m = 0;               // 3-D, metres
-  double protected_radius_m = 0;    // R of the rules above, with the sigma inflation
+  double distance_m = 0;          // 3-D, now
+  double t_cpa_s = 0;             // seconds from now, >= 0
+  double d_cpa_m = 0;             // 3-D, metres
+  double protected_radius_m = 0;  // R of the rules above, with the sigma inflation
   AdvisoryLevel level = AdvisoryLevel::kClear;
 };
 

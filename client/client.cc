@@ -154,7 +154,8 @@ grpc::Status Client::GetPipelineConfig(v1::PipelineConfig* response) {
   return stub_->GetPipelineConfig(&context, v1::GetPipelineConfigRequest(), response);
 }
 
-grpc::Status Client::SetPipelineConfig(const v1::PipelineConfig& update, v1::PipelineConfig* active) {
+grpc::Status Client::SetPipelineConfig(const v1::PipelineConfig& update,
+                                       v1::PipelineConfig* active) {
   grpc::ClientContext context;
   Prepare(context);
   v1::SetPipelineConfigRequest request;
@@ -188,7 +189,8 @@ grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&
       stream_context_ = &context;
     }
     // Fail fast when the server cannot be reached within the timeout.
-    bool connected = stream_channel_->WaitForConnected(std::chrono::system_clock::now() + options_.timeout);
+    bool connected =
+        stream_channel_->WaitForConnected(std::chrono::system_clock::now() + options_.timeout);
     grpc::Status status;
     bool stop = false;
     if (!connected) {
@@ -218,8 +220,9 @@ grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&
     }
     if (stop) return grpc::Status::OK;
     if (!options.reconnect || status.error_code() != grpc::StatusCode::UNAVAILABLE) {
-      return status.ok() ? grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server ended the stream")
-                         : status;
+      return status.ok()
+                 ? grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server ended the stream")
+                 : status;
     }
     if (options.max_reconnect_attempts > 0 && ++failures > options.max_reconnect_attempts) {
       return status;

@@ -59,7 +59,8 @@ class Client {
   grpc::Status GetDisparitySnapshot(v1::DisparitySnapshot* response, bool annotated = false);
 
   // Calls on_frame for every frame until it returns false, max_frames arrived, Cancel() is called,
-  // or the stream fails (and reconnecting, if asked, gives up). Returns OK in the first three cases.
+  // or the stream fails (and reconnecting, if asked, gives up). Returns OK in the first three
+  // cases.
   grpc::Status StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,
                             const StreamOptions& options = {});
   // Calibration (CalibrationService). Calibrate() streams `settings` then every pair; the
@@ -68,15 +69,17 @@ class Client {
                          const std::vector<v1::ImagePair>& pairs, v1::CalibrationReport* report,
                          std::chrono::milliseconds calibrate_timeout = std::chrono::minutes(5));
   // Streams the server's capture progress to on_progress (the last message holds the report).
-  grpc::Status CaptureCalibration(const v1::CaptureCalibrationRequest& request,
-                                  const std::function<void(const v1::CaptureProgress&)>& on_progress,
-                                  std::chrono::milliseconds capture_timeout = std::chrono::minutes(10));
+  grpc::Status CaptureCalibration(
+      const v1::CaptureCalibrationRequest& request,
+      const std::function<void(const v1::CaptureProgress&)>& on_progress,
+      std::chrono::milliseconds capture_timeout = std::chrono::minutes(10));
   grpc::Status ListCalibrations(v1::ListCalibrationsResponse* response);
   // Streams vehicle states to the server (an autopilot's feed) and returns its counts.
   grpc::Status PublishVehicleStates(const std::vector<v1::VehicleState>& states,
                                     v1::PublishVehicleStateResponse* response);
   // Recording on the server (DATA_DIR/recordings/NAME).
-  grpc::Status StartRecording(const v1::StartRecordingRequest& request, v1::RecordingStatus* status);
+  grpc::Status StartRecording(const v1::StartRecordingRequest& request,
+                              v1::RecordingStatus* status);
   grpc::Status StopRecording(v1::RecordingStatus* status);
   grpc::Status GetCalibration(const std::string& id, v1::CalibrationRecord* record);
   grpc::Status ActivateCalibration(const std::string& id, v1::CalibrationRecord* record);

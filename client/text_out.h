@@ -82,8 +82,7 @@ inline void AppendXmlEscaped(std::string& out, std::string_view s) {
       case '>': out += "&gt;"; break;
       case '"': out += "&quot;"; break;
       case '\'': out += "&apos;"; break;
-      default:
-        out += (u < 0x20 && c != '\t' && c != '\n' && c != '\r') ? ' ' : c;
+      default: out += (u < 0x20 && c != '\t' && c != '\n' && c != '\r') ? ' ' : c;
     }
   }
 }

@@ -12,6 +12,7 @@ packages=(
   libgeographiclib-dev
   libaravis-dev libusb-1.0-0-dev aravis-tools iproute2 util-linux openssl
   libgtest-dev libgmock-dev libbenchmark-dev systemd
+  clang-format clang-tidy
 )
 
 missing=()

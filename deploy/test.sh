@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Sets up a fresh Debian 12 machine, builds stevi with its tests and benchmarks, and runs every test.
+# Sets up a fresh Debian 12 machine, checks the code (format, function size), builds stevi with its
+# tests and benchmarks, and runs every test.
 # Usage: bash deploy/test.sh        (STEVI_BUILD_DIR picks the build folder; default ./build)
 # The reference data is read from $STEVI_DATA_DIR (default ../shared/data); tests that need it
 # skip with a message when it is absent.
@@ -9,7 +10,9 @@ build_dir="${STEVI_BUILD_DIR:-build}"
 jobs="$(nproc)"
 
 bash deploy/install-deps.sh
+bash deploy/check-code.sh --format-only
 cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSTEVI_BUILD_TESTS=ON \
-  -DSTEVI_BUILD_BENCHMARKS=ON -DSTEVI_WERROR=ON
+  -DSTEVI_BUILD_BENCHMARKS=ON -DSTEVI_WERROR=ON -DCMAKE_EXPORT_COMPILE_COMMANDS=ON
 cmake --build "$build_dir" -j"$jobs"
+bash deploy/check-code.sh "$build_dir"
 ctest --test-dir "$build_dir" --output-on-failure -j"$jobs"

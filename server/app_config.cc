@@ -54,8 +54,8 @@ std::optional<double> ParseDouble(const std::string& text) {
 
 }  // namespace
 
-Result<std::unique_ptr<PoseSource>> MakePoseSource(const v1::GeoConfig& config,
-                                                   const std::optional<geo::VehicleState>& synthetic_default) {
+Result<std::unique_ptr<PoseSource>> MakePoseSource(
+    const v1::GeoConfig& config, const std::optional<geo::VehicleState>& synthetic_default) {
   geo::PoseBufferOptions options;
   if (config.has_max_age_s()) options.max_age_s = config.max_age_s();
   if (config.has_max_extrapolation_s()) options.max_extrapolation_s = config.max_extrapolation_s();
@@ -67,14 +67,14 @@ Result<std::unique_ptr<PoseSource>> MakePoseSource(const v1::GeoConfig& config,
 
 std::optional<drivers::Scenario> FindScenario(const std::string& name) {
   if (name == "flight") return drivers::FlightScenario();
-  for (std::vector<drivers::Scenario> list : {drivers::EvaluationScenarios(), drivers::TrackingScenarios()}) {
+  for (std::vector<drivers::Scenario> list :
+       {drivers::EvaluationScenarios(), drivers::TrackingScenarios()}) {
     for (drivers::Scenario& s : list) {
       if (s.name == name) return std::move(s);
     }
   }
   return std::nullopt;
 }
-
 
 Result<Flags> ParseFlags(int argc, const char* const* argv, const std::set<std::string>& known,
                          const std::set<std::string>& switches) {
@@ -92,7 +92,8 @@ Result<Flags> ParseFlags(int argc, const char* const* argv, const std::set<std::
       name = name.substr(0, eq);
     }
     if (switches.count(name) != 0) {
-      if (value.has_value()) return Error{ErrorCode::kInvalidArgument, "--" + name + " takes no value"};
+      if (value.has_value())
+        return Error{ErrorCode::kInvalidArgument, "--" + name + " takes no value"};
       flags.values[name] = "true";
       continue;
     }
@@ -121,7 +122,8 @@ Result<v1::ServerConfig> LoadServerConfig(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   std::stringstream buffer;
   buffer << in.rdbuf();
-  if (!in.good() && !in.eof()) return Error{ErrorCode::kInvalidArgument, "config " + path + ": cannot read"};
+  if (!in.good() && !in.eof())
+    return Error{ErrorCode::kInvalidArgument, "config " + path + ": cannot read"};
   const std::string text = buffer.str();
 
   v1::ServerConfig config;
@@ -187,11 +189,16 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
   if (const std::string* v = get("record")) config.mutable_record()->set_dir(*v);
   if (const std::string* v = get("roi")) {
     const size_t x = v->find('x');
-    const std::optional<double> w = x == std::string::npos ? std::nullopt : ParseDouble(v->substr(0, x));
-    const std::optional<double> h = x == std::string::npos ? std::nullopt : ParseDouble(v->substr(x + 1));
-    const auto side_ok = [](double s) { return s >= drivers::kMinRoiPx && s <= drivers::kMaxRoiPx && s == std::floor(s); };
+    const std::optional<double> w =
+        x == std::string::npos ? std::nullopt : ParseDouble(v->substr(0, x));
+    const std::optional<double> h =
+        x == std::string::npos ? std::nullopt : ParseDouble(v->substr(x + 1));
+    const auto side_ok = [](double s) {
+      return s >= drivers::kMinRoiPx && s <= drivers::kMaxRoiPx && s == std::floor(s);
+    };
     if (!w || !h || !side_ok(*w) || !side_ok(*h)) {
-      problems.push_back("--roi: expected WIDTHxHEIGHT in pixels, " + std::to_string(drivers::kMinRoiPx) + ".." +
+      problems.push_back("--roi: expected WIDTHxHEIGHT in pixels, " +
+                         std::to_string(drivers::kMinRoiPx) + ".." +
                          std::to_string(drivers::kMaxRoiPx) + " each (got '" + *v + "')");
     } else {
       source->mutable_aravis()->set_width(static_cast<uint32_t>(*w));
@@ -309,10 +316,12 @@ void ValidateImagesSource(const v1::SourceConfig& source, std::vector<std::strin
 
 void ValidateAravisSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
   if (source.left().empty()) {
-    problems.push_back("source.left: required for the aravis source (device id, serial or address)");
+    problems.push_back(
+        "source.left: required for the aravis source (device id, serial or address)");
   }
   if (source.right().empty()) {
-    problems.push_back("source.right: required for the aravis source (device id, serial or address)");
+    problems.push_back(
+        "source.right: required for the aravis source (device id, serial or address)");
   }
   if (!source.left().empty() && source.left() == source.right()) {
     problems.push_back("source.right: must be another camera than source.left (both '" +
@@ -322,16 +331,20 @@ void ValidateAravisSource(const v1::SourceConfig& source, std::vector<std::strin
   const std::string sides = "must be " + std::to_string(drivers::kMinRoiPx) + ".." +
                             std::to_string(drivers::kMaxRoiPx) + " pixels";
   if (a.has_width() && (a.width() < drivers::kMinRoiPx || a.width() > drivers::kMaxRoiPx)) {
-    problems.push_back("source.aravis.width: " + sides + " (got " + std::to_string(a.width()) + ")");
+    problems.push_back("source.aravis.width: " + sides + " (got " + std::to_string(a.width()) +
+                       ")");
   }
   if (a.has_height() && (a.height() < drivers::kMinRoiPx || a.height() > drivers::kMaxRoiPx)) {
-    problems.push_back("source.aravis.height: " + sides + " (got " + std::to_string(a.height()) + ")");
+    problems.push_back("source.aravis.height: " + sides + " (got " + std::to_string(a.height()) +
+                       ")");
   }
   if (a.has_frame_rate_hz() && !(a.frame_rate_hz() > 0 && a.frame_rate_hz() <= 1000)) {
-    problems.push_back("source.aravis.frame_rate_hz: must be in (0, 1000] (got " + std::to_string(a.frame_rate_hz()) + ")");
+    problems.push_back("source.aravis.frame_rate_hz: must be in (0, 1000] (got " +
+                       std::to_string(a.frame_rate_hz()) + ")");
   }
   if (a.has_exposure_us() && !(a.exposure_us() > 0 && a.exposure_us() < 1e8)) {
-    problems.push_back("source.aravis.exposure_us: must be in (0, 1e8) (got " + std::to_string(a.exposure_us()) + ")");
+    problems.push_back("source.aravis.exposure_us: must be in (0, 1e8) (got " +
+                       std::to_string(a.exposure_us()) + ")");
   }
   if (a.has_gain_db() && !std::isfinite(a.gain_db())) {
     problems.push_back("source.aravis.gain_db: must be finite");
@@ -343,12 +356,15 @@ void ValidateAravisSource(const v1::SourceConfig& source, std::vector<std::strin
     problems.push_back("source.aravis.trigger: unknown value " + std::to_string(a.trigger()));
   }
   if (a.has_pair_tolerance_ms() && !(a.pair_tolerance_ms() > 0 && a.pair_tolerance_ms() <= 1000)) {
-    problems.push_back("source.aravis.pair_tolerance_ms: must be in (0, 1000] (got " + std::to_string(a.pair_tolerance_ms()) + ")");
+    problems.push_back("source.aravis.pair_tolerance_ms: must be in (0, 1000] (got " +
+                       std::to_string(a.pair_tolerance_ms()) + ")");
   }
   if (a.has_buffers() && (a.buffers() < 2 || a.buffers() > 64)) {
-    problems.push_back("source.aravis.buffers: must be 2..64 (got " + std::to_string(a.buffers()) + ")");
+    problems.push_back("source.aravis.buffers: must be 2..64 (got " + std::to_string(a.buffers()) +
+                       ")");
   }
-  if (a.timestamps() < v1::TIMESTAMP_SOURCE_UNSPECIFIED || a.timestamps() > v1::TIMESTAMP_SOURCE_HOST) {
+  if (a.timestamps() < v1::TIMESTAMP_SOURCE_UNSPECIFIED ||
+      a.timestamps() > v1::TIMESTAMP_SOURCE_HOST) {
     problems.push_back("source.aravis.timestamps: unknown value " + std::to_string(a.timestamps()));
   }
 }
@@ -358,18 +374,21 @@ void ValidateReplaySource(const v1::SourceConfig& source, std::vector<std::strin
     problems.push_back("source.replay.dir: required for the replay source (--replay DIR)");
   }
   if (source.has_left() || source.has_right() || source.has_calibration()) {
-    problems.push_back("source: left, right and calibration do not apply to a replay (the "
-                       "recording holds its frames and calibration)");
+    problems.push_back(
+        "source: left, right and calibration do not apply to a replay (the "
+        "recording holds its frames and calibration)");
   }
   const v1::ReplayConfig& r = source.replay();
   if (r.has_rate() && !(r.rate() >= 0 && r.rate() <= 1000)) {
-    problems.push_back("source.replay.rate: must be in [0, 1000], 0 = as fast as possible (got " + std::to_string(r.rate()) + ")");
+    problems.push_back("source.replay.rate: must be in [0, 1000], 0 = as fast as possible (got " +
+                       std::to_string(r.rate()) + ")");
   }
 }
 
 void ValidateSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
   if (source.has_fps() && !(source.fps() > 0 && source.fps() <= 1000)) {
-    problems.push_back("source.fps: must be in (0, 1000] (got " + std::to_string(source.fps()) + ")");
+    problems.push_back("source.fps: must be in (0, 1000] (got " + std::to_string(source.fps()) +
+                       ")");
   }
   switch (source.kind()) {
     case v1::SOURCE_KIND_UNSPECIFIED:
@@ -417,26 +436,31 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
                          FormatNumber(hi) + "] s (got " + FormatNumber(value) + ")");
     }
   };
-  check_seconds(config.has_keepalive_time_s(), config.keepalive_time_s(), "keepalive_time_s", 1, 86400);
-  check_seconds(config.has_keepalive_timeout_s(), config.keepalive_timeout_s(), "keepalive_timeout_s", 1, 600);
+  check_seconds(config.has_keepalive_time_s(), config.keepalive_time_s(), "keepalive_time_s", 1,
+                86400);
+  check_seconds(config.has_keepalive_timeout_s(), config.keepalive_timeout_s(),
+                "keepalive_timeout_s", 1, 600);
   check_seconds(config.has_min_client_ping_interval_s(), config.min_client_ping_interval_s(),
                 "min_client_ping_interval_s", 1, 86400);
   // Who can reach the server: without authentication only this machine, unless asked explicitly.
   const bool authenticated = config.auth().has_token_file() || config.tls().has_client_ca_file();
   const std::string listen = config.has_listen() ? config.listen() : kDefaultListen;
   if (!authenticated && !config.allow_insecure() && !IsLoopbackListen(listen)) {
-    problems.push_back("listen: '" + listen + "' is not a loopback address, and no authentication "
+    problems.push_back("listen: '" + listen +
+                       "' is not a loopback address, and no authentication "
                        "is configured (auth.token_file, or tls.client_ca_file for mutual TLS): "
                        "anyone on the network could change the pipeline; configure one, or give "
                        "--allow-insecure (allow_insecure: true) to accept that");
   }
   if (config.auth().has_token_file() && !config.tls().has_cert_file() && !config.allow_insecure()) {
-    problems.push_back("auth.token_file: a bearer token needs TLS (tls.cert_file and tls.key_file), "
-                       "else it crosses the network in clear text; or give --allow-insecure");
+    problems.push_back(
+        "auth.token_file: a bearer token needs TLS (tls.cert_file and tls.key_file), "
+        "else it crosses the network in clear text; or give --allow-insecure");
   }
   if (!config.auth().allowed_client_names().empty() && !config.tls().has_client_ca_file()) {
-    problems.push_back("auth.allowed_client_names: needs tls.client_ca_file (client certificates "
-                       "exist only with mutual TLS)");
+    problems.push_back(
+        "auth.allowed_client_names: needs tls.client_ca_file (client certificates "
+        "exist only with mutual TLS)");
   }
   if (config.record().has_dir() && config.record().dir().empty()) {
     problems.push_back("record.dir: must not be empty");
@@ -492,8 +516,9 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig
     }
     if (a.has_buffers()) options.buffers = static_cast<int>(a.buffers());
     if (a.has_pixel_format()) options.pixel_format = a.pixel_format();
-    options.timestamps = a.timestamps() == v1::TIMESTAMP_SOURCE_HOST ? drivers::TimestampSource::kHost
-                                                                      : drivers::TimestampSource::kCamera;
+    options.timestamps = a.timestamps() == v1::TIMESTAMP_SOURCE_HOST
+                             ? drivers::TimestampSource::kHost
+                             : drivers::TimestampSource::kCamera;
     std::shared_ptr<const geometry::StereoRig> rig;
     if (!config.calibration().empty()) {
       Result<geometry::StereoRig> loaded = geometry::StereoRig::FromFile(config.calibration());

@@ -59,8 +59,8 @@ Result<pipeline::PipelineConfig> BuildPipelineConfig(const v1::PipelineConfig& c
 // The pose source of the configuration's GeoConfig (its fields over the core defaults; errors name
 // them as "geo.FIELD"). `synthetic_default` is the fixed pose used when the config gives none (the
 // synthetic rig's hover at Pisa), or nullopt.
-Result<std::unique_ptr<PoseSource>> MakePoseSource(const v1::GeoConfig& config,
-                                                   const std::optional<geo::VehicleState>& synthetic_default);
+Result<std::unique_ptr<PoseSource>> MakePoseSource(
+    const v1::GeoConfig& config, const std::optional<geo::VehicleState>& synthetic_default);
 
 // A named evaluation or tracking scenario (drivers/synthetic), to play live with --scene NAME.
 std::optional<drivers::Scenario> FindScenario(const std::string& name);

@@ -49,7 +49,8 @@ Result<std::string> ReadSecretFile(const std::string& path, size_t max_bytes) {
   in.read(text.data(), static_cast<std::streamsize>(text.size()));
   text.resize(static_cast<size_t>(in.gcount()));
   if (text.size() > max_bytes) {
-    return Error{ErrorCode::kInvalidArgument, path + ": larger than " + std::to_string(max_bytes) + " bytes"};
+    return Error{ErrorCode::kInvalidArgument,
+                 path + ": larger than " + std::to_string(max_bytes) + " bytes"};
   }
   return text;
 }
@@ -102,10 +103,11 @@ Result<Authorizer> Authorizer::Create(const v1::AuthConfig& auth) {
     std::getline(lines, token);
     while (!token.empty() && (token.back() == '\r' || token.back() == ' ')) token.pop_back();
     if (token.size() < kMinTokenLength) {
-      return Error{ErrorCode::kInvalidArgument,
-                   "auth.token_file: " + auth.token_file() + ": the token (first line) must have at least " +
-                       std::to_string(kMinTokenLength) + " characters (got " +
-                       std::to_string(token.size()) + ")"};
+      return Error{ErrorCode::kInvalidArgument, "auth.token_file: " + auth.token_file() +
+                                                    ": the token (first line) must have at least " +
+                                                    std::to_string(kMinTokenLength) +
+                                                    " characters (got " +
+                                                    std::to_string(token.size()) + ")"};
     }
     a.token_ = token;
   }
@@ -146,8 +148,9 @@ grpc::Status Authorizer::CheckControl(const grpc::ServerContextBase& context,
   if (it == metadata.end()) {
     LogRefusal(context, method, "no credentials");
     return ToGrpcStatus(ErrorCode::kUnauthenticated,
-                        std::string(method) + " is a control call: it needs a bearer token "
-                                              "(authorization: Bearer TOKEN) or an allowed client certificate");
+                        std::string(method) +
+                            " is a control call: it needs a bearer token "
+                            "(authorization: Bearer TOKEN) or an allowed client certificate");
   }
   const std::string_view value(it->second.data(), it->second.size());
   const std::string_view prefix(kBearer);

@@ -141,7 +141,8 @@ v1::CalibrationReport ToProto(const calibration::CalibrationReport& r,
     v1::PairResult* pr = out.add_pairs();
     pr->set_name(p.name);
     pr->set_used(true);
-    pr->set_rms_px(std::sqrt(0.5 * (p.rms_left_px * p.rms_left_px + p.rms_right_px * p.rms_right_px)));
+    pr->set_rms_px(
+        std::sqrt(0.5 * (p.rms_left_px * p.rms_left_px + p.rms_right_px * p.rms_right_px)));
     pr->set_coverage_left(p.coverage_left);
     pr->set_coverage_right(p.coverage_right);
   }
@@ -233,7 +234,7 @@ Result<v1::CalibrationReport> CalibrationManager::Calibrate(
   if (pairs.empty()) return Error::Invalid({"no image pair was uploaded"});
   const auto gone = [&] { return abandoned && abandoned(); };
   const Error abandoned_error{ErrorCode::kFailedPrecondition,
-                             "the call was cancelled or its deadline passed; nothing was stored"};
+                              "the call was cancelled or its deadline passed; nothing was stored"};
   if (gone()) return abandoned_error;  // it waited behind other work for longer than its deadline
   Result<calibration::CalibrationResult> result = calibration::CalibrateStereo(pairs, *options);
   if (!result.ok()) return result.error();
@@ -275,7 +276,8 @@ Status CalibrationManager::Capture(const v1::CaptureCalibrationRequest& request,
   if (Status valid = ValidateCapture(request); !valid.ok()) return valid;
   const calibration::CalibrationOptions options = ToCalibrationOptions(request.settings()).value();
   const int count = request.pairs() > 0 ? request.pairs() : kDefaultCapturePairs;
-  const double interval_s = request.interval_s() > 0 ? request.interval_s() : kDefaultCaptureInterval;
+  const double interval_s =
+      request.interval_s() > 0 ? request.interval_s() : kDefaultCaptureInterval;
   const auto interval = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       std::chrono::duration<double>(interval_s));
   std::vector<calibration::ImagePair> pairs;
@@ -381,7 +383,8 @@ Result<v1::CalibrationRecord> CalibrationManager::ActivateLocked(calibration::Ca
                      " images, but the source delivers " + SizeText(source)};
   }
   // The rectification maps are built here, on the caller's thread, never on the pipeline's.
-  Result<geometry::StereoRig> rig = geometry::StereoRig::FromCalibration(stored->calibration, id.Name());
+  Result<geometry::StereoRig> rig =
+      geometry::StereoRig::FromCalibration(stored->calibration, id.Name());
   if (!rig.ok()) return rig.error();
   if (persist) {
     if (Status persisted = store_->Activate(id); !persisted.ok()) return persisted.error();

@@ -90,7 +90,8 @@ class CalibrationManager {
 };
 
 // Settings to core options: "settings.board.columns: ..." style problems.
-Result<calibration::CalibrationOptions> ToCalibrationOptions(const v1::CalibrationSettings& settings);
+Result<calibration::CalibrationOptions> ToCalibrationOptions(
+    const v1::CalibrationSettings& settings);
 v1::CalibrationReport ToProto(const calibration::CalibrationReport& report,
                               const std::string& calibration_id, bool applied);
 

@@ -40,9 +40,9 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
       v1::ImagePair& pair = *upload_.mutable_pair();
       bytes_ += static_cast<int64_t>(pair.left().size() + pair.right().size());
       if (static_cast<int>(pairs_.size()) >= kMaxCalibrationPairs) {
-        return Finish(ToGrpcStatus(ErrorCode::kResourceExhausted,
-                                   "more than " + std::to_string(kMaxCalibrationPairs) +
-                                       " pairs in one upload"));
+        return Finish(ToGrpcStatus(
+            ErrorCode::kResourceExhausted,
+            "more than " + std::to_string(kMaxCalibrationPairs) + " pairs in one upload"));
       }
       if (bytes_ > kMaxCalibrationUploadBytes) {
         return Finish(ToGrpcStatus(ErrorCode::kResourceExhausted,
@@ -63,9 +63,7 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
   void OnDone() override { delete this; }
 
  private:
-  void Refuse(const std::string& why) {
-    Finish(ToGrpcStatus(ErrorCode::kInvalidArgument, why));
-  }
+  void Refuse(const std::string& why) { Finish(ToGrpcStatus(ErrorCode::kInvalidArgument, why)); }
 
   void Run() {
     if (!have_settings_) return Refuse("no settings were sent");

@@ -26,8 +26,8 @@ v1::SemiGlobalMode ToProto(Mode mode) {
 }
 
 // Copies a proto optional scalar onto a core field when it is set.
-#define STEVI_MERGE(msg, field, target) \
-  do {                                  \
+#define STEVI_MERGE(msg, field, target)                \
+  do {                                                 \
     if ((msg).has_##field()) (target) = (msg).field(); \
   } while (false)
 
@@ -311,7 +311,7 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& c) {
 
   v1::MatcherConfig* m = p.mutable_matcher();
   m->set_kind(c.matcher.kind == MatcherKind::kBlockMatching ? v1::MATCHER_KIND_BLOCK_MATCHING
-                                                             : v1::MATCHER_KIND_SEMI_GLOBAL);
+                                                            : v1::MATCHER_KIND_SEMI_GLOBAL);
   const stereo::BlockMatchingOptions& bm = c.matcher.block_matching;
   v1::BlockMatchingConfig* pbm = m->mutable_block_matching();
   pbm->set_prefilter_size(bm.prefilter_size);
@@ -369,8 +369,7 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
     case v1::ALGORITHM_CANONICAL: c.algorithm = Algorithm::kCanonical; break;
     case v1::ALGORITHM_STEVIE: c.algorithm = Algorithm::kSteViE; break;
     case v1::ALGORITHM_STEVIS: c.algorithm = Algorithm::kSteViS; break;
-    default:
-      problems.push_back("algorithm: unknown value " + std::to_string(u.algorithm()));
+    default: problems.push_back("algorithm: unknown value " + std::to_string(u.algorithm()));
   }
   STEVI_MERGE(u, max_width_px, c.max_width_px);
 
@@ -396,7 +395,9 @@ std::vector<std::string> MergeFromProto(const v1::PipelineConfig& u, pipeline::P
   STEVI_MERGE(pbm, local_texture_threshold, bm.local_texture_threshold);
   switch (pbm.prefilter_type()) {
     case v1::PRE_FILTER_UNSPECIFIED: break;
-    case v1::PRE_FILTER_X_SOBEL: bm.prefilter_type = stereo::BlockMatchingOptions::PreFilter::kXSobel; break;
+    case v1::PRE_FILTER_X_SOBEL:
+      bm.prefilter_type = stereo::BlockMatchingOptions::PreFilter::kXSobel;
+      break;
     case v1::PRE_FILTER_NORMALIZED_RESPONSE:
       bm.prefilter_type = stereo::BlockMatchingOptions::PreFilter::kNormalizedResponse;
       break;

@@ -1,4 +1,5 @@
-// stevi-process: the pipeline in-process over a file or synthetic source, every frame, as JSON lines.
+// stevi-process: the pipeline in-process over a file or synthetic source, every frame, as JSON
+// lines.
 #include <fstream>
 #include <iostream>
 #include <memory>
@@ -48,8 +49,9 @@ int Fail(const std::string& message, int code = 2) {
 int main(int argc, char** argv) {
   stevi::KeepFrameMemory();  // first: before any thread starts
   using namespace stevi;
-  const std::set<std::string> known = {"source", "left", "right", "calibration", "fps", "algorithm",
-                                       "config", "frames", "out", "truth", "replay"};
+  const std::set<std::string> known = {"source", "left",      "right",  "calibration",
+                                       "fps",    "algorithm", "config", "frames",
+                                       "out",    "truth",     "replay"};
   Result<server::Flags> flags = server::ParseFlags(argc, argv, known, {"help", "timings"});
   if (!flags.ok()) return Fail(flags.error().message);
   if (flags->values.count("help")) {
@@ -70,8 +72,9 @@ int main(int argc, char** argv) {
   std::vector<std::string> problems = server::ValidateServerConfig(config);
   const v1::SourceKind kind = config.source().kind();
   if (kind == v1::SOURCE_KIND_ARAVIS) {
-    problems.push_back("--source: stevi-process runs recorded or generated frames (synthetic, "
-                       "images, replay); record cameras with stevi-server --record DIR");
+    problems.push_back(
+        "--source: stevi-process runs recorded or generated frames (synthetic, "
+        "images, replay); record cameras with stevi-server --record DIR");
   }
   // Every frame, as fast as it goes: no pacing.
   if (kind == v1::SOURCE_KIND_REPLAY) config.mutable_source()->mutable_replay()->set_rate(0);
@@ -113,7 +116,8 @@ int main(int argc, char** argv) {
   // A replay georeferences its frames with the poses recorded with them, exactly as live.
   std::unique_ptr<server::PoseSource> poses;
   for (const std::string& note : (*source)->Notes()) std::cerr << "stevi-process: " << note << "\n";
-  if (const std::vector<geo::VehicleState> recorded = (*source)->RecordedVehicleStates(); !recorded.empty()) {
+  if (const std::vector<geo::VehicleState> recorded = (*source)->RecordedVehicleStates();
+      !recorded.empty()) {
     Result<std::unique_ptr<server::PoseSource>> created =
         server::PoseSource::Create(geo::PoseBufferOptions{}, std::nullopt);
     if (!created.ok()) return Fail(created.error().message, 1);
@@ -135,11 +139,13 @@ int main(int argc, char** argv) {
     }
     snapshot.rig = (*source)->Rig();  // a replay follows the calibration changes it recorded
     Result<pipeline::FrameResult> result = pipe.Process(*frame, snapshot);
-    if (!result.ok()) return Fail("frame " + std::to_string(frame->index) + ": " + result.error().message, 1);
+    if (!result.ok())
+      return Fail("frame " + std::to_string(frame->index) + ": " + result.error().message, 1);
     v1::TrackFrame track_frame = server::ToTrackFrame(*result);
     if (!timings) track_frame.clear_timings();
     out << server::ToJsonLine(track_frame) << "\n";
-    if (const drivers::FrameTruth* truth = (*source)->LastTruth(); truth_file.is_open() && truth != nullptr) {
+    if (const drivers::FrameTruth* truth = (*source)->LastTruth();
+        truth_file.is_open() && truth != nullptr) {
       truth_file << server::ToJsonLine(server::ToTruthFrame(*truth, frame->t_ns)) << "\n";
     }
   }

@@ -107,7 +107,8 @@ Result<v1::RecordingStatus> RecordingManager::Start(const v1::StartRecordingRequ
   if (const std::string problem = CheckRecordingName(name); !problem.empty()) {
     return Error{ErrorCode::kInvalidArgument, "name: " + problem};
   }
-  const uint64_t max_bytes = request.max_bytes() == 0 ? kDefaultRecordingMaxBytes : request.max_bytes();
+  const uint64_t max_bytes =
+      request.max_bytes() == 0 ? kDefaultRecordingMaxBytes : request.max_bytes();
   return StartIn((std::filesystem::path(recordings_root_) / name).string(), max_bytes);
 }
 

@@ -34,7 +34,8 @@ void FollowSyntheticFlight(const v1::SourceConfig& source, const geo::VehicleSta
   if (!scenario || scenario->options.scene.rig_velocity_mps == cv::Vec3d(0, 0, 0)) return;
   const drivers::Scene scene = scenario->options.scene;
   poses.SetSyntheticPath([scene, start](int64_t t_ns) {
-    return MovedRigPose(start, scene.RigOffsetAt(static_cast<double>(t_ns) * 1e-9), scene.rig_velocity_mps);
+    return MovedRigPose(start, scene.RigOffsetAt(static_cast<double>(t_ns) * 1e-9),
+                        scene.rig_velocity_mps);
   });
 }
 
@@ -42,7 +43,8 @@ void FollowSyntheticFlight(const v1::SourceConfig& source, const geo::VehicleSta
 // starts). Errors are prefixed "record: ".
 Status StartConfiguredRecording(const v1::RecordConfig& record, RecordingManager& recording) {
   if (!record.has_dir()) return Status::Ok();
-  const uint64_t max_bytes = record.has_max_bytes() ? record.max_bytes() : kDefaultRecordingMaxBytes;
+  const uint64_t max_bytes =
+      record.has_max_bytes() ? record.max_bytes() : kDefaultRecordingMaxBytes;
   const int queue = record.has_queue_frames() ? static_cast<int>(record.queue_frames())
                                               : kDefaultRecordingQueueFrames;
   Result<v1::RecordingStatus> started = recording.StartIn(record.dir(), max_bytes, queue);
@@ -60,8 +62,8 @@ void ConfigureTransport(const v1::ServerConfig& config, grpc::ServerBuilder& bui
   };
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS,
                              ms(config.has_keepalive_time_s(), config.keepalive_time_s(), 30));
-  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS,
-                             ms(config.has_keepalive_timeout_s(), config.keepalive_timeout_s(), 10));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, ms(config.has_keepalive_timeout_s(),
+                                                               config.keepalive_timeout_s(), 10));
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
   builder.AddChannelArgument(
       GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS,
@@ -86,7 +88,8 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
 
   // Credentials before the source: a bad certificate or token file is found without touching a
   // camera.
-  Result<std::shared_ptr<grpc::ServerCredentials>> credentials = MakeServerCredentials(config.tls());
+  Result<std::shared_ptr<grpc::ServerCredentials>> credentials =
+      MakeServerCredentials(config.tls());
   if (!credentials.ok()) return credentials.error();
   Result<Authorizer> auth = Authorizer::Create(config.auth());
   if (!auth.ok()) return auth.error();
@@ -101,17 +104,20 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   server->auth_ = std::move(auth).value();
   server->poses_ = std::move(poses).value();
   server->listen_ = config.has_listen() ? config.listen() : kDefaultListen;
-  Status built = server->BuildRuntime(config, std::move(source).value(), std::move(pipeline_config).value());
+  Status built =
+      server->BuildRuntime(config, std::move(source).value(), std::move(pipeline_config).value());
   if (!built.ok()) return built.error();
   built = server->BuildGrpcServer(config, *credentials);
   if (!built.ok()) return built.error();
-  server->engine_->Start(config.has_pipeline_workers() ? config.pipeline_workers() : 0,
-                         config.has_opencv_threads() ? static_cast<int>(config.opencv_threads()) : 0);
+  server->engine_->Start(
+      config.has_pipeline_workers() ? config.pipeline_workers() : 0,
+      config.has_opencv_threads() ? static_cast<int>(config.opencv_threads()) : 0);
   server->health_thread_ = std::thread([raw = server.get()] { raw->HealthLoop(); });
   return server;
 }
 
-Status Server::BuildRuntime(const v1::ServerConfig& config, std::unique_ptr<drivers::StereoSource> source,
+Status Server::BuildRuntime(const v1::ServerConfig& config,
+                            std::unique_ptr<drivers::StereoSource> source,
                             pipeline::PipelineConfig pipeline_config) {
   const uint32_t queue =
       config.has_subscriber_queue_frames() ? config.subscriber_queue_frames() : kDefaultQueueFrames;
@@ -127,9 +133,11 @@ Status Server::BuildRuntime(const v1::ServerConfig& config, std::unique_ptr<driv
   if (!engine.ok()) return engine.error();
   engine_ = std::move(engine).value();
   PoseSource* pose_source = poses_.get();
-  engine_->SetPoseSource([pose_source](int64_t t, int64_t unix_t) { return pose_source->At(t, unix_t); });
+  engine_->SetPoseSource(
+      [pose_source](int64_t t, int64_t unix_t) { return pose_source->At(t, unix_t); });
   const std::string data_dir = config.has_data_dir() ? config.data_dir() : kDefaultDataDir;
-  Result<std::unique_ptr<CalibrationManager>> calibration = CalibrationManager::Open(data_dir, *engine_);
+  Result<std::unique_ptr<CalibrationManager>> calibration =
+      CalibrationManager::Open(data_dir, *engine_);
   if (!calibration.ok()) return calibration.error();
   calibration_ = std::move(calibration).value();
   // The recorder comes after the calibration store, so that it records the calibration the store
@@ -137,7 +145,8 @@ Status Server::BuildRuntime(const v1::ServerConfig& config, std::unique_ptr<driv
   recording_ = std::make_unique<RecordingManager>(data_dir, *engine_, *poses_);
   const Status recording = StartConfiguredRecording(config.record(), *recording_);
   if (!recording.ok()) return recording;
-  service_ = std::make_unique<ObstacleServiceImpl>(*engine_, *broadcaster, *poses_, *recording_, auth_);
+  service_ =
+      std::make_unique<ObstacleServiceImpl>(*engine_, *broadcaster, *poses_, *recording_, auth_);
   calibration_service_ = std::make_unique<CalibrationServiceImpl>(*calibration_, auth_);
   return Status::Ok();
 }
@@ -154,7 +163,8 @@ Status Server::BuildGrpcServer(const v1::ServerConfig& config,
   ConfigureTransport(config, builder);
   grpc_server_ = builder.BuildAndStart();
   if (grpc_server_ == nullptr || port_ == 0) {
-    return Error{ErrorCode::kUnavailable, "cannot listen on " + listen_ + " (address in use or not local?)"};
+    return Error{ErrorCode::kUnavailable,
+                 "cannot listen on " + listen_ + " (address in use or not local?)"};
   }
   if (grpc::HealthCheckServiceInterface* health = grpc_server_->GetHealthCheckService()) {
     // NOT_SERVING until the first frame comes through (the default is SERVING); naming the
@@ -177,7 +187,8 @@ void Server::HealthLoop() {
     lock.unlock();
     const EngineStatus status = engine_->Status();
     // Serving: the source delivers and the pipeline turns its frames into tracks.
-    const bool serving = status.source_state == SourceState::kRunning && status.frames_processed > 0;
+    const bool serving =
+        status.source_state == SourceState::kRunning && status.frames_processed > 0;
     if (published != serving) {
       health->SetServingStatus(serving);  // the overall status ("") and every service
       published = serving;
@@ -210,9 +221,8 @@ void Server::Shutdown() {
   Log(LogLevel::kInfo, "shutdown", {{"step", "stop_accepting"}});
   std::thread stop_accepting;
   if (grpc_server_) {
-    stop_accepting = std::thread([this] {
-      grpc_server_->Shutdown(std::chrono::system_clock::now() + kShutdownGrace);
-    });
+    stop_accepting = std::thread(
+        [this] { grpc_server_->Shutdown(std::chrono::system_clock::now() + kShutdownGrace); });
   }
   // 2. End the streams, each with a final status (UNAVAILABLE "server shutting down": a client
   //    reconnects to the next server), so that the calls in progress finish without waiting.
@@ -232,8 +242,10 @@ void Server::Shutdown() {
     if (was_recording) {
       const v1::RecordingStatus status = recording_->Status();
       Log(LogLevel::kInfo, "shutdown",
-          {{"step", "recording_flushed"}, {"dir", status.dir()},
-           {"frames", std::to_string(status.frames_written())}, {"ms", elapsed_ms()}});
+          {{"step", "recording_flushed"},
+           {"dir", status.dir()},
+           {"frames", std::to_string(status.frames_written())},
+           {"ms", elapsed_ms()}});
     }
   }
 }

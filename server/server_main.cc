@@ -60,9 +60,10 @@ int main(int argc, char** argv) {
   stevi::KeepFrameMemory();  // first: before any thread starts
   using namespace stevi;
   const std::set<std::string> known = {
-      "listen", "config", "source",  "left",        "right",   "calibration", "fps",    "algorithm",
-      "data-dir", "scene", "replay", "rate", "record", "roi", "exposure-us", "gain-db", "trigger",
-      "timestamps", "tls-cert", "tls-key", "tls-client-ca", "token-file"};
+      "listen",   "config",    "source",        "left",      "right",   "calibration",
+      "fps",      "algorithm", "data-dir",      "scene",     "replay",  "rate",
+      "record",   "roi",       "exposure-us",   "gain-db",   "trigger", "timestamps",
+      "tls-cert", "tls-key",   "tls-client-ca", "token-file"};
   Result<server::Flags> flags = server::ParseFlags(argc, argv, known, {"help", "allow-insecure"});
   if (!flags.ok()) {
     std::cerr << "stevi-server: " << flags.error().message << "\n";
@@ -115,11 +116,13 @@ int main(int argc, char** argv) {
        {"algorithm", std::string(pipeline::AlgorithmName(status.algorithm))},
        {"listen", listen.substr(0, listen.rfind(':')) + ":" + std::to_string((*server)->port())},
        {"tls", config.tls().has_cert_file() ? "on" : "off"},
-       {"auth", config.auth().has_token_file() || config.tls().has_client_ca_file() ? "on" : "off"}});
+       {"auth",
+        config.auth().has_token_file() || config.tls().has_client_ca_file() ? "on" : "off"}});
 
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
-  Log(LogLevel::kInfo, "shutting_down", {{"signal", signal_number == SIGINT ? "SIGINT" : "SIGTERM"}});
+  Log(LogLevel::kInfo, "shutting_down",
+      {{"signal", signal_number == SIGINT ? "SIGINT" : "SIGTERM"}});
   (*server)->Shutdown();
   Log(LogLevel::kInfo, "stopped");
   return 0;

@@ -83,8 +83,7 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
     }
     Subscription<FramePtr>::Popped popped = sub_->Pop();
     switch (popped.state) {
-      case Subscription<FramePtr>::PopState::kEmpty:
-        return;  // notified at the next frame
+      case Subscription<FramePtr>::PopState::kEmpty: return;  // notified at the next frame
       case Subscription<FramePtr>::PopState::kEnded:
         FinishLocked(ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
         return;

@@ -41,7 +41,10 @@ class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
  public:
   ObstacleServiceImpl(Engine& engine, FrameBroadcaster& broadcaster, PoseSource& poses,
                       RecordingManager& recording, const Authorizer& auth)
-      : engine_(engine), broadcaster_(broadcaster), poses_(poses), recording_(recording),
+      : engine_(engine),
+        broadcaster_(broadcaster),
+        poses_(poses),
+        recording_(recording),
         auth_(auth) {}
 
   grpc::ServerWriteReactor<v1::TrackFrame>* StreamTracks(

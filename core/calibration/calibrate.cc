@@ -30,7 +30,9 @@ constexpr double kOutlierMinDropPx = 1.0;
 // Rejected pairs quoted in an error message before "and N more".
 constexpr std::size_t kQuotedRejections = 4;
 
-std::string SizeText(cv::Size s) { return std::to_string(s.width) + "x" + std::to_string(s.height); }
+std::string SizeText(cv::Size s) {
+  return std::to_string(s.width) + "x" + std::to_string(s.height);
+}
 
 std::string PairLabel(int index, const std::string& name) {
   std::string label = "#" + std::to_string(index);
@@ -67,7 +69,8 @@ Probe ProbeImage(const ImageData& data, cv::Size max_size) {
     if (mat->empty()) {
       p.reason = RejectReason::kUndecodable;
       p.problem = "empty image";
-    } else if (mat->depth() != CV_8U || (mat->channels() != 1 && mat->channels() != 3 && mat->channels() != 4) ||
+    } else if (mat->depth() != CV_8U ||
+               (mat->channels() != 1 && mat->channels() != 3 && mat->channels() != 4) ||
                mat->dims != 2) {
       p.reason = RejectReason::kUndecodable;
       p.problem = "unsupported image type " + cv::typeToString(mat->type()) +
@@ -120,20 +123,23 @@ bool Finite(const cv::Mat& m) { return m.empty() || cv::checkRange(m, true); }
 // Undistorts and rectifies points accurately (the default 5 iterations of cv::undistortPoints
 // leave tenths of a pixel near the corners of a strongly distorted image).
 std::vector<cv::Point2f> RectifyPoints(const std::vector<cv::Point2f>& points, const cv::Matx33d& K,
-                                       const cv::Mat& D, const cv::Matx33d& R, const cv::Matx34d& P) {
+                                       const cv::Mat& D, const cv::Matx33d& R,
+                                       const cv::Matx34d& P) {
   std::vector<cv::Point2f> out;
   cv::undistortPoints(points, out, K, D, R, P,
                       cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-9));
   return out;
 }
 
-double HullCoverage(const std::vector<cv::Point2f>& corners, cv::Size image, std::vector<cv::Point2f>& hull) {
+double HullCoverage(const std::vector<cv::Point2f>& corners, cv::Size image,
+                    std::vector<cv::Point2f>& hull) {
   cv::convexHull(corners, hull);
   return cv::contourArea(hull) / image.area();
 }
 
 // Fraction of the grid's cells whose centre lies inside some hull.
-double UnionCoverage(const std::vector<std::vector<cv::Point2f>>& hulls, cv::Size image, cv::Size grid) {
+double UnionCoverage(const std::vector<std::vector<cv::Point2f>>& hulls, cv::Size image,
+                     cv::Size grid) {
   int covered = 0;
   for (int gy = 0; gy < grid.height; ++gy) {
     for (int gx = 0; gx < grid.width; ++gx) {
@@ -193,8 +199,9 @@ struct Solution {
 };
 
 // cv::calibrateCamera per camera (optional), then cv::stereoCalibrate.
-Result<Solution> Solve(const std::vector<PairCorners>& pairs, const std::vector<cv::Point3f>& object,
-                       cv::Size image_size, const CalibrationModel& model) {
+Result<Solution> Solve(const std::vector<PairCorners>& pairs,
+                       const std::vector<cv::Point3f>& object, cv::Size image_size,
+                       const CalibrationModel& model) {
   const std::vector<std::vector<cv::Point3f>> object_points(pairs.size(), object);
   std::vector<std::vector<cv::Point2f>> left_points, right_points;
   for (const PairCorners& p : pairs) {
@@ -202,8 +209,8 @@ Result<Solution> Solve(const std::vector<PairCorners>& pairs, const std::vector<
     right_points.push_back(p.right);
   }
   const int n_dist = model.rational_model ? 8 : 5;
-  const cv::TermCriteria criteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, model.max_iterations,
-                                  model.epsilon);
+  const cv::TermCriteria criteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS,
+                                  model.max_iterations, model.epsilon);
   Solution s;
   s.K1 = cv::Mat::eye(3, 3, CV_64F);
   s.K2 = cv::Mat::eye(3, 3, CV_64F);
@@ -211,19 +218,23 @@ Result<Solution> Solve(const std::vector<PairCorners>& pairs, const std::vector<
   s.D2 = cv::Mat::zeros(1, n_dist, CV_64F);
   if (model.calibrate_cameras_first) {
     std::vector<cv::Mat> rvecs, tvecs;
-    cv::calibrateCamera(object_points, left_points, image_size, s.K1, s.D1, rvecs, tvecs, MonoFlags(model), criteria);
-    cv::calibrateCamera(object_points, right_points, image_size, s.K2, s.D2, rvecs, tvecs, MonoFlags(model), criteria);
+    cv::calibrateCamera(object_points, left_points, image_size, s.K1, s.D1, rvecs, tvecs,
+                        MonoFlags(model), criteria);
+    cv::calibrateCamera(object_points, right_points, image_size, s.K2, s.D2, rvecs, tvecs,
+                        MonoFlags(model), criteria);
     s.D1 = RowVector(s.D1, n_dist);
     s.D2 = RowVector(s.D2, n_dist);
   }
   cv::Mat per_view;
-  s.rms = cv::stereoCalibrate(object_points, left_points, right_points, s.K1, s.D1, s.K2, s.D2, image_size, s.R,
-                              s.T, s.E, s.F, per_view, StereoFlags(model), criteria);
+  s.rms =
+      cv::stereoCalibrate(object_points, left_points, right_points, s.K1, s.D1, s.K2, s.D2,
+                          image_size, s.R, s.T, s.E, s.F, per_view, StereoFlags(model), criteria);
   s.D1 = RowVector(s.D1, n_dist);
   s.D2 = RowVector(s.D2, n_dist);
   per_view.convertTo(s.errors, CV_64F);
-  if (!std::isfinite(s.rms) || !Finite(s.K1) || !Finite(s.K2) || !Finite(s.D1) || !Finite(s.D2) || !Finite(s.R) ||
-      !Finite(s.T) || s.errors.rows != static_cast<int>(pairs.size()) || s.errors.cols != 2) {
+  if (!std::isfinite(s.rms) || !Finite(s.K1) || !Finite(s.K2) || !Finite(s.D1) || !Finite(s.D2) ||
+      !Finite(s.R) || !Finite(s.T) || s.errors.rows != static_cast<int>(pairs.size()) ||
+      s.errors.cols != 2) {
     return Error{ErrorCode::kInternal, "the stereo calibration diverged (non-finite result)"};
   }
   return s;
@@ -237,7 +248,8 @@ std::string WorstPairs(const std::vector<PairCorners>& pairs, const cv::Mat1d& e
   std::string out;
   for (std::size_t k = 0; k < order.size() && k < 3; ++k) {
     if (!out.empty()) out += ", ";
-    out += PairLabel(pairs[order[k].second].index, pairs[order[k].second].name) + " " + Fixed(order[k].first, 2) + " px";
+    out += PairLabel(pairs[order[k].second].index, pairs[order[k].second].name) + " " +
+           Fixed(order[k].first, 2) + " px";
   }
   return out;
 }
@@ -250,8 +262,8 @@ Error NoPairError(const DetectedPairs& detected, const BoardSpec& board) {
   bool any_board = false, any_decoded = false;
   for (const RejectedPair& r : detected.rejected) {
     any_board |= r.reason == RejectReason::kNoBoardLeft || r.reason == RejectReason::kNoBoardRight;
-    any_decoded |= r.reason == RejectReason::kNoBoardLeft || r.reason == RejectReason::kNoBoardRight ||
-                   r.reason == RejectReason::kNoBoard;
+    any_decoded |= r.reason == RejectReason::kNoBoardLeft ||
+                   r.reason == RejectReason::kNoBoardRight || r.reason == RejectReason::kNoBoard;
   }
   if (!any_decoded) {
     return Invalid("no usable pair: every one of the " + std::to_string(detected.pairs_given) +
@@ -267,15 +279,19 @@ Error NoPairError(const DetectedPairs& detected, const BoardSpec& board) {
 }
 
 // An error when the pairs are too few to solve, or the image size is not set.
-std::optional<Error> CheckPairCount(const DetectedPairs& detected, const CalibrationOptions& options) {
+std::optional<Error> CheckPairCount(const DetectedPairs& detected,
+                                    const CalibrationOptions& options) {
   const int n_pairs = static_cast<int>(detected.pairs.size());
   if (n_pairs == 0) return NoPairError(detected, options.board);
   if (n_pairs < kMinSolvablePairs) {
     return Invalid("too few pairs: " + std::to_string(n_pairs) + " of " +
                    std::to_string(detected.pairs_given) +
                    " have the board in both images, at least 3 are needed to calibrate (the "
-                   "min_pairs gate asks for " + std::to_string(options.gates.min_pairs) + ")" +
-                   (detected.rejected.empty() ? std::string() : "; rejected: " + RejectionSummary(detected.rejected)));
+                   "min_pairs gate asks for " +
+                   std::to_string(options.gates.min_pairs) + ")" +
+                   (detected.rejected.empty()
+                        ? std::string()
+                        : "; rejected: " + RejectionSummary(detected.rejected)));
   }
   const cv::Size image_size = detected.image_size;
   if (image_size.width <= 0 || image_size.height <= 0) {
@@ -289,9 +305,9 @@ std::optional<Error> CheckCorners(const std::vector<PairCorners>& pairs, const B
                                   const std::vector<cv::Point3f>& object) {
   for (const PairCorners& p : pairs) {
     if (p.left.size() != object.size() || p.right.size() != object.size()) {
-      return Invalid("pair " + PairLabel(p.index, p.name) + ": " + std::to_string(p.left.size()) + " and " +
-                     std::to_string(p.right.size()) + " corners, the board of " + board.Name() + " has " +
-                     std::to_string(object.size()));
+      return Invalid("pair " + PairLabel(p.index, p.name) + ": " + std::to_string(p.left.size()) +
+                     " and " + std::to_string(p.right.size()) + " corners, the board of " +
+                     board.Name() + " has " + std::to_string(object.size()));
     }
   }
   return std::nullopt;
@@ -313,7 +329,8 @@ Outliers FindOutliers(const cv::Mat1d& errors, double outlier_factor) {
   std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
   o.median = sorted[sorted.size() / 2];
   for (int i = 0; i < static_cast<int>(o.worst.size()); ++i) {
-    if (o.worst[i] > outlier_factor * o.median && o.worst[i] > kOutlierMinDropPx) o.pairs.push_back(i);
+    if (o.worst[i] > outlier_factor * o.median && o.worst[i] > kOutlierMinDropPx)
+      o.pairs.push_back(i);
   }
   return o;
 }
@@ -327,8 +344,9 @@ void LeaveOut(const Outliers& outliers, const cv::Mat1d& errors, std::vector<Pai
     const double worst = outliers.worst[*it];
     const bool left_worse = errors(*it, 0) >= errors(*it, 1);
     rejected.push_back({p.index, p.name, RejectReason::kOutlier,
-                        "RMS error " + Fixed(worst, 2) + " px in the " + (left_worse ? "left" : "right") +
-                            " image, " + Fixed(worst / median, 1) + " times the median pair's (" +
+                        "RMS error " + Fixed(worst, 2) + " px in the " +
+                            (left_worse ? "left" : "right") + " image, " +
+                            Fixed(worst / median, 1) + " times the median pair's (" +
                             Fixed(median, 3) + " px): left out and solved again"});
     used.erase(used.begin() + *it);
   }
@@ -343,7 +361,8 @@ struct Fit {
 
 // Solves; drops pairs far worse than the rest (a mis-numbered or mis-detected board) and solves
 // again: at most 3 rounds, and max_outlier_fraction of the pairs in all.
-Result<Fit> SolveWithoutOutliers(const DetectedPairs& detected, const std::vector<cv::Point3f>& object,
+Result<Fit> SolveWithoutOutliers(const DetectedPairs& detected,
+                                 const std::vector<cv::Point3f>& object,
                                  const CalibrationOptions& options) {
   const int n_pairs = static_cast<int>(detected.pairs.size());
   Fit fit{detected.pairs, detected.rejected, {}};
@@ -401,8 +420,8 @@ void SwapCameras(geometry::StereoCalibration& c) {
 // Bouguet's rectification (zero disparity at infinity): R1 R2 P1 P2 Q.
 void Rectify(geometry::StereoCalibration& c, double alpha) {
   cv::Mat R1, R2, P1, P2, Q;
-  cv::stereoRectify(cv::Mat(c.M1), c.D1, cv::Mat(c.M2), c.D2, c.image_size, cv::Mat(c.R), cv::Mat(c.T), R1,
-                    R2, P1, P2, Q, cv::CALIB_ZERO_DISPARITY, alpha);
+  cv::stereoRectify(cv::Mat(c.M1), c.D1, cv::Mat(c.M2), c.D2, c.image_size, cv::Mat(c.R),
+                    cv::Mat(c.T), R1, R2, P1, P2, Q, cv::CALIB_ZERO_DISPARITY, alpha);
   c.R1 = cv::Matx33d(R1);
   c.R2 = cv::Matx33d(R2);
   c.P1 = cv::Matx34d(P1);
@@ -411,22 +430,23 @@ void Rectify(geometry::StereoCalibration& c, double alpha) {
 }
 
 // kInternal for a calibration that fails Validate(), with the RMS and the worst pairs.
-Error InvalidResult(const std::vector<std::string>& problems, double rms, const std::vector<PairCorners>& used,
-                    const cv::Mat1d& errors) {
+Error InvalidResult(const std::vector<std::string>& problems, double rms,
+                    const std::vector<PairCorners>& used, const cv::Mat1d& errors) {
   Error err = Error::Invalid(problems);
   err.code = ErrorCode::kInternal;
-  err.message = "the stereo calibration gave an invalid result (" + err.message + "); RMS " + Fixed(rms, 2) +
-                " px, worst pairs: " + WorstPairs(used, errors);
+  err.message = "the stereo calibration gave an invalid result (" + err.message + "); RMS " +
+                Fixed(rms, 2) + " px, worst pairs: " + WorstPairs(used, errors);
   return err;
 }
 
 // ---- The report -------------------------------------------------------------------------------
 
 // What was calibrated and from what: time, image, board, detector, pairs, the solve's RMS.
-void DescribeInput(const DetectedPairs& detected, const Fit& fit, bool swap, const CalibrationOptions& options,
-                   CalibrationReport& report) {
+void DescribeInput(const DetectedPairs& detected, const Fit& fit, bool swap,
+                   const CalibrationOptions& options, CalibrationReport& report) {
   report.created_unix_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
-                               std::chrono::system_clock::now().time_since_epoch()).count();
+                               std::chrono::system_clock::now().time_since_epoch())
+                               .count();
   report.image_size = detected.image_size;
   report.board = options.board;
   report.detector = std::string(CornerDetectorName(options.detection.detector)) + " + " +
@@ -460,7 +480,8 @@ void MeasurePairs(const std::vector<PairCorners>& used, const cv::Mat1d& errors,
     sum_left += p.rms_left_px * p.rms_left_px;
     sum_right += p.rms_right_px * p.rms_right_px;
     const std::vector<cv::Point2f> rect_left = RectifyPoints(left_points, c.M1, c.D1, *c.R1, *c.P1);
-    const std::vector<cv::Point2f> rect_right = RectifyPoints(right_points, c.M2, c.D2, *c.R2, *c.P2);
+    const std::vector<cv::Point2f> rect_right =
+        RectifyPoints(right_points, c.M2, c.D2, *c.R2, *c.P2);
     double pair_sum = 0;
     for (std::size_t k = 0; k < rect_left.size(); ++k) {
       const double dy = std::abs(static_cast<double>(rect_left[k].y) - rect_right[k].y);
@@ -503,9 +524,10 @@ void CheckGates(const QualityGates& gates, CalibrationReport& report) {
   const int n_used = report.pairs_used;
   const double rms = report.rms_px;
   if (n_used < gates.min_pairs) {
-    report.failures.push_back({"min_pairs", static_cast<double>(n_used), static_cast<double>(gates.min_pairs),
-                               std::to_string(n_used) + " pairs used < " + std::to_string(gates.min_pairs) +
-                                   " (min_pairs)"});
+    report.failures.push_back({"min_pairs", static_cast<double>(n_used),
+                               static_cast<double>(gates.min_pairs),
+                               std::to_string(n_used) + " pairs used < " +
+                                   std::to_string(gates.min_pairs) + " (min_pairs)"});
   }
   if (!(rms <= gates.max_rms_px)) {
     report.failures.push_back({"max_rms_px", rms, gates.max_rms_px,
@@ -514,8 +536,9 @@ void CheckGates(const QualityGates& gates, CalibrationReport& report) {
   }
   if (!(report.epipolar_mean_px <= gates.max_epipolar_px)) {
     report.failures.push_back({"max_epipolar_px", report.epipolar_mean_px, gates.max_epipolar_px,
-                               "mean epipolar error after rectification " + Fixed(report.epipolar_mean_px, 3) +
-                                   " px > " + Fixed(gates.max_epipolar_px, 3) + " px (max_epipolar_px)"});
+                               "mean epipolar error after rectification " +
+                                   Fixed(report.epipolar_mean_px, 3) + " px > " +
+                                   Fixed(gates.max_epipolar_px, 3) + " px (max_epipolar_px)"});
   }
   report.passed = report.failures.empty();
 }
@@ -523,15 +546,17 @@ void CheckGates(const QualityGates& gates, CalibrationReport& report) {
 // Warnings for the pairs whose error is far above the median pair's.
 void WarnAboutOutliers(CalibrationReport& report) {
   std::vector<double> pair_rms;
-  for (const PairReport& p : report.pairs) pair_rms.push_back(std::max(p.rms_left_px, p.rms_right_px));
+  for (const PairReport& p : report.pairs)
+    pair_rms.push_back(std::max(p.rms_left_px, p.rms_right_px));
   std::nth_element(pair_rms.begin(), pair_rms.begin() + pair_rms.size() / 2, pair_rms.end());
   const double median = pair_rms[pair_rms.size() / 2];
   for (const PairReport& p : report.pairs) {
     const double worst = std::max(p.rms_left_px, p.rms_right_px);
     if (worst > kOutlierFactor * median && worst > kOutlierMinPx) {
-      report.warnings.push_back("pair " + PairLabel(p.index, p.name) + " has an RMS error of " + Fixed(worst, 2) +
-                                " px, " + Fixed(worst / median, 1) +
-                                " times the median: check its corners (motion blur, a mis-detection)");
+      report.warnings.push_back(
+          "pair " + PairLabel(p.index, p.name) + " has an RMS error of " + Fixed(worst, 2) +
+          " px, " + Fixed(worst / median, 1) +
+          " times the median: check its corners (motion blur, a mis-detection)");
     }
   }
 }
@@ -541,8 +566,10 @@ void AddAdvice(const geometry::StereoCalibration& c, cv::Size grid, CalibrationR
   const int n_used = report.pairs_used;
   if (report.swap_left_right) {
     report.warnings.push_back(
-        "left and right swapped: the camera named left sits to the right of the other (solved T_x = +" +
-        Fixed(-c.T[0] * 1000, 1) + " mm); this calibration's camera 1 is the input's right camera, so "
+        "left and right swapped: the camera named left sits to the right of the other (solved T_x "
+        "= +" +
+        Fixed(-c.T[0] * 1000, 1) +
+        " mm); this calibration's camera 1 is the input's right camera, so "
         "the source's left and right images must be swapped when it is applied (swap_left_right)");
   }
   if (n_used < kAdvisedPairs) {
@@ -550,24 +577,27 @@ void AddAdvice(const geometry::StereoCalibration& c, cv::Size grid, CalibrationR
                               std::to_string(kAdvisedPairs));
   }
   if (report.coverage_mean_view < kAdvisedViewCoverage) {
-    report.warnings.push_back("the board covers " + Fixed(100 * report.coverage_mean_view, 0) +
-                              " % of the image per view on average; the thesis asks for at least 40 % "
-                              "(hold the board closer)");
+    report.warnings.push_back(
+        "the board covers " + Fixed(100 * report.coverage_mean_view, 0) +
+        " % of the image per view on average; the thesis asks for at least 40 % "
+        "(hold the board closer)");
   }
   const double union_min = std::min(report.coverage_union_left, report.coverage_union_right);
   if (union_min < kAdvisedUnionCoverage) {
-    report.warnings.push_back("the boards reached only " + Fixed(100 * union_min, 0) + " % of the " +
-                              SizeText(grid) +
-                              " grid cells; the distortion is extrapolated elsewhere (move the board "
-                              "into the corners and edges)");
+    report.warnings.push_back(
+        "the boards reached only " + Fixed(100 * union_min, 0) + " % of the " + SizeText(grid) +
+        " grid cells; the distortion is extrapolated elsewhere (move the board "
+        "into the corners and edges)");
   }
   WarnAboutOutliers(report);
 }
 
-Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const CalibrationOptions& options) {
+Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected,
+                                           const CalibrationOptions& options) {
   if (std::optional<Error> error = CheckPairCount(detected, options)) return *error;
   const std::vector<cv::Point3f> object = options.board.ObjectPoints();
-  if (std::optional<Error> error = CheckCorners(detected.pairs, options.board, object)) return *error;
+  if (std::optional<Error> error = CheckCorners(detected.pairs, options.board, object))
+    return *error;
 
   Result<Fit> solved = SolveWithoutOutliers(detected, object, options);
   if (!solved.ok()) return solved.error();
@@ -601,12 +631,14 @@ Result<CalibrationResult> CalibrateChecked(const DetectedPairs& detected, const 
 std::vector<std::string> CalibrationModel::Validate() const {
   std::vector<std::string> problems;
   if (fix_intrinsics && !calibrate_cameras_first) {
-    problems.push_back("fix_intrinsics: needs calibrate_cameras_first (nothing to keep fixed otherwise)");
+    problems.push_back(
+        "fix_intrinsics: needs calibrate_cameras_first (nothing to keep fixed otherwise)");
   }
   if (max_iterations < 1 || max_iterations > 10000) {
     problems.push_back("max_iterations: must be in [1, 10000]" + Got(max_iterations));
   }
-  if (!(epsilon > 0) || !(epsilon < 1)) problems.push_back("epsilon: must be in (0, 1)" + Got(epsilon));
+  if (!(epsilon > 0) || !(epsilon < 1))
+    problems.push_back("epsilon: must be in (0, 1)" + Got(epsilon));
   return problems;
 }
 
@@ -631,11 +663,13 @@ std::vector<std::string> CalibrationOptions::Validate() const {
   AppendPrefixed(problems, "model.", model.Validate());
   AppendPrefixed(problems, "gates.", gates.Validate());
   if (!(rectify_alpha == -1 || (rectify_alpha >= 0 && rectify_alpha <= 1))) {
-    problems.push_back("rectify_alpha: must be in [0, 1], or -1 for OpenCV's choice" + Got(rectify_alpha));
+    problems.push_back("rectify_alpha: must be in [0, 1], or -1 for OpenCV's choice" +
+                       Got(rectify_alpha));
   }
   if (max_image_size.width < 16 || max_image_size.height < 16 || max_image_size.width > 65535 ||
       max_image_size.height > 65535) {
-    problems.push_back("max_image_size: each side must be in [16, 65535] pixels (got " + SizeText(max_image_size) + ")");
+    problems.push_back("max_image_size: each side must be in [16, 65535] pixels (got " +
+                       SizeText(max_image_size) + ")");
   }
   if (!(outlier_factor == 0 || (outlier_factor >= 2 && outlier_factor <= 1000))) {
     problems.push_back("outlier_factor: must be 0 (off) or in [2, 1000]" + Got(outlier_factor));
@@ -645,14 +679,16 @@ std::vector<std::string> CalibrationOptions::Validate() const {
   }
   if (coverage_grid.width < 1 || coverage_grid.height < 1 || coverage_grid.width > 1000 ||
       coverage_grid.height > 1000) {
-    problems.push_back("coverage_grid: each side must be in [1, 1000] cells (got " + SizeText(coverage_grid) + ")");
+    problems.push_back("coverage_grid: each side must be in [1, 1000] cells (got " +
+                       SizeText(coverage_grid) + ")");
   }
   return problems;
 }
 
 namespace {
 
-Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs, const CalibrationOptions& options) {
+Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs,
+                                         const CalibrationOptions& options) {
   const int n = static_cast<int>(pairs.size());
   DetectedPairs out;
   out.pairs_given = n;
@@ -671,7 +707,8 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs, co
     if (left.reason || right.reason) {
       std::string detail;
       if (left.reason) detail = "left image: " + left.problem;
-      if (right.reason) detail += (detail.empty() ? "" : "; ") + std::string("right image: ") + right.problem;
+      if (right.reason)
+        detail += (detail.empty() ? "" : "; ") + std::string("right image: ") + right.problem;
       reject(i, left.reason ? *left.reason : *right.reason, detail);
       continue;
     }
@@ -721,7 +758,8 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs, co
       const ImagePair& pair = pairs[slot / 2];
       ImageOutcome& outcome = outcomes[slot];
       try {
-        Result<cv::Mat> grey = GreyImage(slot % 2 == 0 ? pair.left : pair.right, options.max_image_size);
+        Result<cv::Mat> grey =
+            GreyImage(slot % 2 == 0 ? pair.left : pair.right, options.max_image_size);
         if (!grey.ok()) {
           outcome.decode_error = grey.error();
           continue;
@@ -742,7 +780,8 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs, co
       RejectReason reason = RejectReason::kUndecodable;
       for (const auto* side : {&left, &right}) {
         if (!side->decode_error) continue;
-        if (side->decode_error->code == ErrorCode::kResourceExhausted) reason = RejectReason::kTooLarge;
+        if (side->decode_error->code == ErrorCode::kResourceExhausted)
+          reason = RejectReason::kTooLarge;
         if (!detail.empty()) detail += "; ";
         detail += (side == &left ? "left image: " : "right image: ") + side->decode_error->message;
       }
@@ -756,7 +795,9 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs, co
     }
     const std::string missing = "no board of " + options.board.Name() + " inner corners found in ";
     auto why = [](const ImageOutcome& o) {
-      return o.corners.error().code == ErrorCode::kNotFound ? std::string() : " (" + o.corners.error().message + ")";
+      return o.corners.error().code == ErrorCode::kNotFound
+                 ? std::string()
+                 : " (" + o.corners.error().message + ")";
     };
     if (!found_left && !found_right) {
       reject(i, RejectReason::kNoBoard, missing + "either image" + why(left));
@@ -774,7 +815,8 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs, co
 
 }  // namespace
 
-Result<DetectedPairs> DetectPairs(const std::vector<ImagePair>& pairs, const CalibrationOptions& options) {
+Result<DetectedPairs> DetectPairs(const std::vector<ImagePair>& pairs,
+                                  const CalibrationOptions& options) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
     return Error::Invalid(problems);
   }
@@ -782,11 +824,13 @@ Result<DetectedPairs> DetectPairs(const std::vector<ImagePair>& pairs, const Cal
   try {
     return DetectPairsChecked(pairs, options);
   } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal, std::string("chessboard detection failed (") + e.what() + ")"};
+    return Error{ErrorCode::kInternal,
+                 std::string("chessboard detection failed (") + e.what() + ")"};
   }
 }
 
-Result<CalibrationResult> CalibrateFromCorners(const DetectedPairs& detected, const CalibrationOptions& options) {
+Result<CalibrationResult> CalibrateFromCorners(const DetectedPairs& detected,
+                                               const CalibrationOptions& options) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
     return Error::Invalid(problems);
   }
@@ -795,11 +839,13 @@ Result<CalibrationResult> CalibrateFromCorners(const DetectedPairs& detected, co
   } catch (const cv::Exception& e) {
     return Error{ErrorCode::kInternal, "the stereo calibration failed in OpenCV (" + e.err + ")"};
   } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal, std::string("the stereo calibration failed (") + e.what() + ")"};
+    return Error{ErrorCode::kInternal,
+                 std::string("the stereo calibration failed (") + e.what() + ")"};
   }
 }
 
-Result<CalibrationResult> CalibrateStereo(const std::vector<ImagePair>& pairs, const CalibrationOptions& options) {
+Result<CalibrationResult> CalibrateStereo(const std::vector<ImagePair>& pairs,
+                                          const CalibrationOptions& options) {
   Result<DetectedPairs> detected = DetectPairs(pairs, options);
   if (!detected.ok()) return detected.error();
   return CalibrateFromCorners(*detected, options);

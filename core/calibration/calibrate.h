@@ -49,8 +49,8 @@ struct QualityGates {
   // Largest mean epipolar error after rectification (pixels): the mean row difference of matched
   // corners. The matchers compare one row of the left image with one row of the right, so a
   // vertical error eats straight into their window: at half a pixel block matching already loses
-  // fine texture. A sound calibration measures about 0.1 px here (0.105 px on the XIMEA rig, 0.02 px
-  // on rendered boards), and the figure is in-sample, so optimistic: 0.5 px fails a calibration
+  // fine texture. A sound calibration measures about 0.1 px here (0.105 px on the XIMEA rig, 0.02
+  // px on rendered boards), and the figure is in-sample, so optimistic: 0.5 px fails a calibration
   // that is clearly unfit for matching while leaving room for noisy real captures. (1 px, the
   // RMS gate's value, would let through rigs whose rectified rows are a pixel apart.)
   double max_epipolar_px = 0.5;
@@ -123,11 +123,12 @@ Result<DetectedPairs> DetectPairs(const std::vector<ImagePair>& pairs,
                                   const CalibrationOptions& options);
 
 // Calibrates from detected corners: cv::calibrateCamera per camera (optional), cv::stereoCalibrate,
-// outlier pairs left out and solved again, the swap when T_x > 0, cv::stereoRectify (Bouguet, zero disparity, options.rectify_alpha), and
-// the report with its gates. kInvalidArgument when no pair has the board in both images ("no board
-// of 9x6 inner corners found in any pair; check the board size" when no image had it), when fewer
-// than 3 pairs are left (too few to solve; the min_pairs gate only reports), or when the corners
-// do not fit the board; kInternal when OpenCV fails or the solve diverges. Never throws.
+// outlier pairs left out and solved again, the swap when T_x > 0, cv::stereoRectify (Bouguet, zero
+// disparity, options.rectify_alpha), and the report with its gates. kInvalidArgument when no pair
+// has the board in both images ("no board of 9x6 inner corners found in any pair; check the board
+// size" when no image had it), when fewer than 3 pairs are left (too few to solve; the min_pairs
+// gate only reports), or when the corners do not fit the board; kInternal when OpenCV fails or the
+// solve diverges. Never throws.
 Result<CalibrationResult> CalibrateFromCorners(const DetectedPairs& detected,
                                                const CalibrationOptions& options);
 

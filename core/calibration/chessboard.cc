@@ -17,8 +17,10 @@ double SmallestSpacing(const std::vector<cv::Point2f>& corners, cv::Size pattern
   for (int r = 0; r < pattern.height; ++r) {
     for (int c = 0; c < pattern.width; ++c) {
       const cv::Point2f& p = corners[r * pattern.width + c];
-      if (c + 1 < pattern.width) smallest = std::min(smallest, cv::norm(p - corners[r * pattern.width + c + 1]));
-      if (r + 1 < pattern.height) smallest = std::min(smallest, cv::norm(p - corners[(r + 1) * pattern.width + c]));
+      if (c + 1 < pattern.width)
+        smallest = std::min(smallest, cv::norm(p - corners[r * pattern.width + c + 1]));
+      if (r + 1 < pattern.height)
+        smallest = std::min(smallest, cv::norm(p - corners[(r + 1) * pattern.width + c]));
     }
   }
   return smallest;
@@ -26,7 +28,8 @@ double SmallestSpacing(const std::vector<cv::Point2f>& corners, cv::Size pattern
 
 // Mean grey level in a small square around `centre` (clipped to the image).
 double MeanAround(const cv::Mat& grey, cv::Point2f centre, int half) {
-  const cv::Rect box(cvRound(centre.x) - half, cvRound(centre.y) - half, 2 * half + 1, 2 * half + 1);
+  const cv::Rect box(cvRound(centre.x) - half, cvRound(centre.y) - half, 2 * half + 1,
+                     2 * half + 1);
   const cv::Rect clipped = box & cv::Rect(0, 0, grey.cols, grey.rows);
   if (clipped.area() == 0) return 0;
   return cv::mean(grey(clipped))[0];
@@ -52,7 +55,8 @@ cv::Point2f SaddlePoint(const cv::Mat1f& smooth, cv::Point2f p, int r) {
     cv::Vec<double, 6> atb = cv::Vec<double, 6>::all(0);
     for (int y = -r; y <= r; ++y) {
       const float* row = patch[y + r];
-      for (int x = -r; x <= r; ++x) atb += static_cast<double>(row[x + r]) * cv::Vec<double, 6>(x * x, x * y, y * y, x, y, 1);
+      for (int x = -r; x <= r; ++x)
+        atb += static_cast<double>(row[x + r]) * cv::Vec<double, 6>(x * x, x * y, y * y, x, y, 1);
     }
     const cv::Vec<double, 6> q = ata_inv * atb;
     const cv::Matx22d hessian(2 * q[0], q[1], q[1], 2 * q[2]);
@@ -89,7 +93,8 @@ void Canonicalise(const cv::Mat& grey, cv::Size pattern, std::vector<cv::Point2f
     int even_n = 0, odd_n = 0;
     for (int r = 0; r + 1 < pattern.height; ++r) {
       for (int c = 0; c + 1 < cols; ++c) {
-        const cv::Point2f centre = (at(r, c) + at(r, c + 1) + at(r + 1, c) + at(r + 1, c + 1)) * 0.25f;
+        const cv::Point2f centre =
+            (at(r, c) + at(r, c + 1) + at(r + 1, c) + at(r + 1, c + 1)) * 0.25f;
         const double level = MeanAround(grey, centre, half);
         if ((r + c) % 2 == 0) {
           even_sum += level;
@@ -119,7 +124,8 @@ std::vector<cv::Point3f> BoardSpec::ObjectPoints() const {
   points.reserve(static_cast<std::size_t>(std::max(0, inner_cols * inner_rows)));
   for (int r = 0; r < inner_rows; ++r) {
     for (int c = 0; c < inner_cols; ++c) {
-      points.emplace_back(static_cast<float>(c * square_size_m), static_cast<float>(r * square_size_m), 0.0f);
+      points.emplace_back(static_cast<float>(c * square_size_m),
+                          static_cast<float>(r * square_size_m), 0.0f);
     }
   }
   return points;
@@ -135,8 +141,10 @@ std::vector<std::string> BoardSpec::Validate() const {
   }
   if (inner_cols == inner_rows) {
     problems.push_back(
-        "inner_cols, inner_rows: must differ (a square grid of corners is ambiguous under a quarter "
-        "turn)" + Got(inner_cols));
+        "inner_cols, inner_rows: must differ (a square grid of corners is ambiguous under a "
+        "quarter "
+        "turn)" +
+        Got(inner_cols));
   }
   if (!(square_size_m > 0) || !std::isfinite(square_size_m) || square_size_m > 10) {
     problems.push_back("square_size_m: must be in (0, 10] metres" + Got(square_size_m));
@@ -163,21 +171,25 @@ std::string_view CornerRefinementName(CornerRefinement refinement) {
 
 std::vector<std::string> DetectionOptions::Validate() const {
   std::vector<std::string> problems;
-  if (detector != CornerDetector::kSectorBasedThenClassic && detector != CornerDetector::kSectorBased &&
-      detector != CornerDetector::kClassic) {
+  if (detector != CornerDetector::kSectorBasedThenClassic &&
+      detector != CornerDetector::kSectorBased && detector != CornerDetector::kClassic) {
     problems.push_back("detector: unknown value" + Got(static_cast<int>(detector)));
   }
-  if (refinement != CornerRefinement::kSaddlePoint && refinement != CornerRefinement::kCornerSubPix) {
+  if (refinement != CornerRefinement::kSaddlePoint &&
+      refinement != CornerRefinement::kCornerSubPix) {
     problems.push_back("refinement: unknown value" + Got(static_cast<int>(refinement)));
   }
   if (subpix_half_window_px < 1 || subpix_half_window_px > 30) {
-    problems.push_back("subpix_half_window_px: must be in [1, 30] pixels" + Got(subpix_half_window_px));
+    problems.push_back("subpix_half_window_px: must be in [1, 30] pixels" +
+                       Got(subpix_half_window_px));
   }
   if (saddle_half_window_px < 2 || saddle_half_window_px > 15) {
-    problems.push_back("saddle_half_window_px: must be in [2, 15] pixels" + Got(saddle_half_window_px));
+    problems.push_back("saddle_half_window_px: must be in [2, 15] pixels" +
+                       Got(saddle_half_window_px));
   }
   if (!(saddle_blur_sigma_px >= 0 && saddle_blur_sigma_px <= 10)) {
-    problems.push_back("saddle_blur_sigma_px: must be in [0, 10] pixels" + Got(saddle_blur_sigma_px));
+    problems.push_back("saddle_blur_sigma_px: must be in [0, 10] pixels" +
+                       Got(saddle_blur_sigma_px));
   }
   return problems;
 }
@@ -204,12 +216,13 @@ Result<std::vector<cv::Point2f>> DetectChessboard(const cv::Mat& grey, const Boa
                                           cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_EXHAUSTIVE);
     }
     if (!found && classic) {
-      found = cv::findChessboardCorners(grey, pattern, corners,
-                                        cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE);
+      found = cv::findChessboardCorners(
+          grey, pattern, corners, cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE);
     }
     if (found && static_cast<int>(corners.size()) == pattern.area()) {
       const double spacing = SmallestSpacing(corners, pattern);
-      const int half = std::clamp(static_cast<int>(0.4 * spacing), 1, options.subpix_half_window_px);
+      const int half =
+          std::clamp(static_cast<int>(0.4 * spacing), 1, options.subpix_half_window_px);
       cv::cornerSubPix(grey, corners, cv::Size(half, half), cv::Size(-1, -1),
                        cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 50, 1e-3));
       if (options.refinement == CornerRefinement::kSaddlePoint) {

@@ -34,7 +34,8 @@ struct BoardSpec {
 };
 
 enum class CornerDetector {
-  // cv::findChessboardCornersSB (sector-based), and cv::findChessboardCorners when it finds nothing.
+  // cv::findChessboardCornersSB (sector-based), and cv::findChessboardCorners when it finds
+  // nothing.
   // The default: on the XIMEA captures the sector-based detector alone misses two boards that the
   // classic one finds (22 pairs instead of 24), and the classic one alone takes twice as long over
   // the set (0.15-0.3 s a 640x512 image against 0.05 s; 2.7 s on the image without a board).

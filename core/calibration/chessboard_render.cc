@@ -15,7 +15,8 @@ constexpr int kMaxSupersampling = 16;
 constexpr int kAttemptsPerPose = 400;
 constexpr int kTargetCells = 3;  // the board centres are aimed at a kTargetCells^2 grid
 
-const cv::TermCriteria kUndistortCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-9);
+const cv::TermCriteria kUndistortCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100,
+                                          1e-9);
 
 // Uniform in [lo, hi) from the generator's raw bits (the same on every standard library).
 double Uniform(std::mt19937& rng, double lo, double hi) {
@@ -29,15 +30,16 @@ cv::Matx33d Rotation(const cv::Vec3d& rvec) {
   return r;
 }
 
-std::vector<std::string> InputProblems(const geometry::StereoCalibration& rig, const BoardSpec& board,
-                                       cv::Size image_size) {
+std::vector<std::string> InputProblems(const geometry::StereoCalibration& rig,
+                                       const BoardSpec& board, cv::Size image_size) {
   std::vector<std::string> problems;
   AppendPrefixed(problems, "truth_rig.", rig.Validate());
   AppendPrefixed(problems, "board.", board.Validate());
   if (image_size.width < 16 || image_size.height < 16 || image_size.width > 16384 ||
       image_size.height > 16384) {
     problems.push_back("image_size: each side must be in [16, 16384] pixels (got " +
-                       std::to_string(image_size.width) + "x" + std::to_string(image_size.height) + ")");
+                       std::to_string(image_size.width) + "x" + std::to_string(image_size.height) +
+                       ")");
   }
   return problems;
 }
@@ -62,7 +64,8 @@ std::vector<std::string> RenderOptions::Validate() const {
   for (const auto& [name, level] : {std::pair<const char*, double>{"dark_level", dark_level},
                                     {"light_level", light_level},
                                     {"background_level", background_level}}) {
-    if (!(level >= 0 && level <= 255)) problems.push_back(std::string(name) + ": must be in [0, 255]" + Got(level));
+    if (!(level >= 0 && level <= 255))
+      problems.push_back(std::string(name) + ": must be in [0, 255]" + Got(level));
   }
   if (supersampling < 1 || supersampling > kMaxSupersampling) {
     problems.push_back("supersampling: must be in [1, 16] samples per axis" + Got(supersampling));
@@ -72,26 +75,33 @@ std::vector<std::string> RenderOptions::Validate() const {
 
 std::vector<std::string> PoseOptions::Validate() const {
   std::vector<std::string> problems;
-  if (!(max_tilt_deg >= 0 && max_tilt_deg <= 60)) problems.push_back("max_tilt_deg: must be in [0, 60]" + Got(max_tilt_deg));
-  if (!(max_roll_deg >= 0 && max_roll_deg <= 180)) problems.push_back("max_roll_deg: must be in [0, 180]" + Got(max_roll_deg));
+  if (!(max_tilt_deg >= 0 && max_tilt_deg <= 60))
+    problems.push_back("max_tilt_deg: must be in [0, 60]" + Got(max_tilt_deg));
+  if (!(max_roll_deg >= 0 && max_roll_deg <= 180))
+    problems.push_back("max_roll_deg: must be in [0, 180]" + Got(max_roll_deg));
   if (!(min_width_fraction > 0 && min_width_fraction <= 1)) {
     problems.push_back("min_width_fraction: must be in (0, 1]" + Got(min_width_fraction));
   }
   if (!(max_width_fraction >= min_width_fraction && max_width_fraction <= 1)) {
-    problems.push_back("max_width_fraction: must be in [min_width_fraction, 1]" + Got(max_width_fraction));
+    problems.push_back("max_width_fraction: must be in [min_width_fraction, 1]" +
+                       Got(max_width_fraction));
   }
-  if (!(margin_squares >= 0 && margin_squares <= 10)) problems.push_back("margin_squares: must be in [0, 10]" + Got(margin_squares));
-  if (border_px < 0 || border_px > 100) problems.push_back("border_px: must be in [0, 100] pixels" + Got(border_px));
+  if (!(margin_squares >= 0 && margin_squares <= 10))
+    problems.push_back("margin_squares: must be in [0, 10]" + Got(margin_squares));
+  if (border_px < 0 || border_px > 100)
+    problems.push_back("border_px: must be in [0, 100] pixels" + Got(border_px));
   return problems;
 }
 
-ProjectedBoard ProjectChessboard(const geometry::StereoCalibration& truth_rig, const BoardSpec& board,
-                                 const cv::Affine3d& board_in_left) {
+ProjectedBoard ProjectChessboard(const geometry::StereoCalibration& truth_rig,
+                                 const BoardSpec& board, const cv::Affine3d& board_in_left) {
   const std::vector<cv::Point3f> object = board.ObjectPoints();
   ProjectedBoard out;
   const cv::Affine3d in_right = RightPose(truth_rig, board_in_left);
-  cv::projectPoints(object, board_in_left.rvec(), board_in_left.translation(), truth_rig.M1, truth_rig.D1, out.left);
-  cv::projectPoints(object, in_right.rvec(), in_right.translation(), truth_rig.M2, truth_rig.D2, out.right);
+  cv::projectPoints(object, board_in_left.rvec(), board_in_left.translation(), truth_rig.M1,
+                    truth_rig.D1, out.left);
+  cv::projectPoints(object, in_right.rvec(), in_right.translation(), truth_rig.M2, truth_rig.D2,
+                    out.right);
   return out;
 }
 
@@ -112,11 +122,13 @@ Result<ChessboardRenderer> ChessboardRenderer::Create(const geometry::StereoCali
   for (int j = 0; j <= image_size.height; ++j) {
     for (int i = 0; i <= image_size.width; ++i) corners.emplace_back(i - 0.5, j - 0.5);
   }
-  auto grid = [&](const cv::Matx33d& K, const cv::Mat& D) -> Result<std::shared_ptr<const RayGrid>> {
+  auto grid = [&](const cv::Matx33d& K,
+                  const cv::Mat& D) -> Result<std::shared_ptr<const RayGrid>> {
     auto rays = std::make_shared<RayGrid>();
     std::vector<cv::Point2d> normalised;
     try {
-      cv::undistortPoints(corners, normalised, K, D, cv::noArray(), cv::noArray(), kUndistortCriteria);
+      cv::undistortPoints(corners, normalised, K, D, cv::noArray(), cv::noArray(),
+                          kUndistortCriteria);
     } catch (const cv::Exception& e) {
       return Error{ErrorCode::kInvalidArgument, "truth_rig: cannot undistort (" + e.err + ")"};
     }
@@ -133,7 +145,8 @@ Result<ChessboardRenderer> ChessboardRenderer::Create(const geometry::StereoCali
   return renderer;
 }
 
-cv::Mat1b ChessboardRenderer::RenderCamera(const RayGrid& grid, const cv::Matx33d& R, const cv::Vec3d& t) const {
+cv::Mat1b ChessboardRenderer::RenderCamera(const RayGrid& grid, const cv::Matx33d& R,
+                                           const cv::Vec3d& t) const {
   // Board (u, v, 1) -> ray: lambda (x, y, 1) = [r1 r2 t] (u, v, 1); invert for ray -> board.
   const cv::Matx33d H(R(0, 0), R(0, 1), t[0], R(1, 0), R(1, 1), t[1], R(2, 0), R(2, 1), t[2]);
   const cv::Matx33d H_inv = H.inv();
@@ -151,13 +164,15 @@ cv::Mat1b ChessboardRenderer::RenderCamera(const RayGrid& grid, const cv::Matx33
   const double s = board_.square_size_m;
   const double margin = options_.margin_squares * s;
   const double u_lo = -s, u_hi = board_.inner_cols * s, v_lo = -s, v_hi = board_.inner_rows * s;
-  const double dark = options_.dark_level, light = options_.light_level, background = options_.background_level;
+  const double dark = options_.dark_level, light = options_.light_level,
+               background = options_.background_level;
   // n x n samples in the pixel, each in its own row and column of an n^2 x n^2 grid (a
   // multi-jittered pattern): an edge along x or y is resolved to 1/n^2 of a pixel, not 1/n.
   const int n = options_.supersampling;
   std::vector<cv::Vec2d> offsets;
   for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) offsets.emplace_back((i + (j + 0.5) / n) / n, (j + (i + 0.5) / n) / n);
+    for (int j = 0; j < n; ++j)
+      offsets.emplace_back((i + (j + 0.5) / n) / n, (j + (i + 0.5) / n) / n);
   }
   const double inv_samples = 1.0 / (n * n);
 
@@ -170,7 +185,8 @@ cv::Mat1b ChessboardRenderer::RenderCamera(const RayGrid& grid, const cv::Matx33
         double sum = 0;
         for (const cv::Vec2d& ab : offsets) {
           const double a = ab[0], b = ab[1];
-          const cv::Vec3d h = (top[x] * (1 - a) + top[x + 1] * a) * (1 - b) + (bottom[x] * (1 - a) + bottom[x + 1] * a) * b;
+          const cv::Vec3d h = (top[x] * (1 - a) + top[x + 1] * a) * (1 - b) +
+                              (bottom[x] * (1 - a) + bottom[x + 1] * a) * b;
           if (!(h[2] > 0)) {  // the plane is behind the camera along this ray
             sum += background;
             continue;
@@ -203,10 +219,12 @@ RenderedPair ChessboardRenderer::Render(const cv::Affine3d& board_in_left) const
   return out;
 }
 
-Result<RenderedPair> RenderChessboardPair(const geometry::StereoCalibration& truth_rig, const BoardSpec& board,
-                                          const cv::Affine3d& board_pose_in_left_cam, cv::Size image_size,
-                                          const RenderOptions& options) {
-  Result<ChessboardRenderer> renderer = ChessboardRenderer::Create(truth_rig, board, image_size, options);
+Result<RenderedPair> RenderChessboardPair(const geometry::StereoCalibration& truth_rig,
+                                          const BoardSpec& board,
+                                          const cv::Affine3d& board_pose_in_left_cam,
+                                          cv::Size image_size, const RenderOptions& options) {
+  Result<ChessboardRenderer> renderer =
+      ChessboardRenderer::Create(truth_rig, board, image_size, options);
   if (!renderer.ok()) return renderer.error();
   return renderer->Render(board_pose_in_left_cam);
 }
@@ -216,8 +234,8 @@ namespace {
 // True when the outline of the board plus margin (sampled densely) projects inside the image,
 // `border` pixels from the edges, in front of the camera, and where the lens model is still
 // one-to-one (undistorting the projection gives the ray back).
-bool OutlineInView(const std::vector<cv::Point3d>& outline, const cv::Affine3d& pose, const cv::Matx33d& K,
-                   const cv::Mat& D, cv::Size image, int border) {
+bool OutlineInView(const std::vector<cv::Point3d>& outline, const cv::Affine3d& pose,
+                   const cv::Matx33d& K, const cv::Mat& D, cv::Size image, int border) {
   std::vector<cv::Point3d> in_cam;
   in_cam.reserve(outline.size());
   for (const cv::Point3d& p : outline) {
@@ -228,7 +246,8 @@ bool OutlineInView(const std::vector<cv::Point3d>& outline, const cv::Affine3d& 
   std::vector<cv::Point2d> projected;
   cv::projectPoints(in_cam, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), K, D, projected);
   for (const cv::Point2d& p : projected) {
-    if (p.x < border || p.y < border || p.x > image.width - 1 - border || p.y > image.height - 1 - border) {
+    if (p.x < border || p.y < border || p.x > image.width - 1 - border ||
+        p.y > image.height - 1 - border) {
       return false;
     }
   }
@@ -244,8 +263,9 @@ bool OutlineInView(const std::vector<cv::Point3d>& outline, const cv::Affine3d& 
 }  // namespace
 
 Result<std::vector<cv::Affine3d>> GenerateBoardPoses(const geometry::StereoCalibration& truth_rig,
-                                                     const BoardSpec& board, cv::Size image_size, int count,
-                                                     std::uint32_t seed, const PoseOptions& options) {
+                                                     const BoardSpec& board, cv::Size image_size,
+                                                     int count, std::uint32_t seed,
+                                                     const PoseOptions& options) {
   std::vector<std::string> problems = InputProblems(truth_rig, board, image_size);
   AppendPrefixed(problems, "options.", options.Validate());
   if (count < 0 || count > 100000) problems.push_back("count: must be in [0, 100000]" + Got(count));
@@ -253,7 +273,8 @@ Result<std::vector<cv::Affine3d>> GenerateBoardPoses(const geometry::StereoCalib
 
   const double s = board.square_size_m;
   const double m = options.margin_squares * s;
-  const double u0 = -s - m, u1 = board.inner_cols * s + m, v0 = -s - m, v1 = board.inner_rows * s + m;
+  const double u0 = -s - m, u1 = board.inner_cols * s + m, v0 = -s - m,
+               v1 = board.inner_rows * s + m;
   std::vector<cv::Point3d> outline;
   constexpr int kPerEdge = 16;
   for (int k = 0; k < kPerEdge; ++k) {
@@ -263,7 +284,8 @@ Result<std::vector<cv::Affine3d>> GenerateBoardPoses(const geometry::StereoCalib
     outline.emplace_back(u1 - f * (u1 - u0), v1, 0);
     outline.emplace_back(u0, v1 - f * (v1 - v0), 0);
   }
-  const cv::Vec3d centre_in_board((board.inner_cols - 1) * s / 2, (board.inner_rows - 1) * s / 2, 0);
+  const cv::Vec3d centre_in_board((board.inner_cols - 1) * s / 2, (board.inner_rows - 1) * s / 2,
+                                  0);
   const double board_width_m = (board.inner_cols + 1) * s;
   const double outline_width_m = u1 - u0, outline_height_m = v1 - v0;
   const double deg = CV_PI / 180;
@@ -285,9 +307,12 @@ Result<std::vector<cv::Affine3d>> GenerateBoardPoses(const geometry::StereoCalib
         // middle a little with every attempt, so that the board ends up as far out as it fits.
         const int cell = cells[static_cast<std::size_t>(k) % cells.size()];
         const double pull = 1.0 - static_cast<double>(attempt) / kAttemptsPerPose;
-        const double cx = 0.5 + pull * ((cell % kTargetCells + Uniform(rng, 0, 1)) / kTargetCells - 0.5);
-        const double cy = 0.5 + pull * ((cell / kTargetCells + Uniform(rng, 0, 1)) / kTargetCells - 0.5);
-        const double width_fraction = Uniform(rng, options.min_width_fraction, options.max_width_fraction);
+        const double cx =
+            0.5 + pull * ((cell % kTargetCells + Uniform(rng, 0, 1)) / kTargetCells - 0.5);
+        const double cy =
+            0.5 + pull * ((cell / kTargetCells + Uniform(rng, 0, 1)) / kTargetCells - 0.5);
+        const double width_fraction =
+            Uniform(rng, options.min_width_fraction, options.max_width_fraction);
         const double tilt_x = Uniform(rng, -options.max_tilt_deg, options.max_tilt_deg) * deg;
         const double tilt_y = Uniform(rng, -options.max_tilt_deg, options.max_tilt_deg) * deg;
         const double roll = Uniform(rng, -options.max_roll_deg, options.max_roll_deg) * deg;
@@ -295,29 +320,39 @@ Result<std::vector<cv::Affine3d>> GenerateBoardPoses(const geometry::StereoCalib
         // Where the centre can go so that the board (about hw x hh pixels from its centre) stays in
         // both images: the right camera sees it shifted by the disparity.
         const double z = truth_rig.M1(0, 0) * board_width_m / (width_fraction * image_size.width);
-        const double hw = 0.5 * width_fraction * image_size.width * outline_width_m / board_width_m + options.border_px;
+        const double hw =
+            0.5 * width_fraction * image_size.width * outline_width_m / board_width_m +
+            options.border_px;
         const double hh = hw * outline_height_m / outline_width_m;
         const double shift = truth_rig.M2(0, 0) * truth_rig.T[0] / z;
-        double lo_x = hw + std::max(0.0, -shift), hi_x = image_size.width - 1 - hw - std::max(0.0, shift);
+        double lo_x = hw + std::max(0.0, -shift),
+               hi_x = image_size.width - 1 - hw - std::max(0.0, shift);
         double lo_y = hh, hi_y = image_size.height - 1 - hh;
         if (lo_x > hi_x) lo_x = hi_x = 0.5 * (lo_x + hi_x);
         if (lo_y > hi_y) lo_y = hi_y = 0.5 * (lo_y + hi_y);
-        std::vector<cv::Point2d> target{{lo_x + cx * (hi_x - lo_x), lo_y + cy * (hi_y - lo_y)}}, ray;
-        cv::undistortPoints(target, ray, truth_rig.M1, truth_rig.D1, cv::noArray(), cv::noArray(), kUndistortCriteria);
+        std::vector<cv::Point2d> target{{lo_x + cx * (hi_x - lo_x), lo_y + cy * (hi_y - lo_y)}},
+            ray;
+        cv::undistortPoints(target, ray, truth_rig.M1, truth_rig.D1, cv::noArray(), cv::noArray(),
+                            kUndistortCriteria);
         const cv::Vec3d centre(ray[0].x * z, ray[0].y * z, z);
-        const cv::Matx33d rotation =
-            Rotation(cv::Vec3d(0, 0, roll)) * Rotation(cv::Vec3d(0, tilt_y, 0)) * Rotation(cv::Vec3d(tilt_x, 0, 0));
+        const cv::Matx33d rotation = Rotation(cv::Vec3d(0, 0, roll)) *
+                                     Rotation(cv::Vec3d(0, tilt_y, 0)) *
+                                     Rotation(cv::Vec3d(tilt_x, 0, 0));
         const cv::Affine3d pose(rotation, centre - rotation * centre_in_board);
-        if (!OutlineInView(outline, pose, truth_rig.M1, truth_rig.D1, image_size, options.border_px)) continue;
-        if (!OutlineInView(outline, left_to_right * pose, truth_rig.M2, truth_rig.D2, image_size, options.border_px)) {
+        if (!OutlineInView(outline, pose, truth_rig.M1, truth_rig.D1, image_size,
+                           options.border_px))
+          continue;
+        if (!OutlineInView(outline, left_to_right * pose, truth_rig.M2, truth_rig.D2, image_size,
+                           options.border_px)) {
           continue;
         }
         poses.push_back(pose);
         placed = true;
       }
       if (!placed) {
-        return Error{ErrorCode::kOutOfRange, "GenerateBoardPoses: no pose keeps the board (with its margin) in view "
-                                             "of both cameras; use a smaller board or width fraction"};
+        return Error{ErrorCode::kOutOfRange,
+                     "GenerateBoardPoses: no pose keeps the board (with its margin) in view "
+                     "of both cameras; use a smaller board or width fraction"};
       }
     }
   } catch (const cv::Exception& e) {

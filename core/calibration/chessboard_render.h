@@ -42,8 +42,8 @@ struct ProjectedBoard {
 
 // `board_in_left` takes board-frame points (BoardSpec::ObjectPoints(), metres) to the left camera:
 // point_in_left = board_in_left * point_in_board. The right camera sees R * point_in_left + T.
-ProjectedBoard ProjectChessboard(const geometry::StereoCalibration& truth_rig, const BoardSpec& board,
-                                 const cv::Affine3d& board_in_left);
+ProjectedBoard ProjectChessboard(const geometry::StereoCalibration& truth_rig,
+                                 const BoardSpec& board, const cv::Affine3d& board_in_left);
 
 // Renders a planar chessboard for the two cameras of a rig, with their intrinsics and distortion:
 // every sample of every pixel is undistorted to a ray (cv::undistortPoints, iterated to 1e-9 px,

@@ -70,7 +70,8 @@ Result<cv::Size> JpegSize(std::span<const std::uint8_t> bytes) {
     if (pos >= n) return Invalid("truncated JPEG: no frame header (SOFn) before the data ends");
     const int marker = b[pos++];
     if (marker == 0xD8 || marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) continue;
-    if (marker == 0xD9) return Invalid("malformed JPEG: the image ends (EOI) before a frame header");
+    if (marker == 0xD9)
+      return Invalid("malformed JPEG: the image ends (EOI) before a frame header");
     if (marker == 0x00) return Invalid("malformed JPEG: a stuffed 0xFF00 outside the image data");
     if (pos + 2 > n) return Invalid("truncated JPEG: a segment length is cut off");
     const int length = BigEndian16(b + pos);  // includes the two length bytes

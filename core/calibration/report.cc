@@ -10,9 +10,9 @@ namespace stevi::calibration {
 namespace {
 
 constexpr RejectReason kAllReasons[] = {
-    RejectReason::kUndecodable,  RejectReason::kTooLarge,     RejectReason::kSizeMismatch,
-    RejectReason::kSizeDiffers,  RejectReason::kNoBoardLeft,  RejectReason::kNoBoardRight,
-    RejectReason::kNoBoard,      RejectReason::kOutlier,
+    RejectReason::kUndecodable, RejectReason::kTooLarge,    RejectReason::kSizeMismatch,
+    RejectReason::kSizeDiffers, RejectReason::kNoBoardLeft, RejectReason::kNoBoardRight,
+    RejectReason::kNoBoard,     RejectReason::kOutlier,
 };
 
 std::string Percent(double fraction) {
@@ -64,7 +64,8 @@ class Reader {
     return static_cast<int>(node);
   }
 
-  std::string String(const cv::FileNode& parent, const std::string& key, const std::string& where = "") {
+  std::string String(const cv::FileNode& parent, const std::string& key,
+                     const std::string& where = "") {
     const cv::FileNode node = Node(parent, key, where);
     if (node.empty() || node.isNone()) return {};
     if (!node.isString()) {
@@ -130,8 +131,8 @@ std::string FormatReportText(const CalibrationReport& r) {
     << r.rejected.size() << " rejected\n";
   s << "  RMS reprojection error: " << Fixed(r.rms_px, 3) << " px (left " << Fixed(r.rms_left_px, 3)
     << " px, right " << Fixed(r.rms_right_px, 3) << " px)\n";
-  s << "  epipolar error after rectification: mean " << Fixed(r.epipolar_mean_px, 3)
-    << " px, max " << Fixed(r.epipolar_max_px, 3) << " px\n";
+  s << "  epipolar error after rectification: mean " << Fixed(r.epipolar_mean_px, 3) << " px, max "
+    << Fixed(r.epipolar_max_px, 3) << " px\n";
   s << "  board coverage: per view mean " << Percent(r.coverage_mean_view) << ", min "
     << Percent(r.coverage_min_view) << "; union of the views on a " << r.coverage_grid.width << "x"
     << r.coverage_grid.height << " grid: left " << Percent(r.coverage_union_left) << ", right "
@@ -162,10 +163,11 @@ std::string FormatReportText(const CalibrationReport& r) {
   if (!r.pairs.empty()) {
     s << "Pairs used (rms and coverage of camera 1 / camera 2, epipolar error):\n";
     for (const PairReport& p : r.pairs) {
-      s << "  #" << std::setw(3) << std::left << p.index << std::right << " "
-        << std::setw(16) << std::left << p.name << std::right << " rms " << Fixed(p.rms_left_px, 3)
-        << " / " << Fixed(p.rms_right_px, 3) << " px, epipolar " << Fixed(p.epipolar_mean_px, 3)
-        << " px, coverage " << Percent(p.coverage_left) << " / " << Percent(p.coverage_right) << "\n";
+      s << "  #" << std::setw(3) << std::left << p.index << std::right << " " << std::setw(16)
+        << std::left << p.name << std::right << " rms " << Fixed(p.rms_left_px, 3) << " / "
+        << Fixed(p.rms_right_px, 3) << " px, epipolar " << Fixed(p.epipolar_mean_px, 3)
+        << " px, coverage " << Percent(p.coverage_left) << " / " << Percent(p.coverage_right)
+        << "\n";
     }
   }
   return s.str();
@@ -173,15 +175,17 @@ std::string FormatReportText(const CalibrationReport& r) {
 
 Result<std::string> ReportToYaml(const CalibrationReport& r) {
   try {
-    cv::FileStorage fs(".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY |
-                                    cv::FileStorage::FORMAT_YAML);
+    cv::FileStorage fs(
+        ".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
     // FileStorage has no 64-bit integers: the time is written as a decimal string.
     fs << "created_unix_ms" << std::to_string(r.created_unix_ms);
     fs << "passed" << static_cast<int>(r.passed);
     fs << "swap_left_right" << static_cast<int>(r.swap_left_right);
     fs << "image_width" << r.image_size.width;
     fs << "image_height" << r.image_size.height;
-    fs << "board" << "{" << "inner_cols" << r.board.inner_cols << "inner_rows" << r.board.inner_rows
+    fs << "board"
+       << "{"
+       << "inner_cols" << r.board.inner_cols << "inner_rows" << r.board.inner_rows
        << "square_size_m" << r.board.square_size_m << "}";
     fs << "detector" << r.detector;
     fs << "pairs_given" << r.pairs_given;
@@ -203,24 +207,31 @@ Result<std::string> ReportToYaml(const CalibrationReport& r) {
     fs << "fy_right_px" << r.fy_right_px;
     fs << "baseline_m" << r.baseline_m;
     fs << "rectified_f_px" << r.rectified_f_px;
-    fs << "failures" << "[";
+    fs << "failures"
+       << "[";
     for (const GateFailure& f : r.failures) {
-      fs << "{" << "gate" << f.gate << "measured" << f.measured << "limit" << f.limit << "message"
+      fs << "{"
+         << "gate" << f.gate << "measured" << f.measured << "limit" << f.limit << "message"
          << f.message << "}";
     }
     fs << "]";
-    fs << "warnings" << "[";
+    fs << "warnings"
+       << "[";
     for (const std::string& w : r.warnings) fs << w;
     fs << "]";
-    fs << "rejected" << "[";
+    fs << "rejected"
+       << "[";
     for (const RejectedPair& p : r.rejected) {
-      fs << "{" << "index" << p.index << "name" << p.name << "reason"
+      fs << "{"
+         << "index" << p.index << "name" << p.name << "reason"
          << std::string(RejectReasonName(p.reason)) << "detail" << p.detail << "}";
     }
     fs << "]";
-    fs << "pairs" << "[";
+    fs << "pairs"
+       << "[";
     for (const PairReport& p : r.pairs) {
-      fs << "{" << "index" << p.index << "name" << p.name << "rms_left_px" << p.rms_left_px
+      fs << "{"
+         << "index" << p.index << "name" << p.name << "rms_left_px" << p.rms_left_px
          << "rms_right_px" << p.rms_right_px << "epipolar_mean_px" << p.epipolar_mean_px
          << "coverage_left" << p.coverage_left << "coverage_right" << p.coverage_right << "}";
     }
@@ -238,7 +249,8 @@ std::optional<Error> OpenYaml(const std::string& yaml_text, cv::FileStorage& fs)
   try {
     std::string text = yaml_text;
     if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
-    if (!fs.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML)) {
+    if (!fs.open(text,
+                 cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML)) {
       return Error{ErrorCode::kInvalidArgument, "calibration report: cannot parse the text"};
     }
   } catch (const cv::Exception& e) {
@@ -274,7 +286,8 @@ void ReadFigures(Reader& read, const cv::FileNode& root, CalibrationReport& r) {
   r.rms_right_px = read.Double(root, "rms_right_px");
   r.epipolar_mean_px = read.Double(root, "epipolar_mean_px");
   r.epipolar_max_px = read.Double(root, "epipolar_max_px");
-  r.coverage_grid = cv::Size(read.Int(root, "coverage_grid_cols"), read.Int(root, "coverage_grid_rows"));
+  r.coverage_grid =
+      cv::Size(read.Int(root, "coverage_grid_cols"), read.Int(root, "coverage_grid_rows"));
   r.coverage_mean_view = read.Double(root, "coverage_mean_view");
   r.coverage_min_view = read.Double(root, "coverage_min_view");
   r.coverage_union_left = read.Double(root, "coverage_union_left");
@@ -364,7 +377,8 @@ Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
   try {
     const cv::FileNode root = fs.root();
     if (!root.isMap()) {
-      return Error{ErrorCode::kInvalidArgument, "calibration report: expected a map at the top level"};
+      return Error{ErrorCode::kInvalidArgument,
+                   "calibration report: expected a map at the top level"};
     }
     Reader read(problems);
     ReadFigures(read, root, r);

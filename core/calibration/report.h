@@ -22,7 +22,8 @@ enum class RejectReason {
   kNoBoardLeft,   // no complete board in the left image (the right one has it)
   kNoBoardRight,  // no complete board in the right image (the left one has it)
   kNoBoard,       // no complete board in either image
-  kOutlier,       // its reprojection error was far above the other pairs' (CalibrationOptions::outlier_factor)
+  kOutlier,       // its reprojection error was far above the other pairs'
+                  // (CalibrationOptions::outlier_factor)
 };
 
 // "undecodable", "too_large", "size_mismatch", "size_differs", "no_board_left", "no_board_right",
@@ -41,8 +42,8 @@ struct RejectedPair {
 struct PairReport {
   int index = 0;
   std::string name;
-  double rms_left_px = 0;   // RMS reprojection error of this view in camera 1 (pixels)
-  double rms_right_px = 0;  // ... in camera 2
+  double rms_left_px = 0;       // RMS reprojection error of this view in camera 1 (pixels)
+  double rms_right_px = 0;      // ... in camera 2
   double epipolar_mean_px = 0;  // mean |y_left - y_right| of its corners after rectification
   double coverage_left = 0;     // area of the corners' convex hull / image area, 0..1
   double coverage_right = 0;
@@ -50,10 +51,10 @@ struct PairReport {
 
 // A quality gate the calibration failed.
 struct GateFailure {
-  std::string gate;      // "min_pairs", "max_rms_px", "max_epipolar_px"
+  std::string gate;  // "min_pairs", "max_rms_px", "max_epipolar_px"
   double measured = 0;
   double limit = 0;
-  std::string message;   // "stereo RMS reprojection error 1.42 px > 1 px (max_rms_px)"
+  std::string message;  // "stereo RMS reprojection error 1.42 px > 1 px (max_rms_px)"
 };
 
 struct CalibrationReport {
@@ -99,7 +100,8 @@ struct CalibrationReport {
   // True when every quality gate passed; otherwise `failures` names each failed gate.
   bool passed = false;
   std::vector<GateFailure> failures;
-  // Advice that does not fail a gate (few pairs, low coverage, a pair with a large error, the swap).
+  // Advice that does not fail a gate (few pairs, low coverage, a pair with a large error, the
+  // swap).
   std::vector<std::string> warnings;
 };
 

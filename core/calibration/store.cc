@@ -29,7 +29,6 @@ constexpr const char* kReportSuffix = ".report.yaml";
 // Files larger than this are not read (a calibration and its report are a few kB).
 constexpr std::uintmax_t kMaxFileBytes = 16u << 20;
 
-
 // The whole file, or an error naming it (kNotFound when it does not exist).
 Result<std::string> ReadFile(const std::string& path, const std::string& label) {
   std::error_code ec;
@@ -37,7 +36,8 @@ Result<std::string> ReadFile(const std::string& path, const std::string& label) 
   const std::uintmax_t size = fs::file_size(path, ec);
   if (ec) return Error{ErrorCode::kInvalidArgument, label + ": cannot read (" + ec.message() + ")"};
   if (size > kMaxFileBytes) {
-    return Error{ErrorCode::kInvalidArgument, label + ": " + std::to_string(size) + " bytes, too large to be ours"};
+    return Error{ErrorCode::kInvalidArgument,
+                 label + ": " + std::to_string(size) + " bytes, too large to be ours"};
   }
   std::ifstream in(path, std::ios::binary);
   if (!in) return Error{ErrorCode::kInvalidArgument, label + ": cannot open"};
@@ -47,7 +47,8 @@ Result<std::string> ReadFile(const std::string& path, const std::string& label) 
   return text.str();
 }
 
-// "cal-000012.yaml" -> 12 for any file of an entry (including temporary files "cal-000012.yaml.tmp-*").
+// "cal-000012.yaml" -> 12 for any file of an entry (including temporary files
+// "cal-000012.yaml.tmp-*").
 std::optional<std::int64_t> IdOfFileName(const std::string& name) {
   if (name.rfind(kPrefix, 0) != 0) return std::nullopt;
   const std::size_t dot = name.find('.');
@@ -64,7 +65,8 @@ std::string Trim(const std::string& s) {
   return s.substr(b, e - b + 1);
 }
 
-CalibrationSummary Summarise(CalibrationId id, const geometry::StereoCalibration& c, const CalibrationReport& r) {
+CalibrationSummary Summarise(CalibrationId id, const geometry::StereoCalibration& c,
+                             const CalibrationReport& r) {
   CalibrationSummary s;
   s.id = id;
   s.created_unix_ms = r.created_unix_ms;
@@ -77,7 +79,8 @@ CalibrationSummary Summarise(CalibrationId id, const geometry::StereoCalibration
 }
 
 // Replaces a leading "<full path>: " by "<file name>: " in a message from calibration_io.
-std::string WithFileName(std::string message, const std::string& path, const std::string& file_name) {
+std::string WithFileName(std::string message, const std::string& path,
+                         const std::string& file_name) {
   if (message.rfind(path + ": ", 0) == 0) message = file_name + message.substr(path.size());
   if (message.rfind(file_name, 0) != 0) message = file_name + ": " + message;
   return message;
@@ -121,14 +124,16 @@ std::string CalibrationStore::ReportPath(CalibrationId id) const {
 
 Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
   std::error_code ec;
-  if (directory.empty()) return Error{ErrorCode::kInvalidArgument, "calibration store: empty directory name"};
+  if (directory.empty())
+    return Error{ErrorCode::kInvalidArgument, "calibration store: empty directory name"};
   if (fs::exists(directory, ec) && !fs::is_directory(directory, ec)) {
-    return Error{ErrorCode::kInvalidArgument, "calibration store: " + directory + " is not a directory"};
+    return Error{ErrorCode::kInvalidArgument,
+                 "calibration store: " + directory + " is not a directory"};
   }
   fs::create_directories(directory, ec);
   if (!fs::is_directory(directory, ec)) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "calibration store: cannot create the directory " + directory + " (" + ec.message() + ")"};
+    return Error{ErrorCode::kInvalidArgument, "calibration store: cannot create the directory " +
+                                                  directory + " (" + ec.message() + ")"};
   }
 
   OpenedStore opened;
@@ -140,7 +145,8 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
   std::set<std::int64_t> calibration_ids, report_ids;
   fs::directory_iterator it(directory, ec);
   if (ec) {
-    return Error{ErrorCode::kInvalidArgument, "calibration store: cannot list " + directory + " (" + ec.message() + ")"};
+    return Error{ErrorCode::kInvalidArgument,
+                 "calibration store: cannot list " + directory + " (" + ec.message() + ")"};
   }
   for (const fs::directory_entry& entry : it) {
     const std::string name = entry.path().filename().string();
@@ -156,7 +162,8 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
   for (std::int64_t raw : report_ids) {
     if (!calibration_ids.count(raw)) {
       const CalibrationId id{raw};
-      problems.push_back(id.Name() + kReportSuffix + ": no calibration file beside it (an interrupted Add?); left out");
+      problems.push_back(id.Name() + kReportSuffix +
+                         ": no calibration file beside it (an interrupted Add?); left out");
       left_out[raw] = "has no calibration file";
     }
   }
@@ -164,9 +171,11 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
     const CalibrationId id{raw};
     const std::string yaml_name = id.Name() + kCalibrationSuffix;
     const std::string report_name = id.Name() + kReportSuffix;
-    Result<geometry::StereoCalibration> calibration = geometry::LoadCalibrationYaml(store.CalibrationPath(id));
+    Result<geometry::StereoCalibration> calibration =
+        geometry::LoadCalibrationYaml(store.CalibrationPath(id));
     if (!calibration.ok()) {
-      problems.push_back(WithFileName(calibration.error().message, store.CalibrationPath(id), yaml_name));
+      problems.push_back(
+          WithFileName(calibration.error().message, store.CalibrationPath(id), yaml_name));
       left_out[raw] = "is unreadable";
       continue;
     }
@@ -178,7 +187,8 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
     }
     Result<CalibrationReport> report = ParseReportYaml(*report_text);
     if (!report.ok()) {
-      problems.push_back(report_name + ": " + report.error().message + "; " + id.Name() + " is left out");
+      problems.push_back(report_name + ": " + report.error().message + "; " + id.Name() +
+                         " is left out");
       left_out[raw] = "has no readable report";
       continue;
     }
@@ -190,15 +200,16 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
   for (const CalibrationSummary& s : store.entries_) {
     if (s.passed) last_good = s.id;
   }
-  const std::string fallback =
-      last_good ? "using " + last_good->Name() + " (the last good one)" : std::string("no calibration is active");
+  const std::string fallback = last_good ? "using " + last_good->Name() + " (the last good one)"
+                                         : std::string("no calibration is active");
   const std::string active_path = (fs::path(directory) / kActiveFile).string();
   Result<std::string> active_text = ReadFile(active_path, kActiveFile);
   if (active_text.ok()) {
     const std::string text = Trim(*active_text);
     const std::optional<CalibrationId> named = CalibrationId::Parse(text);
     if (!named) {
-      problems.push_back(std::string("active: cannot read \"") + Printable(text) + "\" as a calibration id; " + fallback);
+      problems.push_back(std::string("active: cannot read \"") + Printable(text) +
+                         "\" as a calibration id; " + fallback);
       store.active_ = last_good;
     } else {
       max_id = std::max(max_id, named->value);
@@ -206,13 +217,15 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
                                       [&](const CalibrationSummary& s) { return s.id == *named; });
       if (entry == store.entries_.end()) {
         const auto why = left_out.find(named->value);
-        const std::string state = why != left_out.end()
-                                      ? why->second
-                                      : "is missing (no " + named->Name() + kCalibrationSuffix + ")";
-        problems.push_back("active: points to " + named->Name() + ", which " + state + "; " + fallback);
+        const std::string state =
+            why != left_out.end() ? why->second
+                                  : "is missing (no " + named->Name() + kCalibrationSuffix + ")";
+        problems.push_back("active: points to " + named->Name() + ", which " + state + "; " +
+                           fallback);
         store.active_ = last_good;
       } else if (!entry->passed) {
-        problems.push_back("active: points to " + named->Name() + ", which failed its quality gates; " + fallback);
+        problems.push_back("active: points to " + named->Name() +
+                           ", which failed its quality gates; " + fallback);
         store.active_ = last_good;
       } else {
         store.active_ = named;
@@ -232,8 +245,10 @@ std::vector<CalibrationSummary> CalibrationStore::List() const {
 }
 
 Result<StoredCalibration> CalibrationStore::ReadLocked(CalibrationId id) const {
-  const bool known = std::any_of(entries_.begin(), entries_.end(), [&](const CalibrationSummary& s) { return s.id == id; });
-  if (!known) return Error{ErrorCode::kNotFound, "no calibration " + id.Name() + " in " + directory_};
+  const bool known = std::any_of(entries_.begin(), entries_.end(),
+                                 [&](const CalibrationSummary& s) { return s.id == id; });
+  if (!known)
+    return Error{ErrorCode::kNotFound, "no calibration " + id.Name() + " in " + directory_};
   const std::string yaml_name = id.Name() + kCalibrationSuffix;
   const std::string report_name = id.Name() + kReportSuffix;
   StoredCalibration out;
@@ -247,7 +262,8 @@ Result<StoredCalibration> CalibrationStore::ReadLocked(CalibrationId id) const {
   Result<std::string> report_text = ReadFile(ReportPath(id), report_name);
   if (!report_text.ok()) return report_text.error();
   Result<CalibrationReport> report = ParseReportYaml(*report_text);
-  if (!report.ok()) return Error{ErrorCode::kInvalidArgument, report_name + ": " + report.error().message};
+  if (!report.ok())
+    return Error{ErrorCode::kInvalidArgument, report_name + ": " + report.error().message};
   out.yaml_text = std::move(*yaml);
   out.calibration = std::move(*calibration);
   out.report = std::move(*report);
@@ -269,7 +285,8 @@ Result<CalibrationId> CalibrationStore::Add(const geometry::StereoCalibration& c
   CalibrationReport stamped = report;
   if (stamped.created_unix_ms == 0) {
     stamped.created_unix_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
-                                  std::chrono::system_clock::now().time_since_epoch()).count();
+                                  std::chrono::system_clock::now().time_since_epoch())
+                                  .count();
   }
   Result<std::string> report_text = ReportToYaml(stamped);
   if (!report_text.ok()) return report_text.error();
@@ -299,7 +316,8 @@ Status CalibrationStore::Activate(CalibrationId id) {
       gates += f.message;
     }
     return Error{ErrorCode::kFailedPrecondition,
-                 id.Name() + " failed its quality gates" + (gates.empty() ? std::string() : " (" + gates + ")") +
+                 id.Name() + " failed its quality gates" +
+                     (gates.empty() ? std::string() : " (" + gates + ")") +
                      "; it can be inspected but not activated"};
   }
   const std::string active_path = (fs::path(directory_) / kActiveFile).string();
@@ -315,7 +333,8 @@ std::optional<CalibrationId> CalibrationStore::ActiveId() const {
 
 Result<StoredCalibration> CalibrationStore::Active() const {
   std::lock_guard<std::mutex> lock(mu_);
-  if (!active_) return Error{ErrorCode::kFailedPrecondition, "no active calibration in " + directory_};
+  if (!active_)
+    return Error{ErrorCode::kFailedPrecondition, "no active calibration in " + directory_};
   return ReadLocked(*active_);
 }
 

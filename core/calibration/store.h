@@ -62,8 +62,9 @@ struct OpenedStore {
 //   cal-000001.report.yaml   its CalibrationReport (ReportToYaml), with the created time
 //   active                   one line, the active calibration's name ("cal-000001")
 // Every file is written atomically (temporary file, fsync, rename, fsync of the directory) and
-// no stored calibration is ever deleted or overwritten. A calibration that failed its quality gates (report.passed = false) can
-// be added and inspected, but not activated. Thread-safe: every method takes one mutex.
+// no stored calibration is ever deleted or overwritten. A calibration that failed its quality gates
+// (report.passed = false) can be added and inspected, but not activated. Thread-safe: every method
+// takes one mutex.
 class CalibrationStore {
  public:
   // Opens (creating it when missing) the directory and reads every calibration in it. Unreadable
@@ -90,7 +91,8 @@ class CalibrationStore {
   // calibration file (whose presence marks the entry complete). The report's created_unix_ms is
   // set to now when it is 0. Does not activate it. kInvalidArgument for an invalid calibration,
   // kInternal when writing fails (nothing is listed then).
-  Result<CalibrationId> Add(const geometry::StereoCalibration& calibration, const CalibrationReport& report);
+  Result<CalibrationId> Add(const geometry::StereoCalibration& calibration,
+                            const CalibrationReport& report);
 
   // Makes `id` the active calibration and persists that. kNotFound for an unknown id;
   // kFailedPrecondition when its report did not pass the quality gates (the failed gates are

@@ -20,7 +20,8 @@ Status AtomicWriteFile(const std::string& path, const std::string& text) {
   std::string tmp_path = path + ".tmp-XXXXXX";
   const int fd = ::mkstemp(tmp_path.data());
   if (fd < 0) {
-    return Error{ErrorCode::kInternal, path + ": cannot create a temporary file beside it (" + ErrnoText() + ")"};
+    return Error{ErrorCode::kInternal,
+                 path + ": cannot create a temporary file beside it (" + ErrnoText() + ")"};
   }
   auto fail = [&](const std::string& what) -> Status {
     const std::string reason = ErrnoText();

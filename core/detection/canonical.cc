@@ -25,8 +25,9 @@ constexpr double kAutoThresholdSigmas = 20.0;
 int16_t CandidateFloorFixed(const geometry::StereoRig& rig, const geometry::RangeOptions& range,
                             const CanonicalOptions& options) {
   const double fb = rig.f_px() * rig.baseline_m();
-  const double threshold_px = options.threshold_range_m > 0 ? fb / options.threshold_range_m
-                                                            : kAutoThresholdSigmas * range.disparity_sigma_px;
+  const double threshold_px = options.threshold_range_m > 0
+                                  ? fb / options.threshold_range_m
+                                  : kAutoThresholdSigmas * range.disparity_sigma_px;
   double floor_px = std::max(range.min_disparity_px, threshold_px);
   if (range.max_range_m > 0) floor_px = std::max(floor_px, fb / range.max_range_m);
   const double fixed = std::ceil(floor_px * stereo::DisparityMap::kScale - 1e-9);
@@ -39,7 +40,8 @@ int16_t CandidateFloorFixed(const geometry::StereoRig& rig, const geometry::Rang
 std::vector<std::string> CanonicalOptions::Validate() const {
   std::vector<std::string> problems;
   if (!(threshold_range_m >= 0) || !std::isfinite(threshold_range_m)) {
-    problems.push_back("threshold_range_m: must be >= 0 metres (0 = auto)" + Got(threshold_range_m));
+    problems.push_back("threshold_range_m: must be >= 0 metres (0 = auto)" +
+                       Got(threshold_range_m));
   }
   if (open_size_px < 1 || open_size_px % 2 == 0) {
     problems.push_back("open_size_px: must be odd and >= 1" + Got(open_size_px));
@@ -67,7 +69,8 @@ std::vector<Detection> DetectCanonical(const stereo::DisparityMap& disparity,
   // 2. Opening cuts thin bridges and removes isolated speckles.
   const int open_size = ScaledKernel(options.open_size_px, mask.cols);
   if (open_size > 1) {
-    const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(open_size, open_size));
+    const cv::Mat kernel =
+        cv::getStructuringElement(cv::MORPH_RECT, cv::Size(open_size, open_size));
     cv::morphologyEx(mask, mask, cv::MORPH_OPEN, kernel);
   }
 
@@ -77,9 +80,11 @@ std::vector<Detection> DetectCanonical(const stereo::DisparityMap& disparity,
     const uchar* m = mask[y];
     const int16_t* d = disparity.fixed[y];
     uchar* c = classes[y];
-    for (int x = 0; x < mask.cols; ++x) c[x] = m[x] ? kCandidate : (d[x] >= 0 ? kFar : kNoDisparity);
+    for (int x = 0; x < mask.cols; ++x)
+      c[x] = m[x] ? kCandidate : (d[x] >= 0 ? kFar : kNoDisparity);
   }
-  return RangeRegions(mask, classes, disparity, rig, range, options.blobs, "canonical", std::nullopt, full);
+  return RangeRegions(mask, classes, disparity, rig, range, options.blobs, "canonical",
+                      std::nullopt, full);
 }
 
 }  // namespace stevi::detection

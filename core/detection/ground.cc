@@ -31,15 +31,20 @@ std::vector<std::string> GroundOptions::Validate() const {
   if (!(min_row_fraction > 0 && min_row_fraction <= 1)) {
     problems.push_back("min_row_fraction: must be in (0, 1]" + Got(min_row_fraction));
   }
-  if (!(min_row_spread >= 0 && min_row_spread <= 1)) problems.push_back("min_row_spread: must be in [0, 1]" + Got(min_row_spread));
+  if (!(min_row_spread >= 0 && min_row_spread <= 1))
+    problems.push_back("min_row_spread: must be in [0, 1]" + Got(min_row_spread));
   if (min_row_pixels < 1) problems.push_back("min_row_pixels: must be >= 1" + Got(min_row_pixels));
-  if (min_support_rows < 2) problems.push_back("min_support_rows: must be >= 2" + Got(min_support_rows));
-  if (!(min_mode_px >= 0 && min_mode_px <= 64)) problems.push_back("min_mode_px: must be in [0, 64]" + Got(min_mode_px));
-  if (!(inlier_px > 0 && inlier_px <= 16)) problems.push_back("inlier_px: must be in (0, 16]" + Got(inlier_px));
+  if (min_support_rows < 2)
+    problems.push_back("min_support_rows: must be >= 2" + Got(min_support_rows));
+  if (!(min_mode_px >= 0 && min_mode_px <= 64))
+    problems.push_back("min_mode_px: must be in [0, 64]" + Got(min_mode_px));
+  if (!(inlier_px > 0 && inlier_px <= 16))
+    problems.push_back("inlier_px: must be in (0, 16]" + Got(inlier_px));
   if (!(min_span_px >= 0 && min_span_px <= 256)) {
     problems.push_back("min_span_px: must be in [0, 256]" + Got(min_span_px));
   }
-  if (!(margin_px >= 0 && margin_px <= 64)) problems.push_back("margin_px: must be in [0, 64]" + Got(margin_px));
+  if (!(margin_px >= 0 && margin_px <= 64))
+    problems.push_back("margin_px: must be in [0, 64]" + Got(margin_px));
   if (!(margin_fraction >= 0 && margin_fraction <= 1)) {
     problems.push_back("margin_fraction: must be in [0, 1]" + Got(margin_fraction));
   }
@@ -75,9 +80,11 @@ std::vector<RowMode> RowModes(const cv::Mat1s& fixed, int max_bin, const GroundO
       if (*best < options.min_row_pixels) break;
       if (*best >= options.min_row_fraction * matched / (rank + 1) &&
           last_x[bin] - first_x[bin] >= options.min_row_spread * fixed.cols) {
-        const double mode_px = static_cast<double>(sums[bin]) / *best / stereo::DisparityMap::kScale;
+        const double mode_px =
+            static_cast<double>(sums[bin]) / *best / stereo::DisparityMap::kScale;
         const double spread = static_cast<double>(last_x[bin] - first_x[bin]) / fixed.cols;
-        if (mode_px >= options.min_mode_px) modes.push_back({static_cast<double>(y), mode_px, *best, spread});
+        if (mode_px >= options.min_mode_px)
+          modes.push_back({static_cast<double>(y), mode_px, *best, spread});
       }
       *best = 0;
     }
@@ -102,7 +109,8 @@ bool LooksLikeAWall(const std::vector<const RowMode*>& inliers, double best_scor
     spreads.push_back(m->spread);
   }
   std::nth_element(ds.begin(), ds.begin() + static_cast<std::ptrdiff_t>(ds.size() / 2), ds.end());
-  std::nth_element(spreads.begin(), spreads.begin() + static_cast<std::ptrdiff_t>(spreads.size() / 2),
+  std::nth_element(spreads.begin(),
+                   spreads.begin() + static_cast<std::ptrdiff_t>(spreads.size() / 2),
                    spreads.end());
   const double wall_d = ds[ds.size() / 2];
   const double median_spread = spreads[spreads.size() / 2];
@@ -118,7 +126,8 @@ bool LooksLikeAWall(const std::vector<const RowMode*>& inliers, double best_scor
 
 // Least squares d = s * row + c over the inlier rows, weighted by their pixel counts; nullopt when
 // the line does not get nearer towards the bottom or its horizon is far off the image.
-std::optional<GroundModel> FitLine(const std::vector<const RowMode*>& inliers, int rows, double best_score) {
+std::optional<GroundModel> FitLine(const std::vector<const RowMode*>& inliers, int rows,
+                                   double best_score) {
   double sw = 0, sx = 0, sy = 0, sxx = 0, sxy = 0;
   for (const RowMode* m : inliers) {
     const double w = m->count;
@@ -187,7 +196,8 @@ std::optional<GroundModel> FitGround(const stereo::DisparityMap& disparity,
   }
   if (best_score < 0) return std::nullopt;
   std::vector<const RowMode*> inliers;
-  if (inliers_of(best_slope, best_horizon, &inliers) < options.min_support_rows) return std::nullopt;
+  if (inliers_of(best_slope, best_horizon, &inliers) < options.min_support_rows)
+    return std::nullopt;
   double lo = inliers.front()->disparity_px, hi = lo;
   for (const RowMode* m : inliers) {
     lo = std::min(lo, m->disparity_px);

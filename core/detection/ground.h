@@ -45,11 +45,13 @@ struct GroundOptions {
 // d(v) = slope * (v - horizon_row) for v > horizon_row, else 0 (above the horizon there is no
 // ground). slope = B / h for a level rig.
 struct GroundModel {
-  double slope = 0;          // pixels of disparity per image row (> 0)
-  double horizon_row = 0;    // image row where the ground's disparity reaches 0
-  int support_rows = 0;      // rows whose mode lies on the line
+  double slope = 0;        // pixels of disparity per image row (> 0)
+  double horizon_row = 0;  // image row where the ground's disparity reaches 0
+  int support_rows = 0;    // rows whose mode lies on the line
 
-  double DisparityAt(double row) const { return row > horizon_row ? slope * (row - horizon_row) : 0.0; }
+  double DisparityAt(double row) const {
+    return row > horizon_row ? slope * (row - horizon_row) : 0.0;
+  }
   // The camera height implied by the baseline (metres).
   double CameraHeight(double baseline_m) const { return slope > 0 ? baseline_m / slope : 0.0; }
 };

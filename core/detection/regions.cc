@@ -12,7 +12,6 @@
 
 #include "core/extraction/blobs.h"
 
-
 namespace stevi::detection {
 namespace {
 
@@ -96,11 +95,13 @@ void Summarise(Piece& p, int block_px) {
 // The depth modes of a region's trusted disparities: runs of the quarter-pixel histogram separated
 // by at least `gap_bins` empty bins. Returns, per mode, its [first, last] bin; modes holding less
 // than kMinModeFraction of the values are dropped.
-std::vector<std::pair<int, int>> DepthModes(const std::vector<int>& histogram, int n, int gap_bins) {
+std::vector<std::pair<int, int>> DepthModes(const std::vector<int>& histogram, int n,
+                                            int gap_bins) {
   std::vector<std::pair<int, int>> modes;
   int start = -1, last = -1, count = 0;
   const auto close = [&]() {
-    if (start >= 0 && count >= std::max(kMinPieceDisparities, static_cast<int>(kMinModeFraction * n))) {
+    if (start >= 0 &&
+        count >= std::max(kMinPieceDisparities, static_cast<int>(kMinModeFraction * n))) {
       modes.emplace_back(start, last);
     }
   };
@@ -127,8 +128,8 @@ int Find(std::vector<int>& parent, int i) {
 // The fraction of trusted disparities in a ring around the label's mask that lie at its range
 // (see StereoBlobOptions::max_attached_fraction). -1 when the ring holds too few.
 double AttachedFraction(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
-                        const cv::Rect& box, double median_px, double min_disparity_px,
-                        int ring_in, int ring_out) {
+                        const cv::Rect& box, double median_px, double min_disparity_px, int ring_in,
+                        int ring_out) {
   constexpr int kMinRingPixels = 20;
   const cv::Rect outer =
       (box + cv::Point(-ring_out, -ring_out) + cv::Size(2 * ring_out, 2 * ring_out)) &
@@ -137,8 +138,9 @@ double AttachedFraction(const stereo::DisparityMap& disparity, const cv::Mat1i& 
   cv::Mat1b inner_disc, outer_disc;
   cv::dilate(mask, inner_disc,
              cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * ring_in + 1, 2 * ring_in + 1)));
-  cv::dilate(mask, outer_disc,
-             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * ring_out + 1, 2 * ring_out + 1)));
+  cv::dilate(
+      mask, outer_disc,
+      cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * ring_out + 1, 2 * ring_out + 1)));
   const double band = std::max(1.0, 0.1 * median_px);
   const double lo = std::max(median_px - band, min_disparity_px) * kScale;
   const double hi = (median_px + band) * kScale;
@@ -163,7 +165,8 @@ double AttachedFraction(const stereo::DisparityMap& disparity, const cv::Mat1i& 
 // (whose depth, not height, varies), and n_y / n_z = beta f / (gamma + alpha cx + beta cy). 0 when
 // the lean is not significant (beta within 3 standard errors of 0) or the label spans too few rows.
 double LeanBack(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
-                const cv::Rect& box, double median_px, const geometry::StereoRig& rig, int min_rows) {
+                const cv::Rect& box, double median_px, const geometry::StereoRig& rig,
+                int min_rows) {
   if (box.height < min_rows) return 0;
   const double lo = 0.7 * median_px * kScale;
   const double hi = 1.3 * median_px * kScale;
@@ -210,7 +213,8 @@ double LeanBack(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, 
   // independent value per half-window square, so the fit's standard error is that much larger.
   const int block = std::max(1, disparity.block_size);
   const double correlated = std::max(1.0, 0.25 * block * block);
-  const double beta_se = std::sqrt(sigma2 * inverse(1, 1) * std::min(correlated, static_cast<double>(n)));
+  const double beta_se =
+      std::sqrt(sigma2 * inverse(1, 1) * std::min(correlated, static_cast<double>(n)));
   // The lean that the fit shows beyond doubt: beta less three standard errors.
   const double beta = p[1] - 3.0 * beta_se;
   if (!(beta > 0)) return 0;
@@ -245,7 +249,8 @@ cv::Mat1b ClassifyPixels(const stereo::DisparityMap& disparity, const geometry::
     uchar* o = out[y];
     const double ground_d = ground ? ground->DisparityAt(y) : 0.0;
     const double above_fixed =
-        ground ? (ground_d + std::max(ground_options.margin_px, ground_options.margin_fraction * ground_d)) *
+        ground ? (ground_d +
+                  std::max(ground_options.margin_px, ground_options.margin_fraction * ground_d)) *
                      kScale
                : -1.0;
     for (int x = 0; x < fixed.cols; ++x) {
@@ -281,7 +286,7 @@ struct Seed {
 std::vector<Seed> PatchSeeds(const cv::Mat1b& left, const cv::Mat1b& mask, const cv::Rect& box,
                              double initial_px) {
   const int cell = std::max(5, static_cast<int>(std::lround(std::sqrt(
-                                  static_cast<double>(box.area()) / (2.0 * kMaxRefinePatches)))));
+                                   static_cast<double>(box.area()) / (2.0 * kMaxRefinePatches)))));
   const int margin = kHalf + 3;
   std::vector<Seed> seeds;
   for (int cy = 0; cy < box.height; cy += cell) {
@@ -294,8 +299,8 @@ std::vector<Seed> PatchSeeds(const cv::Mat1b& left, const cv::Mat1b& mask, const
       Seed best{0, {}};
       for (int x = cx; x < std::min(cx + cell, box.width); ++x) {
         const int u = box.x + x;
-        if (!m[x] || u < margin || u >= left.cols - margin ||
-            u - initial_px - kSearchPx < margin || u - initial_px + kSearchPx >= left.cols - margin) {
+        if (!m[x] || u < margin || u >= left.cols - margin || u - initial_px - kSearchPx < margin ||
+            u - initial_px + kSearchPx >= left.cols - margin) {
           continue;
         }
         const int gx = std::abs(row[u + 1] - row[u - 1]);
@@ -310,7 +315,8 @@ std::vector<Seed> PatchSeeds(const cv::Mat1b& left, const cv::Mat1b& mask, const
     std::vector<Seed> kept;
     kept.reserve(kMaxRefinePatches);
     const double step = static_cast<double>(seeds.size()) / kMaxRefinePatches;
-    for (int i = 0; i < kMaxRefinePatches; ++i) kept.push_back(seeds[static_cast<size_t>(i * step)]);
+    for (int i = 0; i < kMaxRefinePatches; ++i)
+      kept.push_back(seeds[static_cast<size_t>(i * step)]);
     seeds.swap(kept);
   }
 
@@ -321,8 +327,8 @@ std::vector<Seed> PatchSeeds(const cv::Mat1b& left, const cv::Mat1b& mask, const
 // (dx, dy) by Gauss-Newton from the initial disparity: the vertical term takes up a residual
 // misalignment of the rectification. nullopt for a flat patch, one that leaves the image or the
 // search range, or an ill-conditioned fit.
-std::optional<double> PatchDisparity(const cv::Mat1b& left, const cv::Mat1b& right, const Seed& seed,
-                                     double initial_px) {
+std::optional<double> PatchDisparity(const cv::Mat1b& left, const cv::Mat1b& right,
+                                     const Seed& seed, double initial_px) {
   std::array<float, kCount> l{};
   std::array<float, kOuter * kOuter> r{};
   double l_mean = 0;
@@ -410,7 +416,8 @@ std::optional<RefinedDisparity> RefineDisparity(const cv::Mat1b& left, const cv:
   std::vector<double> estimates;
   estimates.reserve(seeds.size());
   for (const Seed& seed : seeds) {
-    if (const std::optional<double> d = PatchDisparity(left, right, seed, initial_px)) estimates.push_back(*d);
+    if (const std::optional<double> d = PatchDisparity(left, right, seed, initial_px))
+      estimates.push_back(*d);
   }
   const int n = static_cast<int>(estimates.size());
   if (n < kMinRefinePatches) return std::nullopt;
@@ -470,7 +477,8 @@ void ExtendToRegions(const cv::Mat1i& region_labels, const cv::Mat1i& region_sta
     Detection& d = detections[i];
     d.bbox |= box;
     d.perimeter_px = 2.0 * (d.bbox.width + d.bbox.height);
-    d.valid_fraction = std::clamp(static_cast<double>(d.valid_disparities) / d.bbox.area(), 0.0, 1.0);
+    d.valid_fraction =
+        std::clamp(static_cast<double>(d.valid_disparities) / d.bbox.area(), 0.0, 1.0);
   }
 }
 
@@ -509,7 +517,8 @@ void LinkAppearance(const RegionsContext& ctx, cv::Mat1b& candidates, cv::Mat1s&
   linked_disparity.setTo(stereo::DisparityMap::kInvalid);
   fixed.copyTo(linked_disparity, candidates);
   const int link = ScaledKernel(kLinkSize640, width);
-  cv::dilate(linked_disparity, grown, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(link, link)));
+  cv::dilate(linked_disparity, grown,
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(link, link)));
   // The appearance pixels that are not candidates take the grown disparity where there is one.
   thread_local cv::Mat1b grow;
   cv::compare(grown, 0, grow, cv::CMP_GE);
@@ -531,17 +540,21 @@ std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candida
   const stereo::DisparityMap& disparity = ctx.disparity;
   const cv::Mat1s& fixed = disparity.fixed;
   const int width = ctx.width, height = ctx.height;
-  const int step_fixed = std::max(1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale)));
+  const int step_fixed =
+      std::max(1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale)));
   const extraction::BlobSet blobs =
       options.max_disparity_step_px > 0
-          ? extraction::ExtractDisparityBlobs(linked, linked_disparity, step_fixed, kMinPieceDisparities,
+          ? extraction::ExtractDisparityBlobs(linked, linked_disparity, step_fixed,
+                                              kMinPieceDisparities,
                                               /*shapes=*/false)
           : extraction::ExtractBlobs(linked, kMinPieceDisparities);
-  const int gap_bins = std::max(1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale / kBinFixed)));
+  const int gap_bins = std::max(
+      1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale / kBinFixed)));
   // Per blob, in whole-image passes (a blob's box overlaps others'): the quarter-pixel histogram
   // of its candidates' disparities, its depth modes, and each mode's piece.
   std::vector<int> blob_of(std::max(1, blobs.label_count), -1);  // label -> blob (-1: dropped)
-  for (size_t i = 0; i < blobs.blobs.size(); ++i) blob_of[blobs.blobs[i].label] = static_cast<int>(i);
+  for (size_t i = 0; i < blobs.blobs.size(); ++i)
+    blob_of[blobs.blobs[i].label] = static_cast<int>(i);
   const size_t blob_count = blobs.blobs.size();
   int top_px = disparity.min_disparity + disparity.num_disparities;
   if (disparity.num_disparities <= 0) {  // a map that does not say its search range
@@ -582,7 +595,8 @@ std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candida
     }
     for (const auto& [first, last] : modes) {
       pieces.emplace_back();
-      for (int k = first; k <= last; ++k) piece_of_bin[b * bins + k] = static_cast<int>(pieces.size()) - 1;
+      for (int k = first; k <= last; ++k)
+        piece_of_bin[b * bins + k] = static_cast<int>(pieces.size()) - 1;
     }
   }
   std::vector<cv::Point> lo(pieces.size(), cv::Point(INT32_MAX, INT32_MAX));
@@ -600,7 +614,8 @@ std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candida
       const int b = blob_of[lab[x]];
       if (b < 0) continue;
       // A linked pixel goes with the mode of the disparity it took.
-      const int k = piece_of_bin[static_cast<size_t>(b) * bins + std::min(bins - 1, l[x] / kBinFixed)];
+      const int k =
+          piece_of_bin[static_cast<size_t>(b) * bins + std::min(bins - 1, l[x] / kBinFixed)];
       if (k == 0) continue;
       Piece& p = pieces[k];
       // A piece lies in one region: its pixels are 8-connected appearance pixels.
@@ -619,7 +634,8 @@ std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candida
     }
   }
   for (size_t k = 1; k < pieces.size(); ++k) {
-    if (hi[k].x >= 0) pieces[k].box = cv::Rect(lo[k].x, lo[k].y, hi[k].x - lo[k].x + 1, hi[k].y - lo[k].y + 1);
+    if (hi[k].x >= 0)
+      pieces[k].box = cv::Rect(lo[k].x, lo[k].y, hi[k].x - lo[k].x + 1, hi[k].y - lo[k].y + 1);
   }
   const int piece_count = static_cast<int>(pieces.size());
   for (int i = 1; i < piece_count; ++i) {
@@ -653,19 +669,24 @@ std::vector<Piece> JoinPieces(const RegionsContext& ctx, const std::vector<Piece
         // deep object).
         const double tolerance =
             3.0 * std::hypot(a.median_sigma, b.median_sigma) + kMatcherBiasPx * kScale;
-        const bool same_range = std::abs(a.median - b.median) <= tolerance ||
-                                (a.median >= b.lo && a.median <= b.hi && b.median >= a.lo && b.median <= a.hi);
+        const bool same_range =
+            std::abs(a.median - b.median) <= tolerance ||
+            (a.median >= b.lo && a.median <= b.hi && b.median >= a.lo && b.median <= a.hi);
         if (!same_range) continue;
-        const int gap_x = std::max(0, std::max(a.box.x, b.box.x) - std::min(a.box.br().x, b.box.br().x));
-        const int gap_y = std::max(0, std::max(a.box.y, b.box.y) - std::min(a.box.br().y, b.box.br().y));
+        const int gap_x =
+            std::max(0, std::max(a.box.x, b.box.x) - std::min(a.box.br().x, b.box.br().x));
+        const int gap_y =
+            std::max(0, std::max(a.box.y, b.box.y) - std::min(a.box.br().y, b.box.br().y));
         const int size = std::max({a.box.width, a.box.height, b.box.width, b.box.height});
         const bool one_region = a.region != 0 && a.region == b.region;
         // In one region, the gap is measured against the smaller piece: a region that holds a
         // large object and a small one at its range (a drone beside a hangar) is not one object.
-        const int smaller = std::min(std::max(a.box.width, a.box.height), std::max(b.box.width, b.box.height));
-        const double allowed = one_region ? (options.region_gap_fraction > 0 ? options.region_gap_fraction * smaller
-                                                                             : static_cast<double>(width + height))
-                                          : join_fraction * size;
+        const int smaller =
+            std::min(std::max(a.box.width, a.box.height), std::max(b.box.width, b.box.height));
+        const double allowed =
+            one_region ? (options.region_gap_fraction > 0 ? options.region_gap_fraction * smaller
+                                                          : static_cast<double>(width + height))
+                       : join_fraction * size;
         if (std::max(gap_x, gap_y) > allowed) continue;
         parent[Find(parent, i)] = Find(parent, j);
       }
@@ -723,12 +744,13 @@ void RangeFromPixels(const RegionsContext& ctx, const GroupLimits& limits, const
   bool refined_ok = false;
   if (full != nullptr && !full->left.empty()) {
     const int k = std::max(1, full->binning);
-    const cv::Rect full_box = cv::Rect(group.box.x * k, group.box.y * k, group.box.width * k,
-                                       group.box.height * k) &
-                              cv::Rect(0, 0, full->left.cols, full->left.rows);
+    const cv::Rect full_box =
+        cv::Rect(group.box.x * k, group.box.y * k, group.box.width * k, group.box.height * k) &
+        cv::Rect(0, 0, full->left.cols, full->left.rows);
     // The fit runs over the pixels at the hypothesis' own range (a box's oblique faces and a
     // halo at other disparities would pull it off its nearest face).
-    const int band = std::max(kScale * 3 / 8, static_cast<int>(std::lround(0.02 * median_px * kScale)));
+    const int band =
+        std::max(kScale * 3 / 8, static_cast<int>(std::lround(0.02 * median_px * kScale)));
     const int median_fixed = static_cast<int>(std::lround(median_px * kScale));
     cv::Mat1b at_range(mask.size());
     for (int y = 0; y < mask.rows; ++y) {
@@ -737,7 +759,8 @@ void RangeFromPixels(const RegionsContext& ctx, const GroupLimits& limits, const
       const uchar* m = mask[y];
       uchar* o = at_range[y];
       for (int x = 0; x < mask.cols; ++x) {
-        const bool near = (m[x] != 0) & (c[x] == kCandidate) & (std::abs(dd[x] - median_fixed) <= band);
+        const bool near =
+            (m[x] != 0) & (c[x] == kCandidate) & (std::abs(dd[x] - median_fixed) <= band);
         o[x] = near ? 255 : 0;
       }
     }
@@ -747,7 +770,8 @@ void RangeFromPixels(const RegionsContext& ctx, const GroupLimits& limits, const
     full_mask = full_mask(cv::Rect(0, 0, full_box.width, full_box.height));
     const std::optional<RefinedDisparity> refined =
         RefineDisparity(full->left, full->right, full_mask, full_box, median_px * k);
-    if (refined && std::abs(refined->disparity_px - median_px * k) <= std::max(1.5 * k, 0.2 * median_px * k)) {
+    if (refined &&
+        std::abs(refined->disparity_px - median_px * k) <= std::max(1.5 * k, 0.2 * median_px * k)) {
       d.disparity_px = refined->disparity_px / k;
       d.disparity_sigma_px = refined->sigma_px / k;
       refined_ok = true;
@@ -789,7 +813,8 @@ std::optional<Detection> RangeGroup(const RegionsContext& ctx, const GroupLimits
   // At least the trusted disparities of one independent matcher window (half a block square):
   // fewer are one coherent mismatch as often as an object.
   const int block = std::max(1, disparity.block_size);
-  if (n < std::max({options.min_valid_px, kMinPieceDisparities, block * block / 4})) return std::nullopt;
+  if (n < std::max({options.min_valid_px, kMinPieceDisparities, block * block / 4}))
+    return std::nullopt;
   const double box_area = static_cast<double>(group.box.area());
   const double valid_fraction = n / box_area;
   if (static_cast<double>(n) / group.area < options.min_valid_fraction) return std::nullopt;
@@ -798,23 +823,26 @@ std::optional<Detection> RangeGroup(const RegionsContext& ctx, const GroupLimits
   const cv::Mat1b mask = labels(group.box) == g;
   Summarise(group, disparity.block_size);
   const double median_px = static_cast<double>(group.median) / kScale;
-  if (!geometry::IsTrustedDisparity(median_px, rig.f_px(), rig.baseline_m(), range)) return std::nullopt;
+  if (!geometry::IsTrustedDisparity(median_px, rig.f_px(), rig.baseline_m(), range))
+    return std::nullopt;
   // At the top of the search range the matcher has run out of disparities: what is nearer than
   // it can see matches there by chance.
   if (disparity.num_disparities > 0 &&
       median_px > disparity.min_disparity + disparity.num_disparities - 1 - kSearchTopMarginPx) {
     return std::nullopt;
   }
-  if (options.max_depth_per_height > 0 &&
-      LeanBack(disparity, labels, g, group.box, median_px, rig, min_rows) > options.max_depth_per_height) {
+  if (options.max_depth_per_height > 0 && LeanBack(disparity, labels, g, group.box, median_px, rig,
+                                                   min_rows) > options.max_depth_per_height) {
     return std::nullopt;  // terrain leaning back, or level ground
   }
-  const double height_m = group.box.height * (rig.f_px() * rig.baseline_m() / median_px) / rig.f_px();
+  const double height_m =
+      group.box.height * (rig.f_px() * rig.baseline_m() / median_px) / rig.f_px();
   const bool too_short = group.box.height < min_rows || height_m < options.min_terrain_height_m;
   // Terrain is below the horizon: the ground model's, or without one the principal point's
   // row (a level camera's horizon).
   const double horizon_row = ground ? ground->horizon_row : rig.cy();
-  if (options.max_attached_fraction < 1 && too_short && group.box.y + group.box.height > horizon_row &&
+  if (options.max_attached_fraction < 1 && too_short &&
+      group.box.y + group.box.height > horizon_row &&
       AttachedFraction(disparity, labels, g, group.box, median_px, range.min_disparity_px, ring_in,
                        ring_out) > options.max_attached_fraction) {
     return std::nullopt;  // a patch of a continuous surface
@@ -858,9 +886,11 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   std::vector<Detection> out;
   std::vector<RegionOf> out_region;  // per detection
   const cv::Mat1s& fixed = disparity.fixed;
-  if (fixed.empty() || appearance.size() != fixed.size() || classes.size() != fixed.size()) return out;
+  if (fixed.empty() || appearance.size() != fixed.size() || classes.size() != fixed.size())
+    return out;
   const int width = fixed.cols, height = fixed.rows;
-  const RegionsContext ctx{appearance, classes, disparity, rig, range, options, extractor, ground, full, width, height};
+  const RegionsContext ctx{appearance, classes, disparity, rig,   range, options,
+                           extractor,  ground,  full,      width, height};
 
   // 1. Pieces (LinkAppearance, CutPieces). Per-frame buffers, kept between frames of a thread (no
   //    page faults for fresh memory).
@@ -875,11 +905,13 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   thread_local cv::Mat1d region_centroids;
   const bool extend_to_regions = options.join_within_region && options.region_gap_fraction == 0;
   if (extend_to_regions) {
-    cv::connectedComponentsWithStats(appearance, region_labels, region_stats, region_centroids, 8, CV_32S);
+    cv::connectedComponentsWithStats(appearance, region_labels, region_stats, region_centroids, 8,
+                                     CV_32S);
   } else if (options.join_within_region) {
     cv::connectedComponents(appearance, region_labels, 8, CV_32S);
   }
-  std::vector<Piece> pieces = CutPieces(ctx, candidates, linked_disparity, linked, region_labels, piece_labels);
+  std::vector<Piece> pieces =
+      CutPieces(ctx, candidates, linked_disparity, linked, region_labels, piece_labels);
 
   // 2. Groups (JoinPieces).
   std::vector<Piece> groups = JoinPieces(ctx, pieces, piece_labels, labels);
@@ -890,7 +922,8 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   const int min_rows = std::max(3, ScaledKernel(kMinTerrainRows640, width));
   const int ring_in = std::max(2, ScaledKernel(6, width) - 1);
   const int ring_out = std::max(ring_in + 2, ScaledKernel(12, width));
-  const int interior = options.interior_erode_px > 0 ? ScaledKernel(2 * options.interior_erode_px + 1, width) : 1;
+  const int interior =
+      options.interior_erode_px > 0 ? ScaledKernel(2 * options.interior_erode_px + 1, width) : 1;
   const GroupLimits limits{max_width_px, min_rows, ring_in, ring_out, interior};
   for (int g = 1; g <= group_count; ++g) {
     std::optional<Detection> d = RangeGroup(ctx, limits, labels, g, groups[g]);

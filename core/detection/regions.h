@@ -37,7 +37,8 @@ enum PixelClass : uint8_t {
 // Classifies every pixel of `disparity` (the same size as the map).
 cv::Mat1b ClassifyPixels(const stereo::DisparityMap& disparity, const geometry::StereoRig& rig,
                          const geometry::RangeOptions& range,
-                         const std::optional<GroundModel>& ground, const GroundOptions& ground_options);
+                         const std::optional<GroundModel>& ground,
+                         const GroundOptions& ground_options);
 
 // Hypotheses from the regions of `appearance` (non-zero pixels, 8-connected), split where their
 // trusted disparities form separate depth modes and joined with neighbouring pieces at the same

@@ -7,8 +7,6 @@
 #include <limits>
 #include <optional>
 
-
-
 namespace stevi::detection {
 
 std::vector<std::string> StereoBlobOptions::Validate() const {
@@ -67,7 +65,8 @@ void FillRange(Detection& d, const geometry::StereoRig& rig, const geometry::Ran
                                  (d.centroid_px.y - rig.cy()) * d.depth_m / f, d.depth_m);
   }
   d.range_m = geometry::RangeFromPoint(d.position_cam_m);
-  const double sigma_px = d.disparity_sigma_px > 0 ? d.disparity_sigma_px : range.disparity_sigma_px;
+  const double sigma_px =
+      d.disparity_sigma_px > 0 ? d.disparity_sigma_px : range.disparity_sigma_px;
   const double depth_sigma = geometry::DepthSigma(d.depth_m, f, b, sigma_px);
   d.range_sigma_m = d.depth_m > 0 ? depth_sigma * d.range_m / d.depth_m : depth_sigma;
 }

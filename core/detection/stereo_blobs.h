@@ -42,8 +42,8 @@ struct StereoBlobOptions {
   // and a drone at its range is not one object): region_gap_fraction, 0 = any gap. SteViE's
   // regions are closed contours, object outlines: any gap; and with 0 a hypothesis alone in its
   // region, where no other trusted disparity lies, takes the region's box (the outline says how
-  // far the object reaches where the stereo matched only part of it). SteViS's salient blobs can span
-  // neighbouring objects: 2, chosen on the tuning seeds of stevi-eval's families (figures:
+  // far the object reaches where the stereo matched only part of it). SteViS's salient blobs can
+  // span neighbouring objects: 2, chosen on the tuning seeds of stevi-eval's families (figures:
   // core/detection/README.md, "Measured").
   bool join_within_region = false;
   double region_gap_fraction = 0.0;

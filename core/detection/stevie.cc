@@ -22,8 +22,7 @@ std::vector<std::string> SteViEOptions::Validate() const {
 std::vector<Detection> DetectSteViE(const cv::Mat1b& left, const stereo::DisparityMap& disparity,
                                     const geometry::StereoRig& rig,
                                     const geometry::RangeOptions& range,
-                                    const SteViEOptions& options,
-                                    const FullResolutionPair* full) {
+                                    const SteViEOptions& options, const FullResolutionPair* full) {
   if (left.empty() || disparity.empty() || left.size() != disparity.fixed.size()) return {};
   // The morphology's sizes are given for a 640-pixel-wide image.
   extraction::MorphologyOptions morphology = options.morphology;
@@ -32,14 +31,17 @@ std::vector<Detection> DetectSteViE(const cv::Mat1b& left, const stereo::Dispari
   // The Canny thresholds are given for a pixel noise of 2 grey levels and follow the frame's own
   // (within a factor of 2 either way): noise must not draw contours, nor a faint outline vanish.
   extraction::EdgeOptions edges = options.edges;
-  const double noise_scale = std::clamp(stereo::EstimateNoiseSigma(left) / kEdgeReferenceNoise, 0.5, 2.0);
+  const double noise_scale =
+      std::clamp(stereo::EstimateNoiseSigma(left) / kEdgeReferenceNoise, 0.5, 2.0);
   edges.canny_low *= noise_scale;
   edges.canny_high *= noise_scale;
-  const cv::Mat1b regions = extraction::CloseFillOpen(extraction::DetectEdges(left, edges), morphology);
+  const cv::Mat1b regions =
+      extraction::CloseFillOpen(extraction::DetectEdges(left, edges), morphology);
   const std::optional<GroundModel> ground =
       options.ground.enabled ? FitGround(disparity, options.ground) : std::nullopt;
   const cv::Mat1b classes = ClassifyPixels(disparity, rig, range, ground, options.ground);
-  return RangeRegions(regions, classes, disparity, rig, range, options.blobs, "stevie", ground, full);
+  return RangeRegions(regions, classes, disparity, rig, range, options.blobs, "stevie", ground,
+                      full);
 }
 
 }  // namespace stevi::detection

@@ -21,9 +21,9 @@
 namespace stevi::detection {
 
 struct SteViEOptions {
-  extraction::EdgeOptions edges;            // Gaussian + Canny
-  extraction::MorphologyOptions morphology; // close the contours, fill, open to separate
-  GroundOptions ground;                     // the ground and what lies on it are not obstacles
+  extraction::EdgeOptions edges;             // Gaussian + Canny
+  extraction::MorphologyOptions morphology;  // close the contours, fill, open to separate
+  GroundOptions ground;                      // the ground and what lies on it are not obstacles
   StereoBlobOptions blobs = StereoBlobOptions::JoiningWithinRegions(0.0);
 
   // Every problem, prefixed with the sub-struct ("edges.canny_low: ...").

@@ -70,14 +70,14 @@ cv::Mat1b SalientRegions(const cv::Mat1b& left, const SteViSOptions& options) {
 std::vector<Detection> DetectSteViS(const cv::Mat1b& left, const stereo::DisparityMap& disparity,
                                     const geometry::StereoRig& rig,
                                     const geometry::RangeOptions& range,
-                                    const SteViSOptions& options,
-                                    const FullResolutionPair* full) {
+                                    const SteViSOptions& options, const FullResolutionPair* full) {
   if (left.empty() || disparity.empty() || left.size() != disparity.fixed.size()) return {};
   const cv::Mat1b salient = SalientRegions(left, options);
   const std::optional<GroundModel> ground =
       options.ground.enabled ? FitGround(disparity, options.ground) : std::nullopt;
   const cv::Mat1b classes = ClassifyPixels(disparity, rig, range, ground, options.ground);
-  return RangeRegions(salient, classes, disparity, rig, range, options.blobs, "stevis", ground, full);
+  return RangeRegions(salient, classes, disparity, rig, range, options.blobs, "stevis", ground,
+                      full);
 }
 
 }  // namespace stevi::detection

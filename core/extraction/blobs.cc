@@ -26,10 +26,10 @@ cv::Moments Shifted(const cv::Moments& m, double dx, double dy) {
   s.m11 = m.m11 + dx * m.m01 + dy * m.m10 + dx * dy * m.m00;
   s.m02 = m.m02 + 2 * dy * m.m01 + dy2 * m.m00;
   s.m30 = m.m30 + 3 * dx * m.m20 + 3 * dx2 * m.m10 + dx2 * dx * m.m00;
-  s.m21 = m.m21 + dy * m.m20 + 2 * dx * m.m11 + 2 * dx * dy * m.m10 + dx2 * m.m01 +
-          dx2 * dy * m.m00;
-  s.m12 = m.m12 + dx * m.m02 + 2 * dy * m.m11 + 2 * dx * dy * m.m01 + dy2 * m.m10 +
-          dx * dy2 * m.m00;
+  s.m21 =
+      m.m21 + dy * m.m20 + 2 * dx * m.m11 + 2 * dx * dy * m.m10 + dx2 * m.m01 + dx2 * dy * m.m00;
+  s.m12 =
+      m.m12 + dx * m.m02 + 2 * dy * m.m11 + 2 * dx * dy * m.m01 + dy2 * m.m10 + dx * dy2 * m.m00;
   s.m03 = m.m03 + 3 * dy * m.m02 + 3 * dy2 * m.m01 + dy2 * dy * m.m00;
   return s;
 }
@@ -100,7 +100,8 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
   // The buffers are reused from call to call on this thread (no allocation per frame).
   thread_local std::vector<Run> runs;
   thread_local std::vector<int> parent;
-  thread_local std::vector<int> run_at;  // two rows: the run of each column, for this row and the last
+  thread_local std::vector<int>
+      run_at;  // two rows: the run of each column, for this row and the last
   runs.clear();
   parent.clear();
   run_at.resize(2 * static_cast<size_t>(w));
@@ -179,8 +180,8 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
     Blob blob;
     blob.label = label;
     blob.bbox = cv::Rect(a.x0, a.y0, a.x1 - a.x0 + 1, a.y1 - a.y0 + 1);
-    blob.centroid_px = cv::Point2d(static_cast<double>(a.sx) / a.area,
-                                   static_cast<double>(a.sy) / a.area);
+    blob.centroid_px =
+        cv::Point2d(static_cast<double>(a.sx) / a.area, static_cast<double>(a.sy) / a.area);
     blob.area_px = a.area;
     if (shapes) {
       const Shape shape = BlobShape(set.labels, label, blob.bbox);

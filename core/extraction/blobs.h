@@ -8,8 +8,8 @@
 namespace stevi::extraction {
 
 struct Blob {
-  int label = 0;            // the blob's value in BlobSet::labels
-  cv::Rect bbox;            // pixels, in the image
+  int label = 0;  // the blob's value in BlobSet::labels
+  cv::Rect bbox;  // pixels, in the image
   cv::Point2d centroid_px;
   int area_px = 0;          // pixel count
   double perimeter_px = 0;  // length of the outer contour

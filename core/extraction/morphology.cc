@@ -18,12 +18,9 @@ bool ValidSize(int size) { return size >= 1 && size % 2 == 1 && size <= kMaxElem
 
 int CvShape(StructuringShape shape) {
   switch (shape) {
-    case StructuringShape::kRect:
-      return cv::MORPH_RECT;
-    case StructuringShape::kCross:
-      return cv::MORPH_CROSS;
-    case StructuringShape::kEllipse:
-      break;
+    case StructuringShape::kRect: return cv::MORPH_RECT;
+    case StructuringShape::kCross: return cv::MORPH_CROSS;
+    case StructuringShape::kEllipse: break;
   }
   return cv::MORPH_ELLIPSE;
 }
@@ -52,8 +49,7 @@ std::vector<std::string> MorphologyOptions::Validate() const {
   std::vector<std::string> problems;
   if (shape != StructuringShape::kRect && shape != StructuringShape::kEllipse &&
       shape != StructuringShape::kCross) {
-    problems.push_back("shape: must be kRect, kEllipse or kCross" +
-                       Got(static_cast<int>(shape)));
+    problems.push_back("shape: must be kRect, kEllipse or kCross" + Got(static_cast<int>(shape)));
   }
   if (!ValidSize(close_size)) {
     problems.push_back("close_size: must be odd and in 1..101 pixels" + Got(close_size));

@@ -119,9 +119,8 @@ cv::Mat1i SegmentGraph(const cv::Mat& image, const GraphSegmentationOptions& opt
   if (image.empty()) return labels;
   CV_Assert(image.depth() == CV_8U && image.channels() >= 1 && image.channels() <= 4);
   const cv::Ptr<cv::ximgproc::segmentation::GraphSegmentation> segmenter =
-      cv::ximgproc::segmentation::createGraphSegmentation(options.sigma,
-                                                          static_cast<float>(options.k),
-                                                          options.min_size);
+      cv::ximgproc::segmentation::createGraphSegmentation(
+          options.sigma, static_cast<float>(options.k), options.min_size);
   cv::Mat out;
   segmenter->processImage(image, out);
   labels = out;

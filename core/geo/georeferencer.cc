@@ -113,9 +113,9 @@ Result<GeoPoint> Georeferencer::Georeference(const VehiclePose& pose,
   local.Reverse(out.offset_ned_m.y(), out.offset_ned_m.x(), -out.offset_ned_m.z(), out.lat_deg,
                 out.lon_deg, out.alt_m);
   // d/dt (p_vehicle + R r_body) = v_vehicle + R (omega x r_body + dr_body/dt).
-  out.velocity_ned_mps = state.velocity_ned_mps +
-                         ned_from_body * (pose.angular_rate_body_rps.cross(in_body) +
-                                          body_from_cam_ * point.velocity_mps);
+  out.velocity_ned_mps =
+      state.velocity_ned_mps + ned_from_body * (pose.angular_rate_body_rps.cross(in_body) +
+                                                body_from_cam_ * point.velocity_mps);
   out.sigma = Sigma(state, point.position_m, cov);
   return out;
 }

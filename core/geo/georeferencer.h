@@ -91,8 +91,7 @@ class Georeferencer {
 // range * pixel_sigma_px / focal_px across it (both lateral axes), m^2. The point must not be the
 // origin.
 Eigen::Matrix3d LineOfSightCovariance(const Eigen::Vector3d& position_in_cam_m,
-                                      double range_sigma_m, double pixel_sigma_px,
-                                      double focal_px);
+                                      double range_sigma_m, double pixel_sigma_px, double focal_px);
 
 // A diagonal covariance from per-axis 1-sigmas (tracking::Track::position_sigma_m), m^2.
 Eigen::Matrix3d DiagonalCovariance(const cv::Vec3d& sigma_m);

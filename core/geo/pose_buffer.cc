@@ -92,8 +92,7 @@ Status PoseBuffer::Add(const VehicleState& state) {
     char buf[160];
     std::snprintf(buf, sizeof buf,
                   "t_ns: out of order: %lld ns is not after the newest state (%lld ns)",
-                  static_cast<long long>(state.t_ns),
-                  static_cast<long long>(states_.back().t_ns));
+                  static_cast<long long>(state.t_ns), static_cast<long long>(states_.back().t_ns));
     return Error{ErrorCode::kInvalidArgument, buf};
   }
   states_.push_back(state);
@@ -131,9 +130,9 @@ PoseLookup PoseBuffer::At(int64_t t_ns) const {
                        SecondsBetween(states_.front().t_ns, t_ns));
       }
       // The first state after t_ns (there is one unless t_ns is the newest's time).
-      const auto after = std::upper_bound(
-          states_.begin(), states_.end(), t_ns,
-          [](int64_t t, const VehicleState& s) { return t < s.t_ns; });
+      const auto after =
+          std::upper_bound(states_.begin(), states_.end(), t_ns,
+                           [](int64_t t, const VehicleState& s) { return t < s.t_ns; });
       const std::size_t i = static_cast<std::size_t>(after - states_.begin());  // >= 1
       s0 = states_[i - 1];
       if (s0.t_ns == t_ns) {
@@ -156,15 +155,13 @@ PoseLookup PoseBuffer::At(int64_t t_ns) const {
   }
 
   VehiclePose pose;
-  if (rate_pair && SecondsBetween(rate_pair->second.t_ns, rate_pair->first.t_ns) <=
-                       options_.max_gap_s) {
+  if (rate_pair &&
+      SecondsBetween(rate_pair->second.t_ns, rate_pair->first.t_ns) <= options_.max_gap_s) {
     pose.angular_rate_body_rps = AngularRate(rate_pair->first, rate_pair->second);
   }
 
   switch (kind) {
-    case Case::kExact:
-      pose.state = s0;
-      break;
+    case Case::kExact: pose.state = s0; break;
     case Case::kInterpolate: {
       const double w = SecondsBetween(t_ns, s0.t_ns) / SecondsBetween(s1.t_ns, s0.t_ns);
       VehicleState& s = pose.state;

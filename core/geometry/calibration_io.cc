@@ -59,9 +59,9 @@ cv::FileNode Lookup(const cv::FileNode& root, const std::string& key) {
 
 // Reads one key as a matrix; nullopt (with a problem appended) when missing or malformed.
 // `shapes` lists the accepted (rows, cols) pairs; `expected` describes them for the message.
-std::optional<cv::Mat> ReadMatrix(const cv::FileNode& root, const std::string& key,
-                                  bool required, const std::vector<cv::Size>& shapes,
-                                  const std::string& expected, std::vector<std::string>& problems) {
+std::optional<cv::Mat> ReadMatrix(const cv::FileNode& root, const std::string& key, bool required,
+                                  const std::vector<cv::Size>& shapes, const std::string& expected,
+                                  std::vector<std::string>& problems) {
   const cv::FileNode node = Lookup(root, key);
   if (node.empty() || node.isNone()) {
     if (required) problems.push_back(key + ": missing (expected " + expected + ")");
@@ -96,8 +96,9 @@ std::optional<cv::Mat> ReadMatrix(const cv::FileNode& root, const std::string& k
       m = cv::Mat();
     }
     if (m.empty()) {
-      problems.push_back(key + ": expected " + expected +
-                         " (an !!opencv-matrix with rows, cols, dt and data, or a list of numbers)");
+      problems.push_back(
+          key + ": expected " + expected +
+          " (an !!opencv-matrix with rows, cols, dt and data, or a list of numbers)");
       return std::nullopt;
     }
   } else {
@@ -178,19 +179,27 @@ Result<StereoCalibration> ParseStorage(const cv::FileStorage& fs) {
   }
   const std::string dist_text = "a 1xN or Nx1 matrix with N in {4, 5, 8, 12, 14}";
 
-  if (auto m = ReadMatrix(root, "M1", true, k3x3, "a 3x3 matrix", problems)) c.M1 = ToMatx<3, 3>(*m);
-  if (auto m = ReadMatrix(root, "D1", true, k_dist, dist_text, problems)) c.D1 = m->reshape(1, 1).clone();
-  if (auto m = ReadMatrix(root, "M2", true, k3x3, "a 3x3 matrix", problems)) c.M2 = ToMatx<3, 3>(*m);
-  if (auto m = ReadMatrix(root, "D2", true, k_dist, dist_text, problems)) c.D2 = m->reshape(1, 1).clone();
+  if (auto m = ReadMatrix(root, "M1", true, k3x3, "a 3x3 matrix", problems))
+    c.M1 = ToMatx<3, 3>(*m);
+  if (auto m = ReadMatrix(root, "D1", true, k_dist, dist_text, problems))
+    c.D1 = m->reshape(1, 1).clone();
+  if (auto m = ReadMatrix(root, "M2", true, k3x3, "a 3x3 matrix", problems))
+    c.M2 = ToMatx<3, 3>(*m);
+  if (auto m = ReadMatrix(root, "D2", true, k_dist, dist_text, problems))
+    c.D2 = m->reshape(1, 1).clone();
   if (auto m = ReadMatrix(root, "R", true, k3x3, "a 3x3 matrix", problems)) c.R = ToMatx<3, 3>(*m);
   if (auto m = ReadMatrix(root, "T", true, k_vec3, "a 3x1 or 1x3 matrix", problems)) {
     const cv::Mat t = m->reshape(1, 3);
     c.T = cv::Vec3d(t.at<double>(0), t.at<double>(1), t.at<double>(2));
   }
-  if (auto m = ReadMatrix(root, "R1", false, k3x3, "a 3x3 matrix", problems)) c.R1 = ToMatx<3, 3>(*m);
-  if (auto m = ReadMatrix(root, "R2", false, k3x3, "a 3x3 matrix", problems)) c.R2 = ToMatx<3, 3>(*m);
-  if (auto m = ReadMatrix(root, "P1", false, k3x4, "a 3x4 matrix", problems)) c.P1 = ToMatx<3, 4>(*m);
-  if (auto m = ReadMatrix(root, "P2", false, k3x4, "a 3x4 matrix", problems)) c.P2 = ToMatx<3, 4>(*m);
+  if (auto m = ReadMatrix(root, "R1", false, k3x3, "a 3x3 matrix", problems))
+    c.R1 = ToMatx<3, 3>(*m);
+  if (auto m = ReadMatrix(root, "R2", false, k3x3, "a 3x3 matrix", problems))
+    c.R2 = ToMatx<3, 3>(*m);
+  if (auto m = ReadMatrix(root, "P1", false, k3x4, "a 3x4 matrix", problems))
+    c.P1 = ToMatx<3, 4>(*m);
+  if (auto m = ReadMatrix(root, "P2", false, k3x4, "a 3x4 matrix", problems))
+    c.P2 = ToMatx<3, 4>(*m);
   if (auto m = ReadMatrix(root, "Q", false, k4x4, "a 4x4 matrix", problems)) c.Q = ToMatx<4, 4>(*m);
   if (auto m = ReadMatrix(root, "E", false, k3x3, "a 3x3 matrix", problems)) c.E = ToMatx<3, 3>(*m);
   if (auto m = ReadMatrix(root, "F", false, k3x3, "a 3x3 matrix", problems)) c.F = ToMatx<3, 3>(*m);
@@ -205,7 +214,6 @@ Error WithPrefix(Error e, const std::string& prefix) {
   e.message = prefix + e.message;
   return e;
 }
-
 
 // A readable reason from an OpenCV exception. OpenCV's YAML parser puts "(line): message" in
 // `func` and the parser function's name in `err`. `line_offset` undoes lines we prepended.
@@ -273,8 +281,8 @@ std::vector<std::string> StereoCalibration::Validate() const {
     problems.push_back("T: the baseline |T| must be > 0");
   }
 
-  const int rectification_terms = R1.has_value() + R2.has_value() + P1.has_value() +
-                                  P2.has_value() + Q.has_value();
+  const int rectification_terms =
+      R1.has_value() + R2.has_value() + P1.has_value() + P2.has_value() + Q.has_value();
   if (rectification_terms != 0 && rectification_terms != 5) {
     problems.push_back("R1, R2, P1, P2, Q: give all five rectification terms or none (got " +
                        std::to_string(rectification_terms) + ")");
@@ -328,8 +336,8 @@ Result<StereoCalibration> ParseCalibrationYaml(const std::string& yaml_text) {
       text = "%YAML:1.0\n---\n" + text;
       header_lines = 2;
     }
-    if (!fs.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY |
-                           cv::FileStorage::FORMAT_YAML)) {
+    if (!fs.open(text,
+                 cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML)) {
       return Error{ErrorCode::kInvalidArgument, "calibration YAML: cannot parse the text"};
     }
   } catch (const cv::Exception& e) {
@@ -344,8 +352,8 @@ Result<std::string> CalibrationYamlText(const StereoCalibration& calibration) {
     return WithPrefix(Error::Invalid(problems), "refusing to write an invalid calibration: ");
   }
   try {
-    cv::FileStorage fs(".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY |
-                                    cv::FileStorage::FORMAT_YAML);
+    cv::FileStorage fs(
+        ".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
     fs << "image_width" << calibration.image_size.width;
     fs << "image_height" << calibration.image_size.height;
     fs << "M1" << cv::Mat(calibration.M1);
@@ -363,7 +371,8 @@ Result<std::string> CalibrationYamlText(const StereoCalibration& calibration) {
     if (calibration.F) fs << "F" << cv::Mat(*calibration.F);
     return fs.releaseAndGetString();
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInternal, "could not format the calibration (" + OpenCvReason(e) + ")"};
+    return Error{ErrorCode::kInternal,
+                 "could not format the calibration (" + OpenCvReason(e) + ")"};
   }
 }
 

@@ -19,7 +19,7 @@ struct StereoCalibration {
   cv::Matx33d M1, M2;
   cv::Mat D1, D2;  // CV_64F, one row
   cv::Matx33d R;
-  cv::Vec3d T;     // metres
+  cv::Vec3d T;  // metres
   std::optional<cv::Matx33d> R1, R2, E, F;
   std::optional<cv::Matx34d> P1, P2;
   std::optional<cv::Matx44d> Q;

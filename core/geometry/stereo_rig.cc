@@ -100,7 +100,8 @@ Result<StereoRig> StereoRig::FromCalibration(const StereoCalibration& calibratio
                  "T: the camera named left sits to the right of the camera named right "
                  "(T_x > 0); swap left and right"};
   }
-  if (std::abs(calibration.T[0]) < std::max(std::abs(calibration.T[1]), std::abs(calibration.T[2]))) {
+  if (std::abs(calibration.T[0]) <
+      std::max(std::abs(calibration.T[1]), std::abs(calibration.T[2]))) {
     return Error{ErrorCode::kInvalidArgument,
                  "T: the baseline must be mostly horizontal (|T_x| largest); vertical or "
                  "forward-looking rigs are not supported"};
@@ -145,10 +146,10 @@ Result<StereoRig> StereoRig::FromCalibration(const StereoCalibration& calibratio
     }
     auto maps = std::make_shared<Maps>();
     try {
-      cv::initUndistortRectifyMap(cv::Mat(c.M1), c.D1, cv::Mat(*c.R1), cv::Mat(*c.P1),
-                                  c.image_size, CV_16SC2, maps->left_x, maps->left_y);
-      cv::initUndistortRectifyMap(cv::Mat(c.M2), c.D2, cv::Mat(*c.R2), cv::Mat(*c.P2),
-                                  c.image_size, CV_16SC2, maps->right_x, maps->right_y);
+      cv::initUndistortRectifyMap(cv::Mat(c.M1), c.D1, cv::Mat(*c.R1), cv::Mat(*c.P1), c.image_size,
+                                  CV_16SC2, maps->left_x, maps->left_y);
+      cv::initUndistortRectifyMap(cv::Mat(c.M2), c.D2, cv::Mat(*c.R2), cv::Mat(*c.P2), c.image_size,
+                                  CV_16SC2, maps->right_x, maps->right_y);
     } catch (const cv::Exception& e) {
       return Error{ErrorCode::kInvalidArgument,
                    std::string("calibration: building the remap tables failed (") + e.err + ")"};

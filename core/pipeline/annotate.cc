@@ -31,8 +31,8 @@ cv::Mat3b AnnotateTracks(const FrameResult& result) {
     }
     cv::rectangle(out, d.bbox, box_colour, thickness);
     char label[96];
-    const double range = t.state == tracking::TrackState::kCoasting ? cv::norm(t.position_cam_m)
-                                                                     : d.range_m;
+    const double range =
+        t.state == tracking::TrackState::kCoasting ? cv::norm(t.position_cam_m) : d.range_m;
     std::snprintf(label, sizeof label, "#%llu %.1f m +-%.1f%s",
                   static_cast<unsigned long long>(t.id), range, d.range_sigma_m,
                   t.state == tracking::TrackState::kCoasting    ? " (pred)"
@@ -41,8 +41,9 @@ cv::Mat3b AnnotateTracks(const FrameResult& result) {
     int baseline = 0;
     const cv::Size size = cv::getTextSize(label, font, scale, 1, &baseline);
     // Above the box when there is room, else inside its top edge.
-    const int top = d.bbox.y - size.height - baseline - 2 >= 0 ? d.bbox.y - size.height - baseline - 2
-                                                               : std::max(0, d.bbox.y);
+    const int top = d.bbox.y - size.height - baseline - 2 >= 0
+                        ? d.bbox.y - size.height - baseline - 2
+                        : std::max(0, d.bbox.y);
     // Inside the image on the right too.
     const int left = std::max(0, std::min(d.bbox.x, out.cols - size.width - 4));
     const cv::Rect tag(left, top, size.width + 4, size.height + baseline + 2);

@@ -26,12 +26,9 @@ constexpr Algorithm kAlgorithms[] = {Algorithm::kCanonical, Algorithm::kSteViE, 
 
 std::string_view AlgorithmName(Algorithm algorithm) {
   switch (algorithm) {
-    case Algorithm::kCanonical:
-      return "canonical";
-    case Algorithm::kSteViE:
-      return "stevie";
-    case Algorithm::kSteViS:
-      return "stevis";
+    case Algorithm::kCanonical: return "canonical";
+    case Algorithm::kSteViE: return "stevie";
+    case Algorithm::kSteViS: return "stevis";
   }
   return "unknown";
 }
@@ -48,8 +45,7 @@ std::vector<std::string> PipelineConfig::Validate() const {
   switch (algorithm) {
     case Algorithm::kCanonical:
     case Algorithm::kSteViE:
-    case Algorithm::kSteViS:
-      break;
+    case Algorithm::kSteViS: break;
     default:
       problems.push_back("algorithm: unknown value " + std::to_string(static_cast<int>(algorithm)));
   }

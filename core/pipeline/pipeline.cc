@@ -25,17 +25,10 @@ std::string SizeText(const cv::Size& size) {
 // Returns false for types other than CV_8UC1 / CV_8UC3 / CV_8UC4.
 bool ToGrey(const cv::Mat& in, cv::Mat& out) {
   switch (in.type()) {
-    case CV_8UC1:
-      in.copyTo(out);
-      return true;
-    case CV_8UC3:
-      cv::cvtColor(in, out, cv::COLOR_BGR2GRAY);
-      return true;
-    case CV_8UC4:
-      cv::cvtColor(in, out, cv::COLOR_BGRA2GRAY);
-      return true;
-    default:
-      return false;
+    case CV_8UC1: in.copyTo(out); return true;
+    case CV_8UC3: cv::cvtColor(in, out, cv::COLOR_BGR2GRAY); return true;
+    case CV_8UC4: cv::cvtColor(in, out, cv::COLOR_BGRA2GRAY); return true;
+    default: return false;
   }
 }
 
@@ -59,7 +52,8 @@ namespace {
 // Stage: extract. The detectors work on the processed (binned) images, where the disparity floor
 // (camera pixels) is divided by the binning; each hypothesis is then ranged on the camera's own
 // images.
-void Extract(const PipelineConfig& config, int factor, const FrameImages& images, FrameResult& result) {
+void Extract(const PipelineConfig& config, int factor, const FrameImages& images,
+             FrameResult& result) {
   const geometry::StereoRig& work_rig = *result.rig;
   geometry::RangeOptions range = config.range;
   range.min_disparity_px /= factor;
@@ -80,12 +74,12 @@ void Extract(const PipelineConfig& config, int factor, const FrameImages& images
           detection::DetectCanonical(result.disparity, work_rig, range, config.canonical, &full);
       break;
     case Algorithm::kSteViE:
-      result.detections =
-          detection::DetectSteViE(rect_left, result.disparity, work_rig, range, config.stevie, &full);
+      result.detections = detection::DetectSteViE(rect_left, result.disparity, work_rig, range,
+                                                  config.stevie, &full);
       break;
     case Algorithm::kSteViS:
-      result.detections =
-          detection::DetectSteViS(rect_left, result.disparity, work_rig, range, config.stevis, &full);
+      result.detections = detection::DetectSteViS(rect_left, result.disparity, work_rig, range,
+                                                  config.stevis, &full);
       break;
   }
 }
@@ -124,7 +118,8 @@ Status FrontEnd::State::Rectify(const StereoFrame& frame, const Snapshot& snapsh
   const geometry::StereoRig& rig = *snapshot.rig;
   cv::Mat& full_out = factor > 1 ? full_left : images.rect_left;
   cv::Mat& out_left = images.full_left;  // never written to from here
-  cv::Mat& out_right = images.rect_right;  // a view of frame.right or of rect_right; never written to
+  cv::Mat& out_right =
+      images.rect_right;  // a view of frame.right or of rect_right; never written to
   if (frame.rectified) {
     if (factor > 1 && frame.left.type() == CV_8UC1) {
       out_left = frame.left;  // only read: no copy needed
@@ -276,8 +271,12 @@ Result<FrameResult> Pipeline::Finish(PreparedFrame prepared, const Snapshot& sna
       state_->tracker->SetOptions(config.tracking);
     }
   }
-  const tracking::CameraModel camera{rig.f_px(), rig.cx(), rig.cy(), rig.baseline_m(),
-                                     rig.image_size().width, rig.image_size().height};
+  const tracking::CameraModel camera{rig.f_px(),
+                                     rig.cx(),
+                                     rig.cy(),
+                                     rig.baseline_m(),
+                                     rig.image_size().width,
+                                     rig.image_size().height};
   result.tracks = state_->tracker->Update(result.detections, result.capture_time_ns, camera);
   result.timings.push_back({"track", MsSince(t)});
 

@@ -30,11 +30,11 @@ struct StageTiming {
 
 // Everything one frame produced. Immutable once published.
 struct FrameResult {
-  uint64_t frame_id = 0;          // the pipeline's own count, from 1
+  uint64_t frame_id = 0;  // the pipeline's own count, from 1
   int64_t capture_time_ns = 0;
   int64_t capture_unix_time_ns = 0;
   int64_t source_index = 0;
-  int64_t pair_skew_ns = 0;       // the frame's right minus left capture time (two cameras)
+  int64_t pair_skew_ns = 0;  // the frame's right minus left capture time (two cameras)
   Algorithm algorithm = Algorithm::kCanonical;
   std::vector<detection::Detection> detections;
   // Every live track after this frame's detections (tentative, confirmed, coasting), by id.
@@ -48,7 +48,7 @@ struct FrameResult {
   // in the images the frame was processed at: binned (PipelineConfig::max_width_px) when the
   // camera is wider than that, and `rig` is then the binned rig (StereoRig::Binned).
   stereo::DisparityMap disparity;
-  cv::Mat rectified_left;         // 8-bit grey
+  cv::Mat rectified_left;  // 8-bit grey
   std::vector<StageTiming> timings;
   std::shared_ptr<const geometry::StereoRig> rig;  // the rig the frame was processed with
   int binning = 1;  // the binning factor of the processed images (1 = the camera's own)

@@ -201,11 +201,11 @@ template <typename V>
 
 // One call of the vector kernel: the valid rectangle of one image pair.
 struct Job {
-  const uint8_t* left;  // pre-filtered
-  const void* right;  // P: int16_t (pre-widened, for 16-bit costs) or uint8_t
+  const uint8_t* left;           // pre-filtered
+  const void* right;             // P: int16_t (pre-widened, for 16-bit costs) or uint8_t
   size_t left_step, right_step;  // elements
   int16_t* disp;
-  size_t disp_step;  // elements
+  size_t disp_step;    // elements
   int y0, y1, x0, x1;  // rows and columns matched
   int half;            // block_size / 2
   int nd, max_disp;
@@ -258,9 +258,10 @@ __attribute__((target("avx2"), always_inline)) inline __m256i At(const int16_t* 
 // Bit k of `words` (k = 0 .. 16 kVectors - 1) is the sign of 16-bit lane k % 16 of
 // masks[k / 16] (masks: comparison results, all ones or all zeros).
 template <int kVectors>
-__attribute__((target("avx2"), always_inline)) inline void LaneBits(const __m256i* masks, uint64_t* words) {
+__attribute__((target("avx2"), always_inline)) inline void LaneBits(const __m256i* masks,
+                                                                    uint64_t* words) {
   static_assert(kVectors % 2 == 0);
-  #pragma GCC unroll 8
+#pragma GCC unroll 8
   for (int v = 0; v < kVectors; v += 2) {
     // packs interleaves the 128-bit halves (a.lo b.lo a.hi b.hi); the permute puts them in order.
     const __m256i packed =
@@ -289,7 +290,7 @@ __attribute__((target("avx2"), noinline)) void MatchRowInRegisters(
   const int span = 2 * job.half;
   int16_t* const sad_buffer = cols - 2 * nd;  // the Job's T[nd] of the current pixel's costs
   __m256i s[kVectors];
-  #pragma GCC unroll 8
+#pragma GCC unroll 8
   for (int v = 0; v < kVectors; ++v) s[v] = At(sad_buffer + v * kLanes);
   for (int x = job.x0; x < job.x1; ++x) {
     const int jadd = x - job.x0 + span;
@@ -304,7 +305,7 @@ __attribute__((target("avx2"), noinline)) void MatchRowInRegisters(
       const __m256i bv = _mm256_set1_epi16(static_cast<int16_t>(b));
       const int16_t* ra = right_add + job.right_col[jadd];
       const int16_t* rs = right_sub + job.right_col[jadd];
-      #pragma GCC unroll 8
+#pragma GCC unroll 8
       for (int v = 0; v < kVectors; ++v) {
         const __m256i da = _mm256_abs_epi16(_mm256_sub_epi16(av, At(ra + v * kLanes)));
         const __m256i db = _mm256_abs_epi16(_mm256_sub_epi16(bv, At(rs + v * kLanes)));
@@ -314,9 +315,10 @@ __attribute__((target("avx2"), noinline)) void MatchRowInRegisters(
       }
       tex[jadd] += std::abs(a - job.cap) - std::abs(b - job.cap);
     } else {
-      #pragma GCC unroll 8
+#pragma GCC unroll 8
       for (int v = 0; v < kVectors; ++v) {
-        s[v] = _mm256_add_epi16(s[v], _mm256_sub_epi16(At(add_col + v * kLanes), At(sub_col + v * kLanes)));
+        s[v] = _mm256_add_epi16(
+            s[v], _mm256_sub_epi16(At(add_col + v * kLanes), At(sub_col + v * kLanes)));
       }
     }
     tsum += tex[jadd] - tex[jsub];
@@ -327,14 +329,15 @@ __attribute__((target("avx2"), noinline)) void MatchRowInRegisters(
     // The minimum (costs are >= 0: the unsigned horizontal minimum applies), then the first index
     // holding it.
     __m256i vmin = s[0];
-    #pragma GCC unroll 8
+#pragma GCC unroll 8
     for (int v = 1; v < kVectors; ++v) vmin = _mm256_min_epi16(vmin, s[v]);
-    const __m128i half_min = _mm_min_epi16(_mm256_castsi256_si128(vmin), _mm256_extracti128_si256(vmin, 1));
+    const __m128i half_min =
+        _mm_min_epi16(_mm256_castsi256_si128(vmin), _mm256_extracti128_si256(vmin, 1));
     const int min_sad = _mm_extract_epi16(_mm_minpos_epu16(half_min), 0);
     const __m256i min_v = _mm256_set1_epi16(static_cast<int16_t>(min_sad));
     __m256i masks[kVectors];
     uint64_t words[kWords];
-    #pragma GCC unroll 8
+#pragma GCC unroll 8
     for (int v = 0; v < kVectors; ++v) masks[v] = _mm256_cmpeq_epi16(s[v], min_v);
     LaneBits<kVectors>(masks, words);
     int best = 0;
@@ -349,10 +352,11 @@ __attribute__((target("avx2"), noinline)) void MatchRowInRegisters(
       const int thresh = std::min(min_sad + min_sad * job.uniqueness_ratio / 100,
                                   static_cast<int>(std::numeric_limits<int16_t>::max()));
       const __m256i above = _mm256_set1_epi16(static_cast<int16_t>(thresh));
-      #pragma GCC unroll 8
+#pragma GCC unroll 8
       for (int v = 0; v < kVectors; ++v) masks[v] = _mm256_cmpgt_epi16(above, s[v]);  // s < thresh
-      #pragma GCC unroll 8
-      for (int v = 0; v < kVectors; ++v) masks[v] = _mm256_or_si256(masks[v], _mm256_cmpeq_epi16(above, s[v]));
+#pragma GCC unroll 8
+      for (int v = 0; v < kVectors; ++v)
+        masks[v] = _mm256_or_si256(masks[v], _mm256_cmpeq_epi16(above, s[v]));
       LaneBits<kVectors>(masks, words);
       for (int k = std::max(0, best - 1); k <= std::min(nd - 1, best + 1); ++k) {
         words[k / 64] &= ~(uint64_t{1} << (k % 64));
@@ -364,12 +368,14 @@ __attribute__((target("avx2"), noinline)) void MatchRowInRegisters(
         continue;
       }
     }
-    #pragma GCC unroll 8
-    for (int v = 0; v < kVectors; ++v) _mm256_storeu_si256(reinterpret_cast<__m256i*>(sad_buffer + v * kLanes), s[v]);
+#pragma GCC unroll 8
+    for (int v = 0; v < kVectors; ++v)
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(sad_buffer + v * kLanes), s[v]);
     out[x] = Interpolated(sad_buffer, best, nd, job.max_disp);
   }
-  #pragma GCC unroll 8
-  for (int v = 0; v < kVectors; ++v) _mm256_storeu_si256(reinterpret_cast<__m256i*>(sad_buffer + v * kLanes), s[v]);
+#pragma GCC unroll 8
+  for (int v = 0; v < kVectors; ++v)
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(sad_buffer + v * kLanes), s[v]);
 }
 #endif
 
@@ -406,14 +412,13 @@ template <typename T, int kBytes, typename P>
       tex[jj] += std::abs(lv - job.cap);
     }
   }
-
 }
 
 // One row of pixels, for any nd: the costs go through memory (`sad`), as wide as the vectors.
 // `tsum`: the texture of the row's first window minus its last column.
 template <typename T, int kBytes, typename P>
-[[gnu::always_inline]] inline void MatchRowGeneric(const Job& job, T* sad, T* cols, int* tex, int tsum,
-                                                   bool slide, const uint8_t* left_add,
+[[gnu::always_inline]] inline void MatchRowGeneric(const Job& job, T* sad, T* cols, int* tex,
+                                                   int tsum, bool slide, const uint8_t* left_add,
                                                    const uint8_t* left_sub, const P* right_add,
                                                    const P* right_sub, int16_t* out) {
   using V = typename Lanes<T, kBytes>::V;
@@ -509,7 +514,7 @@ template <typename T, int kBytes, typename P, int kVectors = 0>
     if (slide) {
       for (int jj = 0; jj < span; ++jj) {
         SlideColumn<T, kBytes, P>(job, jj, left_add, left_sub, right_add, right_sub,
-                       cols + static_cast<size_t>(jj) * nd, tex + jj);
+                                  cols + static_cast<size_t>(jj) * nd, tex + jj);
       }
     }
     // SADs of the window minus its last column, which the first pixel adds.
@@ -645,7 +650,8 @@ void SadBlockMatcher::RunKernel(int x0, int x1, int y0, int y1, cv::Mat& dispari
   const size_t cost_size = static_cast<size_t>(ncols + 2) * nd;
   const bool avx2 = UsesAvx2();
   void (*kernel)(const Job&) = nullptr;
-  const bool costs16 = p_.block_size * p_.block_size * 2 * cap < std::numeric_limits<int16_t>::max();
+  const bool costs16 =
+      p_.block_size * p_.block_size * 2 * cap < std::numeric_limits<int16_t>::max();
   if (costs16) {
     if (cost16_.size() < cost_size * stripes) cost16_.resize(cost_size * stripes);
     right_filtered_.convertTo(right_wide_, CV_16SC1);
@@ -755,8 +761,7 @@ void SadBlockMatcher::Compute(const cv::Mat& left, const cv::Mat& right, cv::Mat
   ComputeOverrun(lofs + width1, y1, disparity);
 
   if (p_.speckle_window_size > 0) {
-    cv::filterSpeckles(disparity, filtered, p_.speckle_window_size, p_.speckle_range,
-                       speckle_buf_);
+    cv::filterSpeckles(disparity, filtered, p_.speckle_window_size, p_.speckle_range, speckle_buf_);
   }
 }
 

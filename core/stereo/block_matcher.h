@@ -11,14 +11,14 @@
 namespace stevi::stereo {
 
 struct SadBlockMatcherParams {
-  int num_disparities = 64;   // a positive multiple of 16
-  int min_disparity = 0;      // pixels
-  int block_size = 15;        // SAD window in pixels, odd, 5..255
-  int prefilter_cap = 31;     // x-Sobel pre-filter output cap, 1..63
-  int texture_threshold = 10; // >= 0: minimum window sum of |pre-filtered left - cap|
-  int uniqueness_ratio = 15;  // percent, 0..100; 0 disables the test
+  int num_disparities = 64;       // a positive multiple of 16
+  int min_disparity = 0;          // pixels
+  int block_size = 15;            // SAD window in pixels, odd, 5..255
+  int prefilter_cap = 31;         // x-Sobel pre-filter output cap, 1..63
+  int texture_threshold = 10;     // >= 0: minimum window sum of |pre-filtered left - cap|
+  int uniqueness_ratio = 15;      // percent, 0..100; 0 disables the test
   int speckle_window_size = 100;  // pixels, >= 0; 0 disables the speckle filter
-  int speckle_range = 32;     // 1/16 px, as cv::StereoBM::setSpeckleRange takes it; >= 0
+  int speckle_range = 32;         // 1/16 px, as cv::StereoBM::setSpeckleRange takes it; >= 0
   // Horizontal stripes matched at once, each on a thread of its own (the caller's and
   // stripes - 1 more), 1..8; fewer when the image is short. The output does not depend on it.
   int stripes = 1;

@@ -11,8 +11,8 @@ namespace stevi::stereo {
 // The median is exact on the fixed-point values (1/16 px): a histogram of the valid values, and
 // for an even count the mean of the two middle values.
 std::optional<double> MedianDisparityInMask(const DisparityMap& disparity, const cv::Mat1i& labels,
-                                            int label, const cv::Rect& box,
-                                            double min_disparity_px, int* valid_count) {
+                                            int label, const cv::Rect& box, double min_disparity_px,
+                                            int* valid_count) {
   if (valid_count != nullptr) *valid_count = 0;
   if (disparity.fixed.empty() || labels.size() != disparity.fixed.size()) return std::nullopt;
   const cv::Rect area = box & cv::Rect(0, 0, labels.cols, labels.rows);

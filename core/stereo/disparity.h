@@ -14,8 +14,8 @@ struct DisparityMap {
   static constexpr int kScale = 16;
   static constexpr int16_t kInvalid = -1;
 
-  cv::Mat1s fixed;         // CV_16SC1, the left image's size
-  int min_disparity = 0;   // search range used, pixels
+  cv::Mat1s fixed;        // CV_16SC1, the left image's size
+  int min_disparity = 0;  // search range used, pixels
   int num_disparities = 0;
   // The matcher's window (pixels): its errors are correlated over about this distance.
   int block_size = 1;
@@ -36,8 +36,8 @@ struct DisparityMap {
 // values.
 // `valid_count`, when given, receives the number of valid disparities used.
 std::optional<double> MedianDisparityInMask(const DisparityMap& disparity, const cv::Mat1i& labels,
-                                            int label, const cv::Rect& box,
-                                            double min_disparity_px, int* valid_count = nullptr);
+                                            int label, const cv::Rect& box, double min_disparity_px,
+                                            int* valid_count = nullptr);
 
 // 16-bit image of the raw fixed-point disparity (value = d * 16, 0 = unmatched), for PNG output.
 cv::Mat1w ToFixedPoint16U(const DisparityMap& disparity);

@@ -153,8 +153,9 @@ class OpenCvMatcher final : public DisparityMatcher {
     // sensor's sky must not pass for texture, nor a clean sensor's faint object fail.
     ComputeTextureSum(left_rect);
     const double noise = EstimateNoiseSigma(left_rect);
-    const int threshold = std::max(
-        kMinGateThreshold, static_cast<int>(std::lround(gate_.threshold * noise / kGateReferenceNoise)));
+    const int threshold =
+        std::max(kMinGateThreshold,
+                 static_cast<int>(std::lround(gate_.threshold * noise / kGateReferenceNoise)));
     last_gate_threshold_ = threshold;
     const int64_t min_sum = int64_t{threshold} * gate_.window * gate_.window;
     for (int y = 0; y < out.fixed.rows; ++y) {
@@ -191,7 +192,7 @@ class OpenCvMatcher final : public DisparityMatcher {
   }
 
   MatcherOptions options_;
-  cv::Ptr<cv::StereoMatcher> matcher_;     // or
+  cv::Ptr<cv::StereoMatcher> matcher_;  // or
   std::unique_ptr<SadBlockMatcher> sad_;
   int pad_columns_;
   int block_size_;
@@ -303,8 +304,8 @@ double EstimateNoiseSigma(const cv::Mat& grey) {
   CV_Assert(grey.type() == CV_8UC1);
   if (grey.rows < 3 || grey.cols < 3) return 0.0;
   // Immerkaer's operator (the difference of two Laplacians) cancels any local plane; its response
-  // to i.i.d. noise of sigma s has sigma 6 s. The median of its magnitude over every second pixel of every eighth row
-  // ignores the edges and texture that a minority of the pixels hold.
+  // to i.i.d. noise of sigma s has sigma 6 s. The median of its magnitude over every second pixel
+  // of every eighth row ignores the edges and texture that a minority of the pixels hold.
   std::array<int, 4 * 255 * 4 + 1> histogram{};
   int count = 0;
   for (int y = 1; y + 1 < grey.rows; y += 8) {
@@ -338,10 +339,10 @@ std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options) {
     // Grey input: cn = 1 in OpenCV's usual 8 * cn * block^2 and 32 * cn * block^2.
     const int p1 = o.p1 != 0 ? o.p1 : AutoP1(o.block_size);
     const int p2 = o.p2 != 0 ? o.p2 : AutoP2(o.block_size);
-    cv::Ptr<cv::StereoSGBM> sgbm = cv::StereoSGBM::create(
-        o.min_disparity, o.num_disparities, o.block_size, p1, p2, o.disp12_max_diff,
-        o.prefilter_cap, o.uniqueness_ratio, o.speckle_window_size, o.speckle_range,
-        ToOpenCvMode(o.mode));
+    cv::Ptr<cv::StereoSGBM> sgbm =
+        cv::StereoSGBM::create(o.min_disparity, o.num_disparities, o.block_size, p1, p2,
+                               o.disp12_max_diff, o.prefilter_cap, o.uniqueness_ratio,
+                               o.speckle_window_size, o.speckle_range, ToOpenCvMode(o.mode));
     const int pad = o.pad_left ? o.min_disparity + o.num_disparities : 0;
     const TextureGate gate{o.texture_threshold, std::max(o.block_size, kMinTextureWindow)};
     return std::make_unique<OpenCvMatcher>(options, std::move(sgbm), pad, o.block_size, gate);

@@ -70,10 +70,10 @@ struct SemiGlobalOptions {
   int p2 = 0;
   // Left-right check: maximum allowed difference in pixels, -1 disables.
   int disp12_max_diff = 1;
-  int prefilter_cap = 63;       // 1..63
-  int uniqueness_ratio = 10;    // 0..100
+  int prefilter_cap = 63;     // 1..63
+  int uniqueness_ratio = 10;  // 0..100
   int speckle_window_size = 100;
-  int speckle_range = 2;        // pixels
+  int speckle_range = 2;  // pixels
   Mode mode = Mode::kThreeWay;
   // Pad on the left by min_disparity + num_disparities columns (border replicated), as above.
   bool pad_left = true;

@@ -173,7 +173,8 @@ Eigen::Vector3d ConstantVelocityKalman::PredictedAngleDepth(double dt_s) const {
 
 void ConstantVelocityKalman::PredictAngleDepth(double dt_s, double q) {
   if (!(dt_s > 0)) dt_s = 0;
-  const Matrix6 F = NumericJacobian([dt_s](const Vector6& s) { return MoveAngleDepth(s, dt_s); }, x_);
+  const Matrix6 F =
+      NumericJacobian([dt_s](const Vector6& s) { return MoveAngleDepth(s, dt_s); }, x_);
   x_ = MoveAngleDepth(x_, dt_s);
   // White acceleration of density q on each cam axis over dt, mapped into s at the new state.
   const double dt2 = dt_s * dt_s;

@@ -69,7 +69,8 @@ std::vector<std::string> GateOptions::Validate() const {
     problems.push_back("depth_sigmas: must be in (0, 100]" + Got(depth_sigmas));
   }
   if (!(min_depth_sigma_fraction >= 0 && min_depth_sigma_fraction <= 1)) {
-    problems.push_back("min_depth_sigma_fraction: must be in [0, 1]" + Got(min_depth_sigma_fraction));
+    problems.push_back("min_depth_sigma_fraction: must be in [0, 1]" +
+                       Got(min_depth_sigma_fraction));
   }
   if (!(position_sigmas > 0 && position_sigmas <= 100)) {
     problems.push_back("position_sigmas: must be in (0, 100]" + Got(position_sigmas));
@@ -119,7 +120,8 @@ void Tracker::Reset() {
 namespace {
 
 // A nearer detection cuts another when it is at least this much nearer (depth ratio) and their
-// boxes touch (within kTouchPx: blobs of the detectors are separated by a few pixels of morphology).
+// boxes touch (within kTouchPx: blobs of the detectors are separated by a few pixels of
+// morphology).
 constexpr double kNearerRatio = 1.15;
 constexpr int kTouchPx = 4;
 // A detection's size agrees with the track's when it differs by at most this fraction of the
@@ -172,11 +174,10 @@ cv::Rect RectAround(double u, double v, double w, double h) {
 cv::Rect Subtract(const cv::Rect& a, const cv::Rect& b) {
   const cv::Rect overlap = a & b;
   if (overlap.empty()) return a;
-  const cv::Rect strips[] = {
-      {a.x, a.y, overlap.x - a.x, a.height},
-      {overlap.br().x, a.y, a.br().x - overlap.br().x, a.height},
-      {a.x, a.y, a.width, overlap.y - a.y},
-      {a.x, overlap.br().y, a.width, a.br().y - overlap.br().y}};
+  const cv::Rect strips[] = {{a.x, a.y, overlap.x - a.x, a.height},
+                             {overlap.br().x, a.y, a.br().x - overlap.br().x, a.height},
+                             {a.x, a.y, a.width, overlap.y - a.y},
+                             {a.x, overlap.br().y, a.width, a.br().y - overlap.br().y}};
   cv::Rect best;
   for (const cv::Rect& r : strips) {
     if (r.width > 0 && r.height > 0 && r.area() > best.area()) best = r;
@@ -295,8 +296,8 @@ bool Tracker::DepthConsistent(const Prediction& p, const detection::Detection& d
          gates.depth_sigmas * gates.depth_sigmas * (sigma * sigma + p.var_z);
 }
 
-void Tracker::Correct(Entry& e, const Prediction& p, const detection::Detection& d,
-                      const Cut& cut, bool merged, const CameraModel& camera) {
+void Tracker::Correct(Entry& e, const Prediction& p, const detection::Detection& d, const Cut& cut,
+                      bool merged, const CameraModel& camera) {
   const Measured measured = Measure(e, p, d, cut, merged);
   e.kalman = p.kalman;
   const AngleDepth m = MeasureAngleDepth(camera, measured.centre.x, measured.centre.y, DepthOf(d),
@@ -317,7 +318,8 @@ void Tracker::Correct(Entry& e, const Prediction& p, const detection::Detection&
     // A cut blob larger than the full size says the obstacle is at least that large (it is entering
     // the image, or was first seen partly hidden).
     const double scale = DepthOf(d) / e.full_depth_m;
-    if (!cut.left && !cut.right) e.full_size.width = std::max(e.full_size.width, d.bbox.width * scale);
+    if (!cut.left && !cut.right)
+      e.full_size.width = std::max(e.full_size.width, d.bbox.width * scale);
     if (!cut.top && !cut.bottom) {
       e.full_size.height = std::max(e.full_size.height, d.bbox.height * scale);
     }
@@ -477,8 +479,8 @@ int Tracker::FindSharedBlob(const Prediction& p,
     const double tol_u = std::max(kEdgeAgreePx, kEdgeAgreeSigmas * p.sigma_u);
     const double lo_error = std::abs(d.bbox.x - predicted.x);
     const double hi_error = std::abs(d.bbox.br().x - predicted.br().x);
-    const bool wider = d.bbox.width > p.size.width +
-                                          std::max(kSizeTolerancePx, kSizeTolerance * p.size.width);
+    const bool wider =
+        d.bbox.width > p.size.width + std::max(kSizeTolerancePx, kSizeTolerance * p.size.width);
     const double error = std::min(lo_error, hi_error);
     if (!wider || error > tol_u || error >= best_error) continue;
     // Each obstacle of a merged blob is a substantial part of it; a sliver along its edge (a
@@ -497,9 +499,9 @@ void Tracker::UpdatePositionOnly(int t, int k, const std::vector<detection::Dete
   const detection::Detection& d = detections[usable_[k]];
   Measured m = Measure(e, p, d, cuts_[k], true);
   e.kalman = p.kalman;
-  const AngleDepth pseudo = MeasureAngleDepth(camera, m.centre.x, m.centre.y, p.z,
-                                              kNoDepthSigmaFraction * p.z,
-                                              options_.kalman.measurement_noise);
+  const AngleDepth pseudo =
+      MeasureAngleDepth(camera, m.centre.x, m.centre.y, p.z, kNoDepthSigmaFraction * p.z,
+                        options_.kalman.measurement_noise);
   Eigen::Matrix3d covariance = pseudo.covariance;
   const double f2 = camera.f_px * camera.f_px;
   covariance(0, 0) = m.var_u / f2;
@@ -525,9 +527,9 @@ void Tracker::Coast(Entry& e, double dt, const CameraModel& camera) {
   e.kalman.PredictAngleDepth(dt, kalman.occluded_process_noise);
   const Eigen::Vector3d s = e.kalman.position();
   if (s.z() > kMinDepthM) {
-    const AngleDepth pseudo = MeasureAngleDepth(
-        camera, camera.cx + camera.f_px * s.x(), camera.cy + camera.f_px * s.y(), s.z(), 0,
-        kalman.occluded_measurement_noise);
+    const AngleDepth pseudo =
+        MeasureAngleDepth(camera, camera.cx + camera.f_px * s.x(), camera.cy + camera.f_px * s.y(),
+                          s.z(), 0, kalman.occluded_measurement_noise);
     e.kalman.Update(pseudo.s, pseudo.covariance);
     if (e.full_size.width > 0) {
       const double scale = e.full_depth_m > 0 ? e.full_depth_m / s.z() : 1.0;
@@ -710,7 +712,8 @@ Track Tracker::Output(const Entry& e, const CameraModel& camera) const {
       (J * e.kalman.covariance() * J.transpose()).diagonal();
   if (e.misses > 0 && z > kMinDepthM) {
     // Not measured this frame: the centre is the prediction's.
-    track.detection.centroid_px = cv::Point2d(camera.cx + camera.f_px * a, camera.cy + camera.f_px * b);
+    track.detection.centroid_px =
+        cv::Point2d(camera.cx + camera.f_px * a, camera.cy + camera.f_px * b);
   }
   if (e.misses == 0 && e.position_only && z > kMinDepthM) {
     // Measured in position only: the depth is the filter's, not the shared blob's.
@@ -738,7 +741,8 @@ Track Tracker::Output(const Entry& e, const CameraModel& camera) const {
   track.range_rate_mps = p.norm() > 0 ? p.dot(v) / p.norm() : 0.0;
   // Closing only when the range rate is significantly negative (beyond 2 sigma of its own
   // uncertainty): a hovering or standing obstacle's velocity noise must not read as an approach.
-  const Eigen::Vector3d line_of_sight = p.norm() > 0 ? Eigen::Vector3d(p / p.norm()) : Eigen::Vector3d::Zero();
+  const Eigen::Vector3d line_of_sight =
+      p.norm() > 0 ? Eigen::Vector3d(p / p.norm()) : Eigen::Vector3d::Zero();
   const Eigen::Vector3d velocity_sigma = variance.tail<3>().cwiseMax(0.0).cwiseSqrt();
   const double range_rate_sigma = line_of_sight.cwiseProduct(velocity_sigma).norm();
   track.range_rate_sigma_mps = range_rate_sigma;

@@ -155,7 +155,7 @@ class Tracker {
     int age_frames = 0;
     int hits = 0;
     int misses = 0;
-    detection::Detection last;  // the last detection, as measured
+    detection::Detection last;      // the last detection, as measured
     ConstantVelocityKalman kalman;  // on s = (a, b, z): see MeasureAngleDepth
     FadingMemoryFilter range_filter;
     double since_measured_s = 0;  // (clamped) time since the last detection
@@ -184,12 +184,12 @@ class Tracker {
   };
   // A track predicted to this frame, for gating and the update.
   struct Prediction {
-    ConstantVelocityKalman kalman;  // predicted with the measured process noise
-    double u = 0, v = 0;            // predicted centre, pixels
+    ConstantVelocityKalman kalman;    // predicted with the measured process noise
+    double u = 0, v = 0;              // predicted centre, pixels
     double sigma_u = 0, sigma_v = 0;  // its 1-sigma, pixels
-    double z = 0, var_z = 0;        // predicted depth (metres) and its variance
-    cv::Size2d size;                // the full size expected at depth z
-    bool valid = false;             // in front of the camera
+    double z = 0, var_z = 0;          // predicted depth (metres) and its variance
+    cv::Size2d size;                  // the full size expected at depth z
+    bool valid = false;               // in front of the camera
   };
   // The centre a detection gives a track, and the variance of that centre on u and v (px^2).
   struct Measured {

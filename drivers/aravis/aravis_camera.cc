@@ -49,20 +49,16 @@ class GErrorSlot {
         case ARV_DEVICE_ERROR_TIMEOUT:
         case ARV_DEVICE_ERROR_NOT_CONTROLLER:
         case ARV_DEVICE_ERROR_PROTOCOL_ERROR_ACCESS_DENIED:
-        case ARV_DEVICE_ERROR_PROTOCOL_ERROR_BUSY:
-          return ErrorCode::kUnavailable;
-        default:
-          return ErrorCode::kInternal;
+        case ARV_DEVICE_ERROR_PROTOCOL_ERROR_BUSY: return ErrorCode::kUnavailable;
+        default: return ErrorCode::kInternal;
       }
     }
     if (error_->domain == ARV_GC_ERROR) {
       switch (error_->code) {
         case ARV_GC_ERROR_OUT_OF_RANGE:
         case ARV_GC_ERROR_ENUM_ENTRY_NOT_FOUND:
-        case ARV_GC_ERROR_READ_ONLY:
-          return ErrorCode::kInvalidArgument;
-        default:
-          return ErrorCode::kInternal;
+        case ARV_GC_ERROR_READ_ONLY: return ErrorCode::kInvalidArgument;
+        default: return ErrorCode::kInternal;
       }
     }
     return ErrorCode::kInternal;
@@ -339,8 +335,8 @@ Status ConfigurePixelFormat(ConfigureStep& step, const CameraSettings& settings,
     }
     if (!offers(settings.pixel_format)) {
       return Error{ErrorCode::kInvalidArgument, step.name + " does not offer pixel format " +
-                                                    settings.pixel_format +
-                                                    " (it offers " + Join(offered) + ")"};
+                                                    settings.pixel_format + " (it offers " +
+                                                    Join(offered) + ")"};
     }
   } else if (offers("Mono8")) {
     format = PixelFormat::kMono8;
@@ -359,7 +355,8 @@ Status ConfigurePixelFormat(ConfigureStep& step, const CameraSettings& settings,
   }
   info.pixel_format = *format;
   arv_camera_set_pixel_format_from_string(step.camera, PixelFormatName(*format), step.error.out());
-  if (step.error) return step.Failed(std::string("setting pixel format ") + PixelFormatName(*format));
+  if (step.error)
+    return step.Failed(std::string("setting pixel format ") + PixelFormatName(*format));
   arv_format = arv_camera_get_pixel_format(step.camera, step.error.out());
   if (step.error) return step.Failed("reading the pixel format back");
 
@@ -401,10 +398,9 @@ Status ConfigureRoi(ConfigureStep& step, const CameraSettings& settings, CameraI
                      ")"};
   }
   if (roi_w < w_min || roi_h < h_min) {
-    return Error{ErrorCode::kInvalidArgument, step.name + ": the region of interest " +
-                                                  SizeText(roi_w, roi_h) +
-                                                  " is smaller than its minimum " +
-                                                  SizeText(w_min, h_min)};
+    return Error{ErrorCode::kInvalidArgument,
+                 step.name + ": the region of interest " + SizeText(roi_w, roi_h) +
+                     " is smaller than its minimum " + SizeText(w_min, h_min)};
   }
   const gint w_step = std::max(1, arv_camera_get_width_increment(step.camera, step.error.out()));
   if (step.error) return step.Failed("reading the width step");
@@ -419,9 +415,11 @@ Status ConfigureRoi(ConfigureStep& step, const CameraSettings& settings, CameraI
   }
   int x = (sensor_w - roi_w) / 2, y = (sensor_h - roi_h) / 2;
   if (has_offsets) {
-    const gint x_step = std::max(1, arv_camera_get_x_offset_increment(step.camera, step.error.out()));
+    const gint x_step =
+        std::max(1, arv_camera_get_x_offset_increment(step.camera, step.error.out()));
     if (step.error) return step.Failed("reading the x offset step");
-    const gint y_step = std::max(1, arv_camera_get_y_offset_increment(step.camera, step.error.out()));
+    const gint y_step =
+        std::max(1, arv_camera_get_y_offset_increment(step.camera, step.error.out()));
     if (step.error) return step.Failed("reading the y offset step");
     // A Bayer mosaic keeps its phase only with even offsets.
     const int x_align = IsBayer(format) ? std::lcm(x_step, 2) : x_step;
@@ -447,8 +445,8 @@ Status ConfigureRoi(ConfigureStep& step, const CameraSettings& settings, CameraI
     return Error{ErrorCode::kInvalidArgument,
                  step.name + ": asked for the region " + SizeText(roi_w, roi_h) + " at (" +
                      std::to_string(x) + ", " + std::to_string(y) + "), the camera set " +
-                     SizeText(rw, rh) + " at (" + std::to_string(rx) + ", " +
-                     std::to_string(ry) + ")"};
+                     SizeText(rw, rh) + " at (" + std::to_string(rx) + ", " + std::to_string(ry) +
+                     ")"};
   }
 
   return Status::Ok();
@@ -468,7 +466,10 @@ struct AnalogControl {
   double (*get)(ArvCamera*, GError**);
 };
 
-const AnalogControl kExposure = {"exposure", "exposure_us", "exposure time control", "us",
+const AnalogControl kExposure = {"exposure",
+                                 "exposure_us",
+                                 "exposure time control",
+                                 "us",
                                  arv_camera_is_exposure_time_available,
                                  arv_camera_is_exposure_auto_available,
                                  arv_camera_set_exposure_time_auto,
@@ -476,10 +477,16 @@ const AnalogControl kExposure = {"exposure", "exposure_us", "exposure time contr
                                  arv_camera_set_exposure_time,
                                  arv_camera_get_exposure_time};
 // SFNC "Gain" is in dB; a few cameras expose only a raw gain in their own units.
-const AnalogControl kGain = {"gain", "gain_db", "gain control", "dB",
-                             arv_camera_is_gain_available, arv_camera_is_gain_auto_available,
-                             arv_camera_set_gain_auto, arv_camera_get_gain_bounds,
-                             arv_camera_set_gain, arv_camera_get_gain};
+const AnalogControl kGain = {"gain",
+                             "gain_db",
+                             "gain control",
+                             "dB",
+                             arv_camera_is_gain_available,
+                             arv_camera_is_gain_auto_available,
+                             arv_camera_set_gain_auto,
+                             arv_camera_get_gain_bounds,
+                             arv_camera_set_gain,
+                             arv_camera_get_gain};
 
 // Sets `c` to `value`, or to automatic when `automatic` (kept as it is, with a note, on a camera
 // without the automatic mode); reads the value back into `actual` when the camera has the control.
@@ -499,7 +506,8 @@ Status ConfigureAnalog(ConfigureStep& step, const AnalogControl& c, bool automat
   } else {
     if (!has) {
       return Error{ErrorCode::kInvalidArgument, step.name + ": " + c.setting + " " + Number(value) +
-                                                    " was asked but the camera has no " + c.control};
+                                                    " was asked but the camera has no " +
+                                                    c.control};
     }
     if (has_auto) {
       c.set_auto(step.camera, ARV_AUTO_OFF, step.error.out());
@@ -514,7 +522,8 @@ Status ConfigureAnalog(ConfigureStep& step, const AnalogControl& c, bool automat
                                                     Number(hi) + " " + c.unit};
     }
     c.set(step.camera, value, step.error.out());
-    if (step.error) return step.Failed("setting the " + noun + " to " + Number(value) + " " + c.unit);
+    if (step.error)
+      return step.Failed("setting the " + noun + " to " + Number(value) + " " + c.unit);
   }
   if (has) {
     actual = c.get(step.camera, step.error.out());
@@ -537,7 +546,8 @@ Status ConfigureFrameRate(ConfigureStep& step, const CameraSettings& settings, C
                          " is outside its range " + Number(lo) + ".." + Number(hi) + " Hz"};
       }
       arv_camera_set_frame_rate(step.camera, settings.frame_rate_hz, step.error.out());
-      if (step.error) return step.Failed("setting the frame rate to " + Number(settings.frame_rate_hz));
+      if (step.error)
+        return step.Failed("setting the frame rate to " + Number(settings.frame_rate_hz));
     }
     info.frame_rate_hz = arv_camera_get_frame_rate(step.camera, step.error.out());
     if (step.error) return step.Failed("reading the frame rate back");
@@ -565,7 +575,8 @@ Status ConfigureTrigger(ConfigureStep& step, const CameraSettings& settings, Cam
       break;
     case TriggerMode::kHardware: {
       guint n = 0;
-      const char** strings = arv_camera_dup_available_trigger_sources(step.camera, &n, step.error.out());
+      const char** strings =
+          arv_camera_dup_available_trigger_sources(step.camera, &n, step.error.out());
       const std::vector<std::string> sources = TakeStrings(strings, n);
       if (step.error) return step.Failed("listing the trigger sources");
       if (std::find(sources.begin(), sources.end(), settings.trigger_line) == sources.end()) {
@@ -665,8 +676,8 @@ Result<std::unique_ptr<AravisCamera>> AravisCamera::Open(const CameraSettings& s
     // scheduling hiccup of the stream thread then drops packets and frames. Ask for a few
     // frames' worth (Linux caps it at net.core.rmem_max, which large ROIs may need raised).
     const size_t wanted = std::clamp<size_t>(4 * static_cast<size_t>(payload), 1 << 20, 32 << 20);
-    g_object_set(h.stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_FIXED,
-                 "socket-buffer-size", static_cast<gint>(wanted), nullptr);
+    g_object_set(h.stream, "socket-buffer", ARV_GV_STREAM_SOCKET_BUFFER_FIXED, "socket-buffer-size",
+                 static_cast<gint>(wanted), nullptr);
   }
   for (int i = 0; i < settings.buffers; ++i) {
     arv_stream_push_buffer(h.stream, arv_buffer_new_allocate(payload));
@@ -718,7 +729,7 @@ Result<std::optional<MonoFrame>> AravisCamera::Pop(std::chrono::microseconds tim
         const guint64 host_ns = arv_buffer_get_system_timestamp(buffer);
         frame->t_ns = static_cast<int64_t>(
             settings_.timestamps == TimestampSource::kCamera && camera_ns != 0 ? camera_ns
-                                                                              : host_ns);
+                                                                               : host_ns);
         frame->unix_time_ns = static_cast<int64_t>(host_ns);
         frame->frame_id = arv_buffer_get_frame_id(buffer);
       }

@@ -48,9 +48,9 @@ Result<cv::Mat> ToGrey(const void* data, size_t size, int width, int height, Pix
 
 // A device as discovered by Aravis.
 struct DeviceEntry {
-  std::string id;        // Aravis device id, e.g. "Aravis-Fake-GV01" (vendor-model-serial)
-  std::string serial;    // e.g. "GV01"
-  std::string address;   // IP address for GigE Vision, else empty or a bus id
+  std::string id;       // Aravis device id, e.g. "Aravis-Fake-GV01" (vendor-model-serial)
+  std::string serial;   // e.g. "GV01"
+  std::string address;  // IP address for GigE Vision, else empty or a bus id
   std::string vendor;
   std::string model;
   std::string protocol;  // "GigEVision", "USB3Vision", "Fake"
@@ -78,8 +78,8 @@ struct CameraSettings {
   double exposure_us = 0;     // 0 = automatic where the camera has it
   double gain_db = -1;        // negative = automatic where the camera has it
   TriggerMode trigger = TriggerMode::kFreeRun;
-  std::string trigger_line;   // kHardware: the trigger source, e.g. "Line0"
-  int buffers = 8;            // stream buffers (>= 2)
+  std::string trigger_line;  // kHardware: the trigger source, e.g. "Line0"
+  int buffers = 8;           // stream buffers (>= 2)
   TimestampSource timestamps = TimestampSource::kCamera;
 };
 
@@ -102,8 +102,8 @@ struct CameraInfo {
 
 // Stream health since the camera was opened.
 struct CameraStats {
-  uint64_t frames = 0;      // complete frames delivered by Pop()
-  uint64_t incomplete = 0;  // buffers dropped: missing packets, timeouts, wrong size or format
+  uint64_t frames = 0;           // complete frames delivered by Pop()
+  uint64_t incomplete = 0;       // buffers dropped: missing packets, timeouts, wrong size or format
   uint64_t resent_packets = 0;   // GigE packets recovered by resend requests
   uint64_t missing_packets = 0;  // GigE packets never received
   uint64_t underruns = 0;        // frames lost because no buffer was free

@@ -53,9 +53,12 @@ std::vector<std::string> AravisOptions::Validate() const {
   if (!left_id.empty() && left_id == right_id) {
     problems.push_back("right_id: must differ from left_id (both are '" + left_id + "')");
   }
-  const std::string sides = "must be in " + std::to_string(kMinRoiPx) + ".." + std::to_string(kMaxRoiPx) + " pixels";
-  if (roi_width < kMinRoiPx || roi_width > kMaxRoiPx) problems.push_back("roi_width: " + sides + Got(roi_width));
-  if (roi_height < kMinRoiPx || roi_height > kMaxRoiPx) problems.push_back("roi_height: " + sides + Got(roi_height));
+  const std::string sides =
+      "must be in " + std::to_string(kMinRoiPx) + ".." + std::to_string(kMaxRoiPx) + " pixels";
+  if (roi_width < kMinRoiPx || roi_width > kMaxRoiPx)
+    problems.push_back("roi_width: " + sides + Got(roi_width));
+  if (roi_height < kMinRoiPx || roi_height > kMaxRoiPx)
+    problems.push_back("roi_height: " + sides + Got(roi_height));
   if (!pixel_format.empty()) {
     const std::optional<PixelFormat> format = ParsePixelFormat(pixel_format);
     if (!format) {
@@ -127,12 +130,12 @@ struct AravisStereoSource::Impl {
   Clock::time_point trigger_epoch;  // software trigger instants: epoch + k * period
 
   mutable std::mutex mu;
-  std::condition_variable cv;  // a pair, a loss, a recovery, or stop
-  bool stop = false;                         // (mu)
-  bool interrupted = false;                  // (mu) Interrupt(): Next() returns at once
-  StereoPairer pairer;                       // (mu)
-  std::optional<StereoFrame> latest;         // (mu) newest pair not yet taken
-  uint64_t reconnects = 0;                   // (mu)
+  std::condition_variable cv;         // a pair, a loss, a recovery, or stop
+  bool stop = false;                  // (mu)
+  bool interrupted = false;           // (mu) Interrupt(): Next() returns at once
+  StereoPairer pairer;                // (mu)
+  std::optional<StereoFrame> latest;  // (mu) newest pair not yet taken
+  uint64_t reconnects = 0;            // (mu)
   std::array<Slot, 2> slots;
 
   Slot& slot(Side side) { return slots[side == Side::kLeft ? 0 : 1]; }
@@ -164,8 +167,8 @@ void AravisStereoSource::Impl::Lose(Slot& s, const std::string& reason) {
   s.camera->MarkLost();
   // Releasing a lost GigE camera blocks for Aravis's control timeout; do it aside so that
   // reopening starts at once.
-  s.releases.push_back(std::async(std::launch::async,
-                                  [camera = std::move(s.camera)]() mutable { camera.reset(); }));
+  s.releases.push_back(
+      std::async(std::launch::async, [camera = std::move(s.camera)]() mutable { camera.reset(); }));
   PublishStats(s, CameraStats{});
   {
     std::lock_guard lock(mu);
@@ -331,11 +334,10 @@ Result<std::unique_ptr<AravisStereoSource>> AravisStereoSource::Open(
   }
   if (rig && rig->image_size() != cv::Size(options.roi_width, options.roi_height)) {
     return Error{ErrorCode::kInvalidArgument,
-                 "the calibration's image size " + std::to_string(rig->image_size().width) +
-                     "x" + std::to_string(rig->image_size().height) +
-                     " differs from the region of interest " +
-                     std::to_string(options.roi_width) + "x" +
-                     std::to_string(options.roi_height)};
+                 "the calibration's image size " + std::to_string(rig->image_size().width) + "x" +
+                     std::to_string(rig->image_size().height) +
+                     " differs from the region of interest " + std::to_string(options.roi_width) +
+                     "x" + std::to_string(options.roi_height)};
   }
 
   auto impl = std::make_unique<Impl>();
@@ -397,7 +399,8 @@ std::string AravisStereoSource::Describe() const {
   std::snprintf(rate, sizeof rate, "%g", o.frame_rate_hz);
   std::string text = "aravis " + left + " + " + right + " " + std::to_string(o.roi_width) + "x" +
                      std::to_string(o.roi_height) + " " + rate + " fps";
-  if (o.trigger.mode != TriggerMode::kFreeRun) text += std::string(" ") + TriggerModeName(o.trigger.mode) + " trigger";
+  if (o.trigger.mode != TriggerMode::kFreeRun)
+    text += std::string(" ") + TriggerModeName(o.trigger.mode) + " trigger";
   if (o.trigger.mode == TriggerMode::kHardware) text += " on " + o.trigger.line;
   return text;
 }
@@ -448,8 +451,8 @@ Result<StereoFrame> AravisStereoSource::Next() {
   std::snprintf(waited, sizeof waited, "%g s",
                 std::chrono::duration<double>(m.options.timeout).count());
   std::string message = "no pair from " + l.name + "/" + r.name + " for " + waited +
-                        " (left: " + std::to_string(left_frames) + " frames, right: " +
-                        std::to_string(right_frames) + " frames)";
+                        " (left: " + std::to_string(left_frames) +
+                        " frames, right: " + std::to_string(right_frames) + " frames)";
   if (left_frames > 0 && right_frames > 0) {
     const int64_t gap = r.last_t_ns - l.last_t_ns;
     if (std::llabs(gap) > 1'000'000'000) {

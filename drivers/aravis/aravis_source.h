@@ -29,7 +29,7 @@ struct AravisOptions {
   std::string left_id;
   std::string right_id;
   // Region of interest, pixels, centred on each sensor; the same on both cameras.
-  int roi_width = 640;   // kMinRoiPx..kMaxRoiPx
+  int roi_width = 640;  // kMinRoiPx..kMaxRoiPx
   int roi_height = 480;
   // "" picks Mono8 where offered, else a Bayer*8 format (converted to grey).
   std::string pixel_format;

@@ -22,10 +22,10 @@ const char* SideName(Side side);
 
 // One frame of one camera.
 struct MonoFrame {
-  cv::Mat image;              // CV_8UC1
-  int64_t t_ns = 0;           // capture time on the clock that both cameras share
-  int64_t unix_time_ns = 0;   // wall-clock time of the capture (0 = unknown)
-  uint64_t frame_id = 0;      // the camera's frame counter (diagnostics only)
+  cv::Mat image;             // CV_8UC1
+  int64_t t_ns = 0;          // capture time on the clock that both cameras share
+  int64_t unix_time_ns = 0;  // wall-clock time of the capture (0 = unknown)
+  uint64_t frame_id = 0;     // the camera's frame counter (diagnostics only)
 };
 
 struct PairerOptions {

@@ -85,8 +85,7 @@ Result<cv::Mat> ReadImage(const std::string& path) {
   }
   switch (image.channels()) {
     case 1:
-    case 3:
-      return image;
+    case 3: return image;
     case 4: {
       cv::Mat bgr;
       cv::cvtColor(image, bgr, cv::COLOR_BGRA2BGR);

@@ -51,8 +51,8 @@ std::string ImageProblem(const cv::Mat& image, const char* side) {
   if (image.empty()) {
     problem = ": empty image";
   } else if (image.type() != CV_8UC1 && image.type() != CV_8UC3) {
-    problem = ": expected 8-bit grey (CV_8UC1) or BGR (CV_8UC3), got " +
-              cv::typeToString(image.type());
+    problem =
+        ": expected 8-bit grey (CV_8UC1) or BGR (CV_8UC3), got " + cv::typeToString(image.type());
   } else if (image.cols > kMaxImageSide || image.rows > kMaxImageSide ||
              int64_t{image.cols} * image.rows > kMaxImagePixels) {
     problem = ": " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +
@@ -111,9 +111,9 @@ Result<std::unique_ptr<Recorder>> Recorder::Start(const std::string& dir, Record
   const std::string manifest_path = (fs::path(dir) / kManifestFileName).string();
   const std::string records_path = (fs::path(dir) / kRecordsFileName).string();
   if (fs::exists(manifest_path, ec)) {
-    return Error{ErrorCode::kAlreadyExists,
-                 "recording directory " + dir + " already holds a recording (" +
-                     kManifestFileName + " exists); record to a new directory"};
+    return Error{ErrorCode::kAlreadyExists, "recording directory " + dir +
+                                                " already holds a recording (" + kManifestFileName +
+                                                " exists); record to a new directory"};
   }
   // O_EXCL: of two recorders started on one directory, only one gets it.
   const int fd = ::open(records_path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
@@ -216,15 +216,15 @@ std::optional<Error> Recorder::RefuseLocked(bool frame) {
   }
   if (frame && queued_frames_ >= static_cast<size_t>(options_.queue_frames)) {
     ++status_.frames_dropped;
-    return Error{ErrorCode::kResourceExhausted,
-                 "recording " + dir_ + ": the writer is behind (" +
-                     std::to_string(options_.queue_frames) + " frames queued); frame dropped"};
+    return Error{ErrorCode::kResourceExhausted, "recording " + dir_ + ": the writer is behind (" +
+                                                    std::to_string(options_.queue_frames) +
+                                                    " frames queued); frame dropped"};
   }
   if (!frame && queued_other_ >= kMaxQueuedOther) {
     ++status_.other_dropped;
-    return Error{ErrorCode::kResourceExhausted,
-                 "recording " + dir_ + ": the writer is behind (" +
-                     std::to_string(kMaxQueuedOther) + " records queued); record dropped"};
+    return Error{ErrorCode::kResourceExhausted, "recording " + dir_ + ": the writer is behind (" +
+                                                    std::to_string(kMaxQueuedOther) +
+                                                    " records queued); record dropped"};
   }
   return std::nullopt;
 }
@@ -305,8 +305,8 @@ std::optional<Recorder::Outcome> Recorder::Write(const Item& item) {
       // AddFrame checked the images, so this is a library failure: stop rather than lose frames
       // silently one by one.
       return Outcome{"cannot encode frame " + std::to_string(frame->index) + " as PNG" + why,
-                     "recording " + dir_ + ": cannot encode frame " +
-                         std::to_string(frame->index) + " as PNG" + why,
+                     "recording " + dir_ + ": cannot encode frame " + std::to_string(frame->index) +
+                         " as PNG" + why,
                      ErrorCode::kInternal};
     }
     v1::RecordedFrame* out = entry.mutable_frame();
@@ -315,9 +315,8 @@ std::optional<Recorder::Outcome> Recorder::Write(const Item& item) {
     out->set_unix_time_ns(frame->unix_time_ns);
     out->set_pair_skew_ns(frame->pair_skew_ns);
     out->set_rectified(frame->rectified);
-    for (auto [image, png, side] :
-         {std::tuple{&frame->left, &left_png, out->mutable_left()},
-          std::tuple{&frame->right, &right_png, out->mutable_right()}}) {
+    for (auto [image, png, side] : {std::tuple{&frame->left, &left_png, out->mutable_left()},
+                                    std::tuple{&frame->right, &right_png, out->mutable_right()}}) {
       side->set_width(image->cols);
       side->set_height(image->rows);
       side->set_channels(image->channels());
@@ -343,9 +342,8 @@ std::optional<Recorder::Outcome> Recorder::Write(const Item& item) {
     return std::nullopt;
   }
   uint8_t prefix[5];
-  const uint8_t* prefix_end =
-      google::protobuf::io::CodedOutputStream::WriteVarint32ToArray(static_cast<uint32_t>(size),
-                                                                    prefix);
+  const uint8_t* prefix_end = google::protobuf::io::CodedOutputStream::WriteVarint32ToArray(
+      static_cast<uint32_t>(size), prefix);
   const size_t prefix_size = static_cast<size_t>(prefix_end - prefix);
   std::string record(prefix_size + size, '\0');
   std::memcpy(record.data(), prefix, prefix_size);
@@ -398,8 +396,8 @@ std::optional<Recorder::Outcome> Recorder::Append(const std::string& record) {
     // Cut the torn record off, so the file ends on a whole record.
     if (::ftruncate(fd_, static_cast<off_t>(good_size)) != 0 ||
         ::lseek(fd_, static_cast<off_t>(good_size), SEEK_SET) < 0) {
-      message += "; truncating back to the last whole record (byte " +
-                 std::to_string(good_size) + ") also failed (" + std::strerror(errno) + ")";
+      message += "; truncating back to the last whole record (byte " + std::to_string(good_size) +
+                 ") also failed (" + std::strerror(errno) + ")";
     }
     return Outcome{message, message, WriteErrorCode(err)};
   }

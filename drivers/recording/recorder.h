@@ -57,7 +57,7 @@ struct RecorderStatus {
   uint64_t frames_queued = 0;   // waiting to be written
   uint64_t vehicle_states_written = 0;
   uint64_t calibration_changes_written = 0;
-  uint64_t other_dropped = 0;   // vehicle states and calibration changes the queue had no room for
+  uint64_t other_dropped = 0;  // vehicle states and calibration changes the queue had no room for
   // Why it stopped ("disk limit of 4.0 GiB reached after 1234 frames"); empty while recording.
   std::string stop_reason;
   // The write error that stopped it, empty otherwise (then stop_reason says the same).
@@ -104,7 +104,7 @@ class Recorder {
   // Why the writer ended, as it decided (disk limit, write error) or as asked.
   struct Outcome {
     std::string reason;
-    std::string error;  // empty unless a write failed
+    std::string error;                      // empty unless a write failed
     ErrorCode code = ErrorCode::kInternal;  // of the error
   };
 
@@ -137,9 +137,9 @@ class Recorder {
   size_t queued_other_ = 0;
   bool stop_requested_ = false;
   std::string requested_reason_;
-  bool stopped_ = false;      // new items are refused (the writer stopped, or Stop() was called)
+  bool stopped_ = false;         // new items are refused (the writer stopped, or Stop() was called)
   std::string stopping_reason_;  // the writer's reason, as soon as it decided to stop
-  RecorderStatus status_;     // counters, guarded by mu_
+  RecorderStatus status_;        // counters, guarded by mu_
   ErrorCode error_code_ = ErrorCode::kInternal;  // of status_.error
 
   std::mutex stop_mu_;  // serialises Stop() calls

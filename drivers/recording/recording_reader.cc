@@ -182,9 +182,9 @@ Result<v1::RecordedRig> RecordedRigOf(const geometry::StereoRig& rig) {
   }
   Result<geometry::StereoRig> rebuilt = RigFromRecorded(recorded);
   if (!rebuilt.ok()) {
-    return Error{ErrorCode::kInternal,
-                 "rig: cannot be rebuilt from its calibration YAML (" + rebuilt.error().message +
-                     "), so a replay would not reproduce it"};
+    return Error{ErrorCode::kInternal, "rig: cannot be rebuilt from its calibration YAML (" +
+                                           rebuilt.error().message +
+                                           "), so a replay would not reproduce it"};
   }
   if (!RigsIdentical(rig, *rebuilt)) {
     return Error{ErrorCode::kInternal,
@@ -279,9 +279,8 @@ Result<std::unique_ptr<RecordingReader>> RecordingReader::Open(const std::string
   parse.ignore_unknown_fields = true;
   const auto parsed = google::protobuf::util::JsonStringToMessage(text, &reader->manifest_, parse);
   if (!parsed.ok()) {
-    return Error{ErrorCode::kInvalidArgument,
-                 manifest_path + ": not a recording manifest (" + std::string(parsed.message()) +
-                     ")"};
+    return Error{ErrorCode::kInvalidArgument, manifest_path + ": not a recording manifest (" +
+                                                  std::string(parsed.message()) + ")"};
   }
   const v1::RecordingManifest& m = reader->manifest_;
   if (m.format_version() == 0) {
@@ -354,8 +353,7 @@ Result<cv::Mat> RecordingReader::DecodeImage(const v1::RecordedImage& image,
   cv::Mat decoded;
   try {
     const std::string& data = image.data();
-    const cv::Mat bytes(1, static_cast<int>(data.size()), CV_8UC1,
-                        const_cast<char*>(data.data()));
+    const cv::Mat bytes(1, static_cast<int>(data.size()), CV_8UC1, const_cast<char*>(data.data()));
     decoded = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
     return Error{ErrorCode::kInvalidArgument, std::string(side) + " image: " + e.what()};

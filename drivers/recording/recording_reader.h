@@ -25,9 +25,9 @@ inline constexpr const char* kRecordsFileName = "records.bin";
 
 // Limits that keep a damaged or hostile recording from making the reader allocate absurd amounts.
 // The recorder refuses frames beyond them, so every recording it writes stays readable.
-inline constexpr uint64_t kMaxManifestBytes = 16ull << 20;  // the manifest holds one YAML: KiB
-inline constexpr uint64_t kMaxRecordBytes = 512ull << 20;   // one serialized RecordEntry
-inline constexpr int kMaxImageSide = 16384;                 // width or height, pixels
+inline constexpr uint64_t kMaxManifestBytes = 16ull << 20;    // the manifest holds one YAML: KiB
+inline constexpr uint64_t kMaxRecordBytes = 512ull << 20;     // one serialized RecordEntry
+inline constexpr int kMaxImageSide = 16384;                   // width or height, pixels
 inline constexpr int64_t kMaxImagePixels = int64_t{1} << 26;  // 64 Mpx: two BGR images < 512 MiB
 
 // "4.0 GiB", "12.5 MiB", "900 B": sizes for messages.
@@ -61,10 +61,10 @@ struct CalibrationChange {
 struct RecordingRecord {
   enum class Kind { kFrame, kVehicleState, kCalibration };
   Kind kind = Kind::kFrame;
-  StereoFrame frame;                 // kFrame (images empty when read with decode_images false)
+  StereoFrame frame;                  // kFrame (images empty when read with decode_images false)
   geo::VehicleState vehicle_state{};  // kVehicleState
-  CalibrationChange calibration;     // kCalibration
-  uint64_t offset = 0;               // byte offset of the record's length prefix in records.bin
+  CalibrationChange calibration;      // kCalibration
+  uint64_t offset = 0;                // byte offset of the record's length prefix in records.bin
 };
 
 // Reads one recording directory. Thread-compatible: use from one thread.

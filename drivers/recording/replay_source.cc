@@ -67,17 +67,16 @@ Result<std::unique_ptr<ReplaySource>> ReplaySource::Open(const std::string& dir,
         Result<geometry::StereoCalibration> calibration =
             geometry::ParseCalibrationYaml(change.change.yaml);
         Result<geometry::StereoRig> rig =
-            calibration.ok() ? geometry::StereoRig::FromCalibration(*calibration,
-                                                                    change.change.calibration_id)
-                             : Result<geometry::StereoRig>(calibration.error());
+            calibration.ok()
+                ? geometry::StereoRig::FromCalibration(*calibration, change.change.calibration_id)
+                : Result<geometry::StereoRig>(calibration.error());
         if (rig.ok()) {
           change.rig = std::make_shared<const geometry::StereoRig>(std::move(rig.value()));
         } else {
-          source->notes_.push_back(reader.records_path() + ": calibration change '" +
-                                   change.change.calibration_id + "' after " +
-                                   std::to_string(change.frames_before) +
-                                   " frames gives no rig (" + rig.error().message +
-                                   "); the frames after it keep the previous rig");
+          source->notes_.push_back(
+              reader.records_path() + ": calibration change '" + change.change.calibration_id +
+              "' after " + std::to_string(change.frames_before) + " frames gives no rig (" +
+              rig.error().message + "); the frames after it keep the previous rig");
         }
         source->changes_.push_back(std::move(change));
         break;
@@ -152,8 +151,7 @@ Result<StereoFrame> ReplaySource::Next() {
       return Error{ErrorCode::kOutOfRange, message};
     }
     switch (record->kind) {
-      case RecordingRecord::Kind::kVehicleState:
-        continue;  // all of them were read at Open()
+      case RecordingRecord::Kind::kVehicleState: continue;  // all of them were read at Open()
       case RecordingRecord::Kind::kCalibration: {
         // The i-th change of this lap is the i-th of the scan: the file is the same.
         if (next_change_ < changes_.size()) {
@@ -167,8 +165,7 @@ Result<StereoFrame> ReplaySource::Next() {
         ++next_change_;
         continue;
       }
-      case RecordingRecord::Kind::kFrame:
-        break;
+      case RecordingRecord::Kind::kFrame: break;
     }
     StereoFrame& frame = record->frame;
     Pace(frame.t_ns);

@@ -107,11 +107,11 @@ class ReplaySource : public StereoSource {
 
   // Playback (the Next() thread).
   std::unique_ptr<RecordingReader> reader_;
-  size_t next_change_ = 0;       // calibration changes passed in this lap
+  size_t next_change_ = 0;  // calibration changes passed in this lap
   uint64_t frames_this_lap_ = 0;
   int64_t laps_ = 0;
-  bool paced_ = false;           // the pacing clock is running
-  bool wrapped_ = false;         // the next frame starts a new lap
+  bool paced_ = false;                            // the pacing clock is running
+  bool wrapped_ = false;                          // the next frame starts a new lap
   std::chrono::steady_clock::time_point anchor_;  // when the anchor frame came out
   int64_t recorded_since_anchor_ns_ = 0;          // recorded time since the anchor frame
   int64_t previous_t_ns_ = 0;

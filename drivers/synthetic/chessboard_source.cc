@@ -59,9 +59,9 @@ ChessboardSource::ChessboardSource(ChessboardSourceOptions options,
 
 std::string ChessboardSource::Describe() const {
   std::ostringstream out;
-  out << "synthetic chessboard " << options_.board.Name() << " of " << options_.board.square_size_m * 1000
-      << " mm squares, " << options_.width << "x" << options_.height << " f=" << options_.f_px
-      << "px B=" << options_.baseline_m << "m";
+  out << "synthetic chessboard " << options_.board.Name() << " of "
+      << options_.board.square_size_m * 1000 << " mm squares, " << options_.width << "x"
+      << options_.height << " f=" << options_.f_px << "px B=" << options_.baseline_m << "m";
   return out.str();
 }
 

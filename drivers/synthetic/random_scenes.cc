@@ -152,13 +152,13 @@ Shape Aircraft(Rng& rng, double length, bool standing) {
   auto along = [&](double a, double y, double across, cv::Vec3d size_along_across) {
     // size: (along, vertical, across)
     if (s.heading_axis == 0) {
-      return std::make_pair(cv::Vec3d(a * s.heading_sign, y, across),
-                            cv::Vec3d(size_along_across[0], size_along_across[1],
-                                      size_along_across[2]));
+      return std::make_pair(
+          cv::Vec3d(a * s.heading_sign, y, across),
+          cv::Vec3d(size_along_across[0], size_along_across[1], size_along_across[2]));
     }
-    return std::make_pair(cv::Vec3d(across, y, a * s.heading_sign),
-                          cv::Vec3d(size_along_across[2], size_along_across[1],
-                                    size_along_across[0]));
+    return std::make_pair(
+        cv::Vec3d(across, y, a * s.heading_sign),
+        cv::Vec3d(size_along_across[2], size_along_across[1], size_along_across[0]));
   };
   auto add = [&](ObstaclePart::Shape shape, double a, double y, double across, cv::Vec3d size) {
     const auto [offset, sz] = along(a, y, across, size);
@@ -252,14 +252,14 @@ struct FamilySpec {
   std::vector<std::pair<std::string, double>> kinds;  // kind and weight
   double z_lo = 5, z_hi = 1500;                       // camera depth range, metres
   double contrast_lo = 0.1, contrast_hi = 1.0;
-  bool prefer_sky = false;      // airborne obstacles above the horizon
-  double parked = 0.0;          // the chance that an aircraft stands on the ground
-  double scale = 1.0;           // size factor (close: smaller things)
+  bool prefer_sky = false;  // airborne obstacles above the horizon
+  double parked = 0.0;      // the chance that an aircraft stands on the ground
+  double scale = 1.0;       // size factor (close: smaller things)
 };
 
 const std::vector<cv::Size>& AllSizes() {
-  static const std::vector<cv::Size> sizes = {{640, 480},   {752, 480},   {800, 600},
-                                              {1024, 768},  {1280, 720},  {1280, 1024},
+  static const std::vector<cv::Size> sizes = {{640, 480},   {752, 480},  {800, 600},
+                                              {1024, 768},  {1280, 720}, {1280, 1024},
                                               {1920, 1080}, {1920, 1200}};
   return sizes;
 }

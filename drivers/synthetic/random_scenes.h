@@ -41,23 +41,23 @@ namespace stevi::drivers {
 // What the generator chose for one obstacle, at t = 0.
 struct RandomObstacleInfo {
   int id = 0;
-  std::string kind;          // as Obstacle::kind
-  double depth_m = 0;        // camera depth of its reference point (the centre of its bounds)
-  double range_m = 0;        // distance of that point from the left camera centre
-  double disparity_px = 0;   // f B / depth_m, at full resolution
-  double extent_m = 0;       // its largest extent (span, length or height)
-  double contrast = 0;       // c, 0.1..1 (see above)
-  double grey_step = 0;      // albedo - background grey, full scale, signed
+  std::string kind;         // as Obstacle::kind
+  double depth_m = 0;       // camera depth of its reference point (the centre of its bounds)
+  double range_m = 0;       // distance of that point from the left camera centre
+  double disparity_px = 0;  // f B / depth_m, at full resolution
+  double extent_m = 0;      // its largest extent (span, length or height)
+  double contrast = 0;      // c, 0.1..1 (see above)
+  double grey_step = 0;     // albedo - background grey, full scale, signed
   double background_grey = 0;
-  bool standing = false;     // stands on the ground (tower, pole, building, parked aircraft)
-  bool overlapping = false;  // placed to overlap an earlier obstacle in the image
+  bool standing = false;          // stands on the ground (tower, pole, building, parked aircraft)
+  bool overlapping = false;       // placed to overlap an earlier obstacle in the image
   double speed_px_per_frame = 0;  // its reference point's image motion at t = 0
 };
 
 struct RandomScene {
   std::string family;
   uint64_t seed = 0;
-  Scenario scenario;  // name "<family>-<seed>"
+  Scenario scenario;                          // name "<family>-<seed>"
   std::vector<RandomObstacleInfo> obstacles;  // in the order of scenario.options.scene.obstacles
 };
 

@@ -61,8 +61,7 @@ Path Fixed(cv::Vec3d centre) {
 
 cv::Vec3d Path::PositionAt(double t_s) const {
   switch (kind) {
-    case Kind::kStatic:
-      return start;
+    case Kind::kStatic: return start;
     case Kind::kLinear: {
       const double t = period_s > 0.0 ? std::fmod(t_s, period_s) : t_s;
       return start + velocity_mps * t;
@@ -99,8 +98,7 @@ std::vector<std::string> Scene::Validate() const {
         "ground_texture_cell_m", "must be > 0", problems);
   Check(!InUnit(sky_top), "sky_top", "must be in 0..1", problems);
   Check(!InUnit(sky_horizon), "sky_horizon", "must be in 0..1", problems);
-  Check(!(std::abs(camera_pitch_deg) <= 45.0), "camera_pitch_deg", "must be in -45..45",
-        problems);
+  Check(!(std::abs(camera_pitch_deg) <= 45.0), "camera_pitch_deg", "must be in -45..45", problems);
   Check(!InUnit(cloud_cover), "cloud_cover", "must be in 0..1", problems);
   Check(!(std::abs(cloud_grey) <= 1.0), "cloud_grey", "must be in -1..1", problems);
   Check(!(cloud_scale > 0.0) || !std::isfinite(cloud_scale), "cloud_scale", "must be > 0",
@@ -180,8 +178,7 @@ std::vector<std::string> Scene::Validate() const {
           problems);
     Check(!(l.dash_m > 0.0) || !std::isfinite(l.dash_m), prefix + "dash_m", "must be > 0",
           problems);
-    Check(!(l.gap_m >= 0.0) || !std::isfinite(l.gap_m), prefix + "gap_m", "must be >= 0",
-          problems);
+    Check(!(l.gap_m >= 0.0) || !std::isfinite(l.gap_m), prefix + "gap_m", "must be >= 0", problems);
     Check(!InUnit(l.albedo), prefix + "albedo", "must be in 0..1", problems);
     Check(!InUnit(l.contrast), prefix + "contrast", "must be in 0..1", problems);
   }
@@ -246,8 +243,7 @@ Scene DefaultScene() {
     add(4, "drone-1", {1.5, 0.8, 1.5}, p, 0.25, 0.45, 0.12);
   }
   // drone-2: 1.5 x 0.6 x 1.5 m at z = 20 m (21 px), x -5.2 -> +8.8 m (52 x 21 px).
-  add(5, "drone-2", {1.5, 0.6, 1.5}, linear({-5.2, -2.0, 20.75}, {0.7, 0.0, 0.0}), 0.3, 0.45,
-      0.12);
+  add(5, "drone-2", {1.5, 0.6, 1.5}, linear({-5.2, -2.0, 20.75}, {0.7, 0.0, 0.0}), 0.3, 0.45, 0.12);
   // aircraft-2: 5 x 1.5 x 2 m at z = 35 m (12 px), x +4.25 -> -15.75 m (100 x 30 px); it
   // crosses drone-2 in the image around t = 6 s, behind it.
   add(6, "aircraft-2", {5.0, 1.5, 2.0}, linear({4.25, -3.5, 36.0}, {-1.0, 0.0, 0.0}), 0.35, 0.4,
@@ -299,8 +295,7 @@ namespace {
 // fields of other greys beside it (their edges are long straight grey-level steps).
 void AddAirfield(Scene& scene, double runway_x_m) {
   const double half = 15.0;
-  auto mark = [&scene](double x0, double x1, double z0, double z1, double albedo,
-                       double contrast) {
+  auto mark = [&scene](double x0, double x1, double z0, double z1, double albedo, double contrast) {
     GroundMark m;
     m.area_xz_m = cv::Rect2d(x0, z0, x1 - x0, z1 - z0);
     m.albedo = albedo;
@@ -309,9 +304,9 @@ void AddAirfield(Scene& scene, double runway_x_m) {
   };
   const double rx = runway_x_m;
   // Fields first (painted over by nothing else), then the runway and its paint.
-  mark(rx - 260.0, rx - 45.0, 0.0, 700.0, 0.34, 0.28);   // dark grass field, left
-  mark(rx + 50.0, rx + 320.0, 90.0, 520.0, 0.56, 0.25);  // light crop field, right
-  mark(rx - half, rx + half, 0.0, 2000.0, 0.32, 0.12);   // asphalt
+  mark(rx - 260.0, rx - 45.0, 0.0, 700.0, 0.34, 0.28);       // dark grass field, left
+  mark(rx + 50.0, rx + 320.0, 90.0, 520.0, 0.56, 0.25);      // light crop field, right
+  mark(rx - half, rx + half, 0.0, 2000.0, 0.32, 0.12);       // asphalt
   mark(rx - half, rx - half + 0.9, 0.0, 2000.0, 0.9, 0.03);  // edge lines
   mark(rx + half - 0.9, rx + half, 0.0, 2000.0, 0.9, 0.03);
   for (int k = 0; k < 4; ++k) {  // threshold bars, four each side of the centreline
@@ -356,17 +351,16 @@ Scenario ClearSky() {
   scene.camera_height_m = 100.0;  // the ground is 290 m+ away, below the horizon row
   const double loop_s = 8.0;
   scene.obstacles.push_back(MakeObstacle(1, "aircraft-1", {6.0, 2.0, 2.0},
-                                         Leg({-10.0, -9.0, 33.0}, {10.0, -9.0, 33.0}, loop_s),
-                                         0.3, 0.45, 0.15));
+                                         Leg({-10.0, -9.0, 33.0}, {10.0, -9.0, 33.0}, loop_s), 0.3,
+                                         0.45, 0.15));
   scene.obstacles.push_back(MakeObstacle(2, "aircraft-2", {8.0, 2.5, 3.0},
-                                         Leg({12.0, -5.0, 49.5}, {-12.0, -5.0, 49.5}, loop_s),
-                                         0.35, 0.4, 0.2));
-  scene.obstacles.push_back(MakeObstacle(3, "drone-1", {1.2, 0.5, 1.2},
-                                         Circle({0.0, -3.0, 22.0}, 5.0, loop_s, kPi), 0.25, 0.45,
-                                         0.1));
+                                         Leg({12.0, -5.0, 49.5}, {-12.0, -5.0, 49.5}, loop_s), 0.35,
+                                         0.4, 0.2));
+  scene.obstacles.push_back(MakeObstacle(
+      3, "drone-1", {1.2, 0.5, 1.2}, Circle({0.0, -3.0, 22.0}, 5.0, loop_s, kPi), 0.25, 0.45, 0.1));
   scene.obstacles.push_back(MakeObstacle(4, "drone-2", {1.5, 0.6, 1.5},
-                                         Leg({4.0, -7.5, 45.75}, {3.0, -5.0, 24.75}, loop_s),
-                                         0.28, 0.45, 0.12));
+                                         Leg({4.0, -7.5, 45.75}, {3.0, -5.0, 24.75}, loop_s), 0.28,
+                                         0.45, 0.12));
   Scenario s;
   s.name = "clear_sky";
   s.description =
@@ -409,14 +403,14 @@ Scenario LowOverGround() {
 
   const double loop_s = 6.0;
   scene.obstacles.push_back(MakeObstacle(1, "aircraft-low", {5.0, 1.5, 2.0},
-                                         Leg({-3.0, -1.5, 41.0}, {8.0, -1.5, 41.0}, loop_s),
-                                         0.3, 0.4, 0.15));
+                                         Leg({-3.0, -1.5, 41.0}, {8.0, -1.5, 41.0}, loop_s), 0.3,
+                                         0.4, 0.15));
   scene.obstacles.push_back(MakeObstacle(2, "drone-1", {1.5, 0.6, 1.5},
-                                         Leg({6.0, -5.0, 25.75}, {-6.0, -5.0, 25.75}, loop_s),
-                                         0.28, 0.45, 0.12));
+                                         Leg({6.0, -5.0, 25.75}, {-6.0, -5.0, 25.75}, loop_s), 0.28,
+                                         0.45, 0.12));
   scene.obstacles.push_back(MakeObstacle(3, "aircraft-2", {5.0, 1.5, 2.0},
-                                         Leg({-8.0, -11.0, 46.0}, {4.0, -11.0, 46.0}, loop_s),
-                                         0.35, 0.4, 0.15));
+                                         Leg({-8.0, -11.0, 46.0}, {4.0, -11.0, 46.0}, loop_s), 0.35,
+                                         0.4, 0.15));
   Scenario s;
   s.name = "low_over_ground";
   s.description =
@@ -444,11 +438,11 @@ Scenario SmallFar() {
   scene.camera_height_m = 40.0;
   const double loop_s = 6.0;
   scene.obstacles.push_back(MakeObstacle(1, "aircraft-small", {1.3, 0.5, 0.8},
-                                         Leg({-3.0, -6.0, 46.4}, {3.0, -6.0, 46.4}, loop_s),
-                                         0.3, 0.45, 0.06));
+                                         Leg({-3.0, -6.0, 46.4}, {3.0, -6.0, 46.4}, loop_s), 0.3,
+                                         0.45, 0.06));
   scene.obstacles.push_back(MakeObstacle(2, "drone-near", {1.5, 0.6, 1.5},
-                                         Leg({3.0, -0.5, 15.75}, {-3.0, -0.5, 15.75}, loop_s),
-                                         0.28, 0.45, 0.1));
+                                         Leg({3.0, -0.5, 15.75}, {-3.0, -0.5, 15.75}, loop_s), 0.28,
+                                         0.45, 0.1));
   Scenario s;
   s.name = "small_far";
   s.description =
@@ -470,8 +464,8 @@ Scenario ClosePair() {
   // Both drift right at ~10 px/s; the drone rises, so the vertical gap between their boxes
   // closes from ~8 px to an overlap of ~6 px (the drone then hides the aircraft's underside).
   scene.obstacles.push_back(MakeObstacle(1, "aircraft-far", {5.0, 1.5, 2.0},
-                                         Leg({-3.0, -4.5, 36.0}, {0.0, -4.5, 36.0}, loop_s),
-                                         0.33, 0.42, 0.15));
+                                         Leg({-3.0, -4.5, 36.0}, {0.0, -4.5, 36.0}, loop_s), 0.33,
+                                         0.42, 0.15));
   scene.obstacles.push_back(MakeObstacle(2, "drone-near", {1.5, 0.6, 1.5},
                                          Leg({-1.9, -1.50, 20.75}, {-0.1, -1.95, 20.75}, loop_s),
                                          0.28, 0.45, 0.1));
@@ -496,11 +490,11 @@ Scenario LowContrast() {
   // The sky is 0.9 - 0.35 (240 - v) / 240 at row v (sky_top 0.55, sky_horizon 0.9).
   const double loop_s = 6.0;
   scene.obstacles.push_back(MakeObstacle(1, "aircraft-pale", {5.0, 1.5, 0.6},
-                                         Leg({-6.0, -5.0, 32.3}, {6.0, -5.0, 32.3}, loop_s),
-                                         0.80, 0.15, 0.15));
+                                         Leg({-6.0, -5.0, 32.3}, {6.0, -5.0, 32.3}, loop_s), 0.80,
+                                         0.15, 0.15));
   scene.obstacles.push_back(MakeObstacle(2, "drone-grey", {1.5, 0.6, 0.4},
-                                         Leg({5.0, -6.0, 26.2}, {-5.0, -6.0, 26.2}, loop_s),
-                                         0.61, 0.15, 0.1));
+                                         Leg({5.0, -6.0, 26.2}, {-5.0, -6.0, 26.2}, loop_s), 0.61,
+                                         0.15, 0.1));
   Scenario s;
   s.name = "low_contrast";
   s.description =
@@ -525,13 +519,13 @@ Scenario TowerOnGround() {
   AddFarRidge(scene);
   const double loop_s = 6.0;
   // Static, standing on the ground (bottom at y = h).
-  scene.obstacles.push_back(MakeObstacle(1, "tower", {3.0, 15.0, 3.0},
-                                         Fixed({-6.0, h - 7.5, 39.5}), 0.5, 0.4, 0.15));
-  scene.obstacles.push_back(MakeObstacle(2, "hut", {8.0, 4.0, 6.0}, Fixed({9.0, h - 2.0, 47.0}),
-                                         0.6, 0.35, 0.2));
+  scene.obstacles.push_back(
+      MakeObstacle(1, "tower", {3.0, 15.0, 3.0}, Fixed({-6.0, h - 7.5, 39.5}), 0.5, 0.4, 0.15));
+  scene.obstacles.push_back(
+      MakeObstacle(2, "hut", {8.0, 4.0, 6.0}, Fixed({9.0, h - 2.0, 47.0}), 0.6, 0.35, 0.2));
   scene.obstacles.push_back(MakeObstacle(3, "drone-1", {1.5, 0.6, 1.5},
-                                         Leg({6.0, -4.0, 28.75}, {-5.0, -4.0, 28.75}, loop_s),
-                                         0.28, 0.45, 0.12));
+                                         Leg({6.0, -4.0, 28.75}, {-5.0, -4.0, 28.75}, loop_s), 0.28,
+                                         0.45, 0.12));
   Scenario s;
   s.name = "tower_on_ground";
   s.description =

@@ -18,9 +18,9 @@ namespace stevi::drivers {
 // How an obstacle moves. Positions are of the box centre, in metres, at scene time t (seconds).
 struct Path {
   enum class Kind {
-    kStatic,   // stays at `start`
-    kLinear,   // start + velocity * t, wrapping back to start every period_s (0 = never)
-    kCircle,   // circle in the x-z plane around `start` of radius_m, angular_rate_rad_s, phase_rad
+    kStatic,  // stays at `start`
+    kLinear,  // start + velocity * t, wrapping back to start every period_s (0 = never)
+    kCircle,  // circle in the x-z plane around `start` of radius_m, angular_rate_rad_s, phase_rad
   };
   Kind kind = Kind::kStatic;
   cv::Vec3d start;
@@ -47,12 +47,12 @@ struct ObstaclePart {
 // classic), or a composite of parts (size_m is then unused): an aircraft, a drone, a tower...
 // Boxes are shaded by face orientation (edges show); ellipsoids are lit from above like hills.
 struct Obstacle {
-  int id = 0;                // > 0, unique in the scene
+  int id = 0;  // > 0, unique in the scene
   std::string name;
-  cv::Vec3d size_m;          // x (width), y (height), z (depth); parts empty only
+  cv::Vec3d size_m;  // x (width), y (height), z (depth); parts empty only
   Path path;
-  double albedo = 0.5;       // mean grey level 0..1 of its texture
-  double contrast = 0.35;    // texture contrast 0..1
+  double albedo = 0.5;           // mean grey level 0..1 of its texture
+  double contrast = 0.35;        // texture contrast 0..1
   double texture_cell_m = 0.15;  // finest texture detail, metres
   // What it is, copied to the truth: "box", "aircraft", "drone", "tower", "pole", "building",
   // "balloon".
@@ -81,9 +81,9 @@ struct Hill {
 // views see it alike at sub-pixel disparities. Marks listed later paint over earlier ones and over
 // the ground; hills and obstacles hide them. Not an obstacle: object_id 0.
 struct GroundMark {
-  cv::Rect2d area_xz_m;   // x = x0, y = z0, width = x extent, height = z extent; both > 0
-  double albedo = 0.9;    // mean grey 0..1 of the paint
-  double contrast = 0.05; // contrast 0..1 of the paint's texture (the ground's noise pattern)
+  cv::Rect2d area_xz_m;    // x = x0, y = z0, width = x extent, height = z extent; both > 0
+  double albedo = 0.9;     // mean grey 0..1 of the paint
+  double contrast = 0.05;  // contrast 0..1 of the paint's texture (the ground's noise pattern)
 };
 
 // A dashed line along z on the ground (a runway centreline): dashes of length dash_m separated
@@ -106,8 +106,8 @@ struct Scene {
   double ground_albedo = 0.45;
   double ground_contrast = 0.3;
   double ground_texture_cell_m = 0.4;
-  double sky_top = 0.55;          // grey of the sky at the top row, 0..1
-  double sky_horizon = 0.9;       // grey at the horizon
+  double sky_top = 0.55;     // grey of the sky at the top row, 0..1
+  double sky_horizon = 0.9;  // grey at the horizon
   // The camera's pitch, degrees, positive up (|pitch| <= 45). The horizon is then the row
   // cy + f tan(pitch); the sky gradient runs from sky_horizon there to sky_top cy rows above.
   double camera_pitch_deg = 0.0;
@@ -121,8 +121,8 @@ struct Scene {
   std::vector<Obstacle> obstacles;
   // Terrain (object_id 0, never in the truth's obstacle list).
   std::vector<Hill> hills;
-  std::vector<GroundMark> marks;          // painted in order, later over earlier
-  std::vector<DashedLine> dashed_lines;   // painted after the marks
+  std::vector<GroundMark> marks;         // painted in order, later over earlier
+  std::vector<DashedLine> dashed_lines;  // painted after the marks
   // The rig's own motion through the scene (world frame, m/s; level: y = 0): at time t the
   // camera is at rig_velocity_mps * (t mod rig_period_s), so the ground and the obstacles move
   // past it (the flight repeats every rig_period_s; 0 = never). Hills and marks are not supported

@@ -100,7 +100,7 @@ inline float Texture(uint32_t seed, double s, double t, double cell_m, double fo
 // One solid of an obstacle at the frame's time: a box, or the ellipsoid inscribed in it.
 struct Box {
   int id = 0;
-  int obstacle = 0;          // index in Scene::obstacles
+  int obstacle = 0;  // index in Scene::obstacles
   bool ellipsoid = false;
   cv::Vec3d lo, hi, centre;  // corners and centre, world frame, metres
   cv::Vec3d inv_r;           // ellipsoid: 1 / semi-axes
@@ -124,7 +124,7 @@ struct RowStat {
 // One hill, prepared for ray casting. Static over the sequence.
 struct HillGeom {
   cv::Vec3d centre;
-  cv::Vec3d inv_r;           // 1 / radii
+  cv::Vec3d inv_r;             // 1 / radii
   double origin_s[2][3] = {};  // per view: (camera centre - hill centre) / radii
   double c[2] = {0.0, 0.0};    // per view: |origin_s|^2 - 1 (> 0: the camera is outside)
   PixelRect rect[2];           // per view: pixel bounds of the part above the ground
@@ -135,8 +135,8 @@ struct HillGeom {
 
 // The paint of one mark or dashed line, with its coverage of the current row (z footprint).
 struct MarkCandidate {
-  double x0, x1;     // x extent on the ground, metres
-  double cover_z;    // fraction of the row's z footprint that the mark covers
+  double x0, x1;   // x extent on the ground, metres
+  double cover_z;  // fraction of the row's z footprint that the mark covers
   float albedo, contrast;
 };
 
@@ -164,9 +164,9 @@ double DashedCoverZ(const DashedLine& line, double z0, double z1) {
 
 // Everything one frame's rows need; read-only while the rows render.
 struct FrameSetup {
-  std::vector<Box> boxes;           // every solid of every obstacle, in obstacle order
-  std::vector<PixelRect> rects[2];  // per view: 0 left, 1 right
-  double origin_x[2] = {0.0, 0.0};  // camera centre x per view, metres
+  std::vector<Box> boxes;               // every solid of every obstacle, in obstacle order
+  std::vector<PixelRect> rects[2];      // per view: 0 left, 1 right
+  double origin_x[2] = {0.0, 0.0};      // camera centre x per view, metres
   cv::Vec3d rig_offset{0.0, 0.0, 0.0};  // the moving rig's offset from its rest position
 };
 
@@ -525,9 +525,8 @@ struct SyntheticRenderer::Impl {
 
   // The row coordinate the rays of `view`'s row v go through (the right image's misalignment).
   double RayRow(int view, int v) const {
-    return view == 1 && options.right_vertical_shift_px != 0.0
-               ? v - options.right_vertical_shift_px
-               : static_cast<double>(v);
+    return view == 1 && options.right_vertical_shift_px != 0.0 ? v - options.right_vertical_shift_px
+                                                               : static_cast<double>(v);
   }
 
   // World direction (per row): y and z components of the ray through row coordinate vr.
@@ -912,8 +911,8 @@ struct SyntheticRenderer::Impl {
           const double dv = v + 0.5 - cy;
           for (int u = 0; u < w; ++u) {
             const double du = u + 0.5 - cx;
-            fall[static_cast<size_t>(u)] = static_cast<float>(
-                1.0 - options.vignetting * (du * du + dv * dv) / r2_corner);
+            fall[static_cast<size_t>(u)] =
+                static_cast<float>(1.0 - options.vignetting * (du * du + dv * dv) / r2_corner);
           }
         }
         for (int view = 0; view < 2; ++view) {
@@ -962,8 +961,8 @@ struct SyntheticRenderer::Impl {
       for (int v = rows.start; v < rows.end; ++v) {
         float* d_row = truth != nullptr ? disparity[v] : nullptr;
         int* id_row = truth != nullptr ? ids[v] : nullptr;
-        RowStat* st_row = truth != nullptr ? stats.data() + static_cast<size_t>(v) * n_obstacles
-                                           : nullptr;
+        RowStat* st_row =
+            truth != nullptr ? stats.data() + static_cast<size_t>(v) * n_obstacles : nullptr;
         if (frame == nullptr) {
           RenderRow(setup, 0, v, nullptr, nullptr, d_row, id_row, st_row, nullptr);
           continue;
@@ -1094,8 +1093,7 @@ std::vector<std::string> SyntheticOptions::Validate() const {
     problems.push_back("right_gain: must be in 0.5..2" + Got(right_gain));
   }
   if (!(std::abs(right_vertical_shift_px) <= 2.0)) {
-    problems.push_back("right_vertical_shift_px: must be in -2..2" +
-                       Got(right_vertical_shift_px));
+    problems.push_back("right_vertical_shift_px: must be in -2..2" + Got(right_vertical_shift_px));
   }
   if (loop_frames < 0 || loop_frames > kMaxLoopFrames) {
     problems.push_back("loop_frames: must be in 0.." + std::to_string(kMaxLoopFrames) +

@@ -44,7 +44,6 @@ struct SyntheticOptions {
   std::vector<std::string> Validate() const;
 };
 
-
 // Renders frames of the scene. Pure function of (options, index): deterministic.
 class SyntheticRenderer {
  public:

@@ -43,8 +43,8 @@ Scenario CrossingOcclusion() {
                                          Leg({6.0, -10.83, 49.0}, {-12.0, -10.83, 49.0}, length_s),
                                          0.35, 0.4, 0.2));
   // cargo-drone: hovering, front face at 25 m (16.8 px), columns 276..364, rows 143..227.
-  scene.obstacles.push_back(MakeObstacle(3, "cargo-drone", {3.2, 3.0, 2.0},
-                                         Fixed({0.0, -2.0, 26.0}), 0.4, 0.4, 0.15));
+  scene.obstacles.push_back(
+      MakeObstacle(3, "cargo-drone", {3.2, 3.0, 2.0}, Fixed({0.0, -2.0, 26.0}), 0.4, 0.4, 0.15));
   // drone-c: front face at 45 m (9.3 px), rows 179..193, left to right at 3.9 m/s behind the
   // cargo drone: fully hidden for 10 frames (42..51).
   scene.obstacles.push_back(MakeObstacle(4, "drone-c", {2.0, 0.8, 2.0},
@@ -94,8 +94,8 @@ Scenario EntriesExits() {
                                          0.45, 0.12));
   // drone-3: front at 38 m (11 px), rows 104..125, enters from the right at frame 56.
   scene.obstacles.push_back(MakeObstacle(5, "drone-3", {2.0, 0.8, 2.0},
-                                         Straight({38.7, -7.0, 39.0}, {-3.5, 0.0, 0.0}), 0.25,
-                                         0.45, 0.12));
+                                         Straight({38.7, -7.0, 39.0}, {-3.5, 0.0, 0.0}), 0.25, 0.45,
+                                         0.12));
   Scenario s;
   s.name = "entries_exits";
   s.description =
@@ -120,8 +120,8 @@ Scenario HeadOn() {
   // Front face from 50 m (8.4 px) to 12.6 m at frame 59 (33 px): closing at 6.33 m/s, drifting
   // 0.17 m/s left and 0.13 m/s down; the straight line misses the camera by 2.4 m.
   scene.obstacles.push_back(MakeObstacle(1, "drone-head-on", {2.0, 1.0, 2.0},
-                                         Leg({3.5, -2.0, 51.0}, {2.5, -1.2, 13.0}, 6.0), 0.25,
-                                         0.45, 0.12));
+                                         Leg({3.5, -2.0, 51.0}, {2.5, -1.2, 13.0}, 6.0), 0.25, 0.45,
+                                         0.12));
   Scenario s;
   s.name = "head_on";
   s.description =
@@ -141,8 +141,8 @@ Scenario Departing() {
   Scene scene = SkyScene();
   // head_on played backwards: from 12.6 m out to 50 m, receding at 6.33 m/s.
   scene.obstacles.push_back(MakeObstacle(1, "drone-departing", {2.0, 1.0, 2.0},
-                                         Leg({2.5, -1.2, 13.0}, {3.5, -2.0, 51.0}, 6.0), 0.25,
-                                         0.45, 0.12));
+                                         Leg({2.5, -1.2, 13.0}, {3.5, -2.0, 51.0}, 6.0), 0.25, 0.45,
+                                         0.12));
   Scenario s;
   s.name = "departing";
   s.description =

@@ -90,8 +90,14 @@ class Subscription {
     return out;
   }
 
-  uint64_t sent() const { std::lock_guard lock(mu_); return sent_; }
-  uint64_t dropped() const { std::lock_guard lock(mu_); return dropped_; }
+  uint64_t sent() const {
+    std::lock_guard lock(mu_);
+    return sent_;
+  }
+  uint64_t dropped() const {
+    std::lock_guard lock(mu_);
+    return dropped_;
+  }
 
  private:
   void Notify() {

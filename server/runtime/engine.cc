@@ -12,7 +12,7 @@ namespace stevi::server {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-constexpr size_t kRateWindow = 30;    // frames over which fps and mean timings are taken
+constexpr size_t kRateWindow = 30;  // frames over which fps and mean timings are taken
 constexpr auto kRetryFirst = std::chrono::milliseconds(200);
 // Capped at 2 s so that a camera that comes back is streaming again within a few seconds.
 constexpr auto kRetryMax = std::chrono::seconds(2);
@@ -105,14 +105,14 @@ std::shared_ptr<const geometry::StereoRig> Engine::rig() const {
 Result<StereoFrame> Engine::WaitForCapture(Clock::duration timeout) {
   std::unique_lock lock(mu_);
   const uint64_t seen = frames_captured_;
-  const bool got = capture_cv_.wait_for(lock, timeout,
-                                        [&] { return stopping_ || frames_captured_ > seen; });
+  const bool got =
+      capture_cv_.wait_for(lock, timeout, [&] { return stopping_ || frames_captured_ > seen; });
   if (stopping_) return Error{ErrorCode::kCancelled, "the server is stopping"};
   if (!got) {
-    return Error{ErrorCode::kUnavailable,
-                 "no frame from the source within the timeout (" +
-                     std::string(SourceStateName(source_state_)) +
-                     (source_error_.empty() ? "" : ": " + source_error_) + ")"};
+    return Error{ErrorCode::kUnavailable, "no frame from the source within the timeout (" +
+                                              std::string(SourceStateName(source_state_)) +
+                                              (source_error_.empty() ? "" : ": " + source_error_) +
+                                              ")"};
   }
   return last_capture_;
 }
@@ -133,7 +133,8 @@ void Engine::Start(size_t workers, int opencv_threads) {
   // Set before the workers start, and only when it changes: cv::setNumThreads rebuilds OpenCV's
   // thread pool, which must not be in use meanwhile.
   if (opencv_threads == 0 && workers > 1) opencv_threads = 1;
-  if (opencv_threads > 0 && cv::getNumThreads() != opencv_threads) cv::setNumThreads(opencv_threads);
+  if (opencv_threads > 0 && cv::getNumThreads() != opencv_threads)
+    cv::setNumThreads(opencv_threads);
   Log(LogLevel::kInfo, "engine_started",
       {{"pipeline_workers", std::to_string(workers)},
        {"opencv_threads", std::to_string(cv::getNumThreads())}});
@@ -182,16 +183,18 @@ void Engine::SetSourceState(SourceState state, std::string error) {
   }
   if (changed) {
     Log(state == SourceState::kDown ? LogLevel::kWarning : LogLevel::kInfo, "source_state",
-        {{"state", std::string(SourceStateName(state))}, {"source", source_description_},
+        {{"state", std::string(SourceStateName(state))},
+         {"source", source_description_},
          {"error", error}});
   }
 }
 
 void Engine::CaptureLoop() {
   const double fps = source_->NominalFps();
-  const auto period = fps > 0 ? std::chrono::duration_cast<Clock::duration>(
-                                    std::chrono::duration<double>(1.0 / fps))
-                              : Clock::duration::zero();
+  const auto period =
+      fps > 0
+          ? std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / fps))
+          : Clock::duration::zero();
   auto next_tick = Clock::now();
   auto retry = std::chrono::duration_cast<Clock::duration>(kRetryFirst);
   while (WaitUntil(next_tick)) {
@@ -223,8 +226,9 @@ void Engine::CaptureLoop() {
     }
     capture_cv_.notify_all();
     if (recovered) {
-      Log(LogLevel::kInfo, "source_state", {{"state", std::string(SourceStateName(SourceState::kRunning))},
-                                            {"source", source_description_}});
+      Log(LogLevel::kInfo, "source_state",
+          {{"state", std::string(SourceStateName(SourceState::kRunning))},
+           {"source", source_description_}});
     }
     if (tap) (*tap)(*frame);
     mailbox_.Put(std::move(frame).value());
@@ -277,7 +281,8 @@ void Engine::FinishLoop() {
     std::optional<Prepared> item;
     {
       std::unique_lock order(order_mu_);
-      order_cv_.wait(order, [&] { return ready_.count(next_finish_) > 0 || workers_running_ == 0; });
+      order_cv_.wait(order,
+                     [&] { return ready_.count(next_finish_) > 0 || workers_running_ == 0; });
       const auto it = ready_.find(next_finish_);
       if (it == ready_.end()) return;  // every worker has stopped and nothing is left
       item = std::move(it->second);

@@ -33,7 +33,7 @@ struct EngineStatus {
   uint64_t frames_captured = 0;
   uint64_t frames_processed = 0;
   uint64_t frames_failed = 0;
-  uint64_t frames_dropped_capture = 0;   // replaced in the mailbox before the pipeline took them
+  uint64_t frames_dropped_capture = 0;  // replaced in the mailbox before the pipeline took them
   std::vector<pipeline::StageTiming> mean_timings;  // over the last frames
   pipeline::Algorithm algorithm = pipeline::Algorithm::kCanonical;
   std::string calibration_id;
@@ -53,8 +53,8 @@ class Engine {
  public:
   using Sink = std::function<void(const std::shared_ptr<const pipeline::FrameResult>&)>;
 
-  // Validates `config` (kInvalidArgument naming every bad field). `sink` runs on the pipeline thread
-  // for every processed frame, in order.
+  // Validates `config` (kInvalidArgument naming every bad field). `sink` runs on the pipeline
+  // thread for every processed frame, in order.
   static Result<std::unique_ptr<Engine>> Create(std::unique_ptr<drivers::StereoSource> source,
                                                 pipeline::PipelineConfig config, Sink sink);
   ~Engine();
@@ -119,15 +119,15 @@ class Engine {
   pipeline::ConfigStore config_;
   Sink sink_;
   LatestMailbox<StereoFrame> mailbox_;
-  pipeline::Pipeline pipeline_;  // Finish() only: the tracker
+  pipeline::Pipeline pipeline_;                              // Finish() only: the tracker
   std::vector<std::unique_ptr<pipeline::FrontEnd>> fronts_;  // one per worker
   struct Prepared {
     pipeline::PreparedFrame frame;
     pipeline::Snapshot snapshot;  // the one Prepare() used: Finish() uses it too
   };
-  std::mutex take_mu_;            // a frame's sequence number is the order it was taken in
-  uint64_t next_take_ = 0;        // (take_mu_)
-  std::mutex order_mu_;           // guards the three below
+  std::mutex take_mu_;      // a frame's sequence number is the order it was taken in
+  uint64_t next_take_ = 0;  // (take_mu_)
+  std::mutex order_mu_;     // guards the three below
   std::condition_variable order_cv_;
   std::map<uint64_t, std::optional<Prepared>> ready_;  // by sequence; nullopt: the frame failed
   uint64_t next_finish_ = 0;

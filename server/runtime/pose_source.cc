@@ -8,8 +8,8 @@
 
 namespace stevi::server {
 
-Result<std::unique_ptr<PoseSource>> PoseSource::Create(const geo::PoseBufferOptions& options,
-                                                       const std::optional<geo::VehicleState>& fixed) {
+Result<std::unique_ptr<PoseSource>> PoseSource::Create(
+    const geo::PoseBufferOptions& options, const std::optional<geo::VehicleState>& fixed) {
   std::vector<std::string> problems;
   AppendPrefixed(problems, "geo.", options.Validate());
   if (fixed) AppendPrefixed(problems, "geo.fixed_pose.", fixed->Validate());

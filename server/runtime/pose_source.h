@@ -23,12 +23,14 @@ class PoseSource {
   // naming every bad field as the configuration's GeoConfig names it ("geo.max_age_s: ...",
   // "geo.fixed_pose.lat_deg: ...").
   static Result<std::unique_ptr<PoseSource>> Create(const geo::PoseBufferOptions& options,
-                                                     const std::optional<geo::VehicleState>& fixed);
+                                                    const std::optional<geo::VehicleState>& fixed);
 
   // The synthetic rig's own flight: its pose at a frame's source time (t_ns, the scene clock).
   // Used instead of the fixed pose until an autopilot publishes states. Set before the engine
   // starts.
-  void SetSyntheticPath(std::function<geo::VehicleState(int64_t t_ns)> path) { path_ = std::move(path); }
+  void SetSyntheticPath(std::function<geo::VehicleState(int64_t t_ns)> path) {
+    path_ = std::move(path);
+  }
 
   // A replay's recorded poses (drivers::ReplaySource::vehicle_states()): each frame's pose was
   // recorded with the frame's wall-clock time, and is found again by it, exactly. Used instead of

@@ -64,11 +64,12 @@ constexpr int kNumBands = 3;
 struct Totals {
   int scenes = 0, frames = 0;
   int expected = 0, matched = 0, detections = 0, false_positives = 0, dont_care = 0;
-  int found_boxes = 0;   // sum over matched obstacles of 1 + the fragments inside their box
-  int fragmented = 0;    // matched obstacles with more than one box
+  int found_boxes = 0;  // sum over matched obstacles of 1 + the fragments inside their box
+  int fragmented = 0;   // matched obstacles with more than one box
   int missed_none = 0, missed_small = 0, missed_large = 0;  // misses: no box touches it; the
                                                             // box most on it is smaller; larger
-  int missed_with_disparity = 0;  // misses whose truth box the matcher covered (kMatchedBoxFraction)
+  int missed_with_disparity =
+      0;  // misses whose truth box the matcher covered (kMatchedBoxFraction)
   std::vector<double> rel_error[kNumBands];  // (depth - truth) / truth, per band
   std::vector<double> normalised;            // (depth - truth) / depth_sigma
   std::map<std::string, double> stage_ms;
@@ -125,8 +126,8 @@ double MedianAbs(std::vector<double> v) {
 
 // One frame's verdict, also used to draw it.
 struct FrameScore {
-  std::vector<cv::Rect> boxes;          // detections, camera pixels
-  std::vector<int> verdict;             // per detection: 1 match, 0 don't care, -1 false positive
+  std::vector<cv::Rect> boxes;  // detections, camera pixels
+  std::vector<int> verdict;     // per detection: 1 match, 0 don't care, -1 false positive
   std::vector<const drivers::ObstacleTruth*> expected, ignored;
 };
 
@@ -245,8 +246,7 @@ void Draw(const StereoFrame& frame, const pipeline::FrameResult& result, double 
     cv::rectangle(out, o->bbox, green, thick);
     std::ostringstream t;
     t.precision(3);
-    t << o->kind << " d=" << o->median_disparity_px << " Z="
-      << fB / o->median_disparity_px;
+    t << o->kind << " d=" << o->median_disparity_px << " Z=" << fB / o->median_disparity_px;
     label(t.str(), {o->bbox.x, o->bbox.y + o->bbox.height + 12 * thick}, green);
   }
   for (size_t d = 0; d < s.boxes.size(); ++d) {
@@ -342,19 +342,22 @@ bool ParseSeedRange(const std::string& text, uint64_t& first, uint64_t& last) {
 
 int RunFamilyEval(const FamilyEvalOptions& options, const std::vector<EvalVariant>& variants) {
   const auto start = std::chrono::steady_clock::now();
-  std::printf("random scene families, seeds %llu-%llu%s\n",
-              static_cast<unsigned long long>(options.seed_first),
-              static_cast<unsigned long long>(options.seed_last),
-              options.seed_first > 1000 ? " (the TEST split: never tune on it)" : " (tuning split)");
-  std::printf("rule: expected = visible >= %d px and truth median disparity >= %.0f px; a "
-              "detection matches at IoU >= %.1f one-to-one; unmatched detections on a "
-              "non-expected obstacle (IoU >= %.1f or >= 50 %% inside it) are don't care (dc), "
-              "others false positives (FP); prec = matched / (matched + FP)\n",
-              kMinVisiblePx, kMinDisparityPx, kMinIoU, kMinIoU);
-  std::printf("box/obj = mean boxes per found obstacle (1 + unmatched detections >= 50 %% inside "
-              "its truth box), frag = found obstacles with > 1 box; err = |depth - fB / truth "
-              "median disparity| / truth: median/rms (n) by truth disparity band; err/sig = rms "
-              "of (depth - truth) / depth sigma\n");
+  std::printf(
+      "random scene families, seeds %llu-%llu%s\n",
+      static_cast<unsigned long long>(options.seed_first),
+      static_cast<unsigned long long>(options.seed_last),
+      options.seed_first > 1000 ? " (the TEST split: never tune on it)" : " (tuning split)");
+  std::printf(
+      "rule: expected = visible >= %d px and truth median disparity >= %.0f px; a "
+      "detection matches at IoU >= %.1f one-to-one; unmatched detections on a "
+      "non-expected obstacle (IoU >= %.1f or >= 50 %% inside it) are don't care (dc), "
+      "others false positives (FP); prec = matched / (matched + FP)\n",
+      kMinVisiblePx, kMinDisparityPx, kMinIoU, kMinIoU);
+  std::printf(
+      "box/obj = mean boxes per found obstacle (1 + unmatched detections >= 50 %% inside "
+      "its truth box), frag = found obstacles with > 1 box; err = |depth - fB / truth "
+      "median disparity| / truth: median/rms (n) by truth disparity band; err/sig = rms "
+      "of (depth - truth) / depth sigma\n");
   if (!options.dump_dir.empty()) std::filesystem::create_directories(options.dump_dir);
 
   std::map<std::string, std::map<std::string, Totals>> table;  // family -> variant -> totals
@@ -366,8 +369,8 @@ int RunFamilyEval(const FamilyEvalOptions& options, const std::vector<EvalVarian
       const drivers::SyntheticRenderer renderer(scenario.options);
       const auto rig = std::make_shared<const geometry::StereoRig>(renderer.Rig());
       const double fB = scenario.options.f_px * scenario.options.baseline_m;
-      const int frames = options.max_frames > 0 ? std::min(options.max_frames, scenario.frames)
-                                                : scenario.frames;
+      const int frames =
+          options.max_frames > 0 ? std::min(options.max_frames, scenario.frames) : scenario.frames;
       std::vector<StereoFrame> images;
       std::vector<drivers::FrameTruth> truths(static_cast<size_t>(frames));
       const auto r0 = std::chrono::steady_clock::now();
@@ -382,8 +385,8 @@ int RunFamilyEval(const FamilyEvalOptions& options, const std::vector<EvalVarian
         pipeline::Pipeline pipe;
         pipeline::PipelineConfig config = variant.config;
         if (options.max_width_px) config.max_width_px = *options.max_width_px;
-        const pipeline::Snapshot snapshot{
-            std::make_shared<const pipeline::PipelineConfig>(config), rig};
+        const pipeline::Snapshot snapshot{std::make_shared<const pipeline::PipelineConfig>(config),
+                                          rig};
         Totals totals;
         totals.scenes = 1;
         for (int k = 0; k < frames; ++k) {

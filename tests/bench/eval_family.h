@@ -19,11 +19,11 @@ struct EvalVariant {
 struct FamilyEvalOptions {
   std::vector<std::string> families;  // each one of drivers::RandomSceneFamilies()
   uint64_t seed_first = 1, seed_last = 40;
-  int max_frames = 0;                 // cap per scene (0 = the scene's own 4..6)
-  std::optional<int> max_width_px;    // PipelineConfig::max_width_px (unset: the default)
-  std::string json_path;              // --json FILE (empty: none)
-  std::string dump_dir;               // --dump DIR (empty: none)
-  int dump_scenes = 3;                // --dump: the first N seeds of each family
+  int max_frames = 0;               // cap per scene (0 = the scene's own 4..6)
+  std::optional<int> max_width_px;  // PipelineConfig::max_width_px (unset: the default)
+  std::string json_path;            // --json FILE (empty: none)
+  std::string dump_dir;             // --dump DIR (empty: none)
+  int dump_scenes = 3;              // --dump: the first N seeds of each family
 };
 
 // Parses "A-B" or "A" into [first, last]; false when malformed or first > last.

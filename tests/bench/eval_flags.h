@@ -9,10 +9,10 @@
 namespace stevi::bench {
 
 struct EvalFlags {
-  int max_frames = 0;          // --frames N: cap the frames per scenario (0 = each scenario's own)
-  std::string scenario;        // --scenario NAME (empty = all)
-  std::string algorithm;       // --algorithm NAME (empty = all)
-  bool trace = false;          // --trace (only where allow_trace)
+  int max_frames = 0;     // --frames N: cap the frames per scenario (0 = each scenario's own)
+  std::string scenario;   // --scenario NAME (empty = all)
+  std::string algorithm;  // --algorithm NAME (empty = all)
+  bool trace = false;     // --trace (only where allow_trace)
   // --size WxH: render every scenario at this size instead of its own, with the focal length scaled
   // by the width so the horizontal field of view stays (0 x 0 = each scenario's own size).
   int width = 0, height = 0;

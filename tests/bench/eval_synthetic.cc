@@ -134,7 +134,8 @@ int main(int argc, char** argv) {
   int max_frames = 0;
   std::string only_scenario, only_algorithm;
   const auto usage = [](const std::string& problem) {
-    std::fprintf(stderr, "stevi-eval: %s\nusage: stevi-eval [--frames N] [--scenario NAME] "
+    std::fprintf(stderr,
+                 "stevi-eval: %s\nusage: stevi-eval [--frames N] [--scenario NAME] "
                  "[--algorithm canonical|stevie|stevis|stevis-graph] [--size WxH] [--max-width N]\n"
                  "       stevi-eval --family sky|airfield|long_range|close|all --seeds A-B "
                  "[--frames N] [--algorithm NAME] [--max-width N] [--json FILE] [--dump DIR] "
@@ -174,7 +175,8 @@ int main(int argc, char** argv) {
     fo.dump_scenes = flags.dump_scenes;
     std::vector<bench::EvalVariant> variants;
     for (const Variant& v : Variants()) {
-      if (flags.algorithm.empty() || v.name == flags.algorithm) variants.push_back({v.name, v.config});
+      if (flags.algorithm.empty() || v.name == flags.algorithm)
+        variants.push_back({v.name, v.config});
     }
     if (variants.empty()) return usage("unknown algorithm '" + flags.algorithm + "'");
     return bench::RunFamilyEval(fo, variants);
@@ -206,8 +208,10 @@ int main(int argc, char** argv) {
     return usage("unknown algorithm '" + only_algorithm + "'");
   }
 
-  std::printf("rule: IoU >= 0.3 one-to-one; expected = visible >= %d px and disparity >= 8 px; "
-              "matcher BM (default)\n", kMinVisible);
+  std::printf(
+      "rule: IoU >= 0.3 one-to-one; expected = visible >= %d px and disparity >= 8 px; "
+      "matcher BM (default)\n",
+      kMinVisible);
   if (flags.width > 0) {
     std::printf("size: %dx%d, focal length scaled by width / 640 (the rule's pixels with it)\n",
                 flags.width, flags.height);
@@ -254,7 +258,8 @@ int main(int argc, char** argv) {
         Evaluate(*result, truths[k], fB, scale, totals);
       }
       std::vector<double> all;
-      for (const Band& b : totals.bands) all.insert(all.end(), b.errors_pct.begin(), b.errors_pct.end());
+      for (const Band& b : totals.bands)
+        all.insert(all.end(), b.errors_pct.begin(), b.errors_pct.end());
       std::printf("%-16s %-13s %7d %9d %6.1f%% %9.1f%% %8.2f%% %8.2f%% %6.1f ms\n",
                   scenario.name.c_str(), variant.name.c_str(), totals.frames, totals.expected,
                   totals.recall(), totals.precision(), Rms(all), MaxAbs(all),
@@ -263,7 +268,8 @@ int main(int argc, char** argv) {
     }
   }
 
-  std::printf("\nall scenarios: recall, precision, depth error (rms / max) by band, mean ms per stage\n");
+  std::printf(
+      "\nall scenarios: recall, precision, depth error (rms / max) by band, mean ms per stage\n");
   for (const Variant& variant : variants) {
     auto it = overall.find(variant.name);
     if (it == overall.end()) continue;
@@ -271,11 +277,13 @@ int main(int argc, char** argv) {
     std::printf("%-13s recall %5.1f%%  precision %5.1f%% ", variant.name.c_str(), t.recall(),
                 t.precision());
     for (const Band& b : t.bands) {
-      std::printf(" %2.0f-%2.0f m %.2f/%.2f%%", b.lo_m, b.hi_m, Rms(b.errors_pct), MaxAbs(b.errors_pct));
+      std::printf(" %2.0f-%2.0f m %.2f/%.2f%%", b.lo_m, b.hi_m, Rms(b.errors_pct),
+                  MaxAbs(b.errors_pct));
     }
     std::printf("\n              ");
     for (const std::string stage : {"rectify", "disparity", "extract", "total"}) {
-      std::printf(" %s %.2f ms", stage.c_str(), t.stage_ms.count(stage) ? t.stage_ms.at(stage) / t.frames : 0.0);
+      std::printf(" %s %.2f ms", stage.c_str(),
+                  t.stage_ms.count(stage) ? t.stage_ms.at(stage) / t.frames : 0.0);
     }
     std::printf("\n");
   }

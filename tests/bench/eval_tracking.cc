@@ -68,22 +68,24 @@ void PrintGates(const tracking::Track& before, const std::vector<detection::Dete
   const auto ratio = [](double a, double b) {
     return a > 0 && b > 0 ? std::max(a, b) / std::min(a, b) : 1.0;
   };
-  std::printf("    track %llu predicted at (%.0f, %.0f) z %.1f m, v (%.2f, %.2f, %.2f) m/s, last area "
-              "%d px:", static_cast<unsigned long long>(before.id), u, v, p[2],
-              before.velocity_cam_mps[0], before.velocity_cam_mps[1], before.velocity_cam_mps[2],
-              before.detection.area_px);
+  std::printf(
+      "    track %llu predicted at (%.0f, %.0f) z %.1f m, v (%.2f, %.2f, %.2f) m/s, last area "
+      "%d px:",
+      static_cast<unsigned long long>(before.id), u, v, p[2], before.velocity_cam_mps[0],
+      before.velocity_cam_mps[1], before.velocity_cam_mps[2], before.detection.area_px);
   for (const detection::Detection& d : detections) {
     const double distance = std::hypot(d.centroid_px.x - u, d.centroid_px.y - v);
     const double depth = ratio(d.position_cam_m[2], p[2]);
     const double area = ratio(d.area_px, before.detection.area_px);
     const double perimeter = ratio(d.perimeter_px, before.detection.perimeter_px);
-    std::printf("\n      det %s at (%.0f, %.0f) z %.1f m area %d: distance %.0f px%s, depth %.2f%s, "
-                "area %.2f%s, perimeter %.2f%s", Box(d.bbox).c_str(), d.centroid_px.x,
-                d.centroid_px.y, d.position_cam_m[2], d.area_px, distance,
-                distance > gates.max_distance_px ? " FAIL" : "", depth,
-                depth > gates.max_depth_ratio ? " FAIL" : "", area,
-                area > gates.max_area_ratio ? " FAIL" : "", perimeter,
-                perimeter > gates.max_perimeter_ratio ? " FAIL" : "");
+    std::printf(
+        "\n      det %s at (%.0f, %.0f) z %.1f m area %d: distance %.0f px%s, depth %.2f%s, "
+        "area %.2f%s, perimeter %.2f%s",
+        Box(d.bbox).c_str(), d.centroid_px.x, d.centroid_px.y, d.position_cam_m[2], d.area_px,
+        distance, distance > gates.max_distance_px ? " FAIL" : "", depth,
+        depth > gates.max_depth_ratio ? " FAIL" : "", area,
+        area > gates.max_area_ratio ? " FAIL" : "", perimeter,
+        perimeter > gates.max_perimeter_ratio ? " FAIL" : "");
   }
   std::printf("\n");
 }
@@ -250,8 +252,9 @@ int main(int argc, char** argv) {
                   RmsOrDash(s.ttc_errors_s, "%.2f").c_str());
     }
   }
-  std::printf("\ntraj = ground-truth trajectories matched at least once / all; tracks = track ids "
-              "reported (confirmed at least once);\nIoU = mean IoU of the matches; DC = don't-care "
-              "track frames; frag = fragmentations\n");
+  std::printf(
+      "\ntraj = ground-truth trajectories matched at least once / all; tracks = track ids "
+      "reported (confirmed at least once);\nIoU = mean IoU of the matches; DC = don't-care "
+      "track frames; frag = fragmentations\n");
   return 0;
 }

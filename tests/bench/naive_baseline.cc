@@ -90,9 +90,9 @@ std::vector<detection::Detection> MovingTargets::Detections(int64_t frame, doubl
     det.range_sigma_m = z * z / fb * 0.25 * det.range_m / z;
     const double w = camera_.f_px * target.width_m / z;
     const double h = camera_.f_px * target.height_m / z;
-    det.bbox = cv::Rect(static_cast<int>(std::lround(u - w / 2)),
-                        static_cast<int>(std::lround(v - h / 2)), static_cast<int>(std::lround(w)),
-                        static_cast<int>(std::lround(h)));
+    det.bbox =
+        cv::Rect(static_cast<int>(std::lround(u - w / 2)), static_cast<int>(std::lround(v - h / 2)),
+                 static_cast<int>(std::lround(w)), static_cast<int>(std::lround(h)));
     det.area_px = static_cast<int>(std::lround(w * h));
     det.valid_disparities = det.area_px;
     det.perimeter_px = 2 * (w + h);
@@ -136,9 +136,9 @@ NaiveThesisPipeline::NaiveThesisPipeline(const geometry::StereoRig& raw_rig, Nai
   const int block = options_.sgbm_block_size;
   // OpenCV's usual smoothness penalties for one channel, uniqueness and speckle as the project's
   // SGBM defaults (speckle range 2 px = 32 in OpenCV's 1/16 px).
-  impl_->sgbm = cv::StereoSGBM::create(0, options_.num_disparities, block, 8 * block * block,
-                                       32 * block * block, 1, 63, 10, 100, 32,
-                                       cv::StereoSGBM::MODE_SGBM);
+  impl_->sgbm =
+      cv::StereoSGBM::create(0, options_.num_disparities, block, 8 * block * block,
+                             32 * block * block, 1, 63, 10, 100, 32, cv::StereoSGBM::MODE_SGBM);
   impl_->saliency = cv::saliency::StaticSaliencyFineGrained::create();
   impl_->graph = cv::ximgproc::segmentation::createGraphSegmentation(
       options_.graph_sigma, static_cast<float>(options_.graph_k), options_.graph_min_size);
@@ -175,7 +175,8 @@ double Percentile(std::vector<double> values, double pct) {
   std::sort(values.begin(), values.end());
   // Nearest rank: the smallest value with at least pct % of the values at or below it.
   const double rank = std::ceil(pct / 100.0 * static_cast<double>(values.size()));
-  const size_t index = static_cast<size_t>(std::clamp(rank, 1.0, static_cast<double>(values.size()))) - 1;
+  const size_t index =
+      static_cast<size_t>(std::clamp(rank, 1.0, static_cast<double>(values.size()))) - 1;
   return values[index];
 }
 

@@ -63,10 +63,10 @@ class MovingTargets {
 
  private:
   struct Target {
-    double u0, v0;   // grid point, pixels
-    double z_m;      // depth
-    double rate;     // rad/s
-    double phase;    // rad
+    double u0, v0;  // grid point, pixels
+    double z_m;     // depth
+    double rate;    // rad/s
+    double phase;   // rad
     double width_m, height_m;
   };
   tracking::CameraModel camera_;

@@ -125,9 +125,11 @@ BENCHMARK(BM_RectifyRawRig)->ArgName("size")->Arg(0)->Arg(1)->Unit(benchmark::kM
 
 void BM_Matcher(benchmark::State& state) {
   const Scene& scene = SceneAt(state.range(1));
-  stereo::MatcherOptions options = ConfigFor(0, state.range(0), static_cast<int>(state.range(2))).matcher;
+  stereo::MatcherOptions options =
+      ConfigFor(0, state.range(0), static_cast<int>(state.range(2))).matcher;
   std::unique_ptr<stereo::DisparityMatcher> matcher = stereo::MakeMatcher(options);
-  for (auto _ : state) benchmark::DoNotOptimize(matcher->Compute(scene.frame.left, scene.frame.right));
+  for (auto _ : state)
+    benchmark::DoNotOptimize(matcher->Compute(scene.frame.left, scene.frame.right));
   const std::string what =
       std::string(state.range(0) == 0 ? "BM block 15, " : "SGBM 3-way block 5, ")
           .append(std::to_string(state.range(2)))
@@ -171,7 +173,7 @@ void BM_BlockMatchingCore(benchmark::State& state) {
   stereo::SadBlockMatcher matcher(p);
   for (auto _ : state) matcher.Compute(left, right, out);
   state.SetLabel(std::string(stereo::SadBlockMatcher::UsesAvx2() ? "SadBlockMatcher AVX2, "
-                                                                   : "SadBlockMatcher portable, ")
+                                                                 : "SadBlockMatcher portable, ")
                      .append(std::to_string(p.stripes))
                      .append(p.stripes == 1 ? " stripe" : " stripes"));
 }
@@ -234,8 +236,12 @@ void BM_SteViESteps(benchmark::State& state) {
   const cv::Mat1b classes =
       detection::ClassifyPixels(disparity, *scene.rig, config.range, ground, o.ground);
   const detection::FullResolutionPair full{left, right, 1};
-  static const char* const kSteps[] = {"noise estimate", "Canny edges", "close-fill-open",
-                                       "ground fit", "pixel classes", "RangeRegions",
+  static const char* const kSteps[] = {"noise estimate",
+                                       "Canny edges",
+                                       "close-fill-open",
+                                       "ground fit",
+                                       "pixel classes",
+                                       "RangeRegions",
                                        "RangeRegions + sub-pixel range"};
   const int64_t step = state.range(0);
   for (auto _ : state) {
@@ -301,10 +307,9 @@ BENCHMARK(BM_OurGraphSegmentation)->Unit(benchmark::kMillisecond);
 void BM_Pipeline(benchmark::State& state) {
   const int64_t alg = state.range(0), matcher = state.range(1), size = state.range(2);
   const Scene& scene = SceneAt(size);
-  const pipeline::Snapshot snapshot{
-      std::make_shared<const pipeline::PipelineConfig>(
-          ConfigFor(alg, matcher, static_cast<int>(state.range(3)))),
-      scene.rig};
+  const pipeline::Snapshot snapshot{std::make_shared<const pipeline::PipelineConfig>(
+                                        ConfigFor(alg, matcher, static_cast<int>(state.range(3)))),
+                                    scene.rig};
   pipeline::Pipeline pipe;
   std::map<std::string, double> stage_ms;
   int64_t k = 0;
@@ -400,7 +405,8 @@ void BM_NaiveSgbm(benchmark::State& state) {
   const Scene& scene = SceneAt(0);
   bench::NaiveThesisPipeline& naive = TheNaive();
   const bench::SingleThreadScope one_thread;
-  for (auto _ : state) benchmark::DoNotOptimize(naive.Disparity(scene.frame.left, scene.frame.right));
+  for (auto _ : state)
+    benchmark::DoNotOptimize(naive.Disparity(scene.frame.left, scene.frame.right));
   state.SetLabel("640x480 1 thread StereoSGBM MODE_SGBM 5-path, 64 disp");
 }
 BENCHMARK(BM_NaiveSgbm)->Unit(benchmark::kMillisecond);

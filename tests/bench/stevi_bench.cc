@@ -83,8 +83,8 @@ using Clock = std::chrono::steady_clock;
 // The largest source.fps the server's config accepts (server/app_config.cc): "as fast as
 // possible" for the synthetic source, whose render then paces the capture.
 constexpr double kMaxSourceFps = 1000.0;
-constexpr int kWarmupFrames = 3;         // offline runs: frames processed before measuring
-constexpr int kMinFrames = 5;            // offline runs: at least this many measured frames
+constexpr int kWarmupFrames = 3;  // offline runs: frames processed before measuring
+constexpr int kMinFrames = 5;     // offline runs: at least this many measured frames
 constexpr int kMaxFrames = 100000;
 // The synthetic source's loop (source.synthetic.loop_frames): rendered once, then played again at
 // no cost per frame, as a camera delivers frames. The targets are judged on it.
@@ -135,15 +135,23 @@ class Json {
  public:
   enum class Kind { kNull, kBool, kNumber, kString, kArray, kObject };
   Json() = default;
-  Json(bool b) : kind_(Kind::kBool), bool_(b) {}                                   // NOLINT
-  Json(double d) : kind_(Kind::kNumber), number_(d) {}                             // NOLINT
-  Json(int i) : kind_(Kind::kNumber), number_(i) {}                                // NOLINT
-  Json(int64_t i) : kind_(Kind::kNumber), number_(static_cast<double>(i)) {}       // NOLINT
-  Json(uint64_t i) : kind_(Kind::kNumber), number_(static_cast<double>(i)) {}      // NOLINT
-  Json(const char* s) : kind_(Kind::kString), string_(s) {}                        // NOLINT
-  Json(std::string s) : kind_(Kind::kString), string_(std::move(s)) {}             // NOLINT
-  static Json Object() { Json j; j.kind_ = Kind::kObject; return j; }
-  static Json Array() { Json j; j.kind_ = Kind::kArray; return j; }
+  Json(bool b) : kind_(Kind::kBool), bool_(b) {}                               // NOLINT
+  Json(double d) : kind_(Kind::kNumber), number_(d) {}                         // NOLINT
+  Json(int i) : kind_(Kind::kNumber), number_(i) {}                            // NOLINT
+  Json(int64_t i) : kind_(Kind::kNumber), number_(static_cast<double>(i)) {}   // NOLINT
+  Json(uint64_t i) : kind_(Kind::kNumber), number_(static_cast<double>(i)) {}  // NOLINT
+  Json(const char* s) : kind_(Kind::kString), string_(s) {}                    // NOLINT
+  Json(std::string s) : kind_(Kind::kString), string_(std::move(s)) {}         // NOLINT
+  static Json Object() {
+    Json j;
+    j.kind_ = Kind::kObject;
+    return j;
+  }
+  static Json Array() {
+    Json j;
+    j.kind_ = Kind::kArray;
+    return j;
+  }
 
   Json& Set(const std::string& key, Json value) {
     members_.emplace_back(key, std::move(value));
@@ -171,7 +179,10 @@ class Json {
         break;
       case Kind::kString: Quote(string_, out); break;
       case Kind::kArray:
-        if (items_.empty()) { out += "[]"; break; }
+        if (items_.empty()) {
+          out += "[]";
+          break;
+        }
         out += "[\n";
         for (size_t i = 0; i < items_.size(); ++i) {
           out += pad;
@@ -181,7 +192,10 @@ class Json {
         out += end_pad + "]";
         break;
       case Kind::kObject:
-        if (members_.empty()) { out += "{}"; break; }
+        if (members_.empty()) {
+          out += "{}";
+          break;
+        }
         out += "{\n";
         for (size_t i = 0; i < members_.size(); ++i) {
           out += pad;
@@ -237,18 +251,23 @@ struct Flags {
   double latency_fps = 30.0;
   std::string latency_algorithm = "stevie";
   // The source's rate in the throughput runs: a fast camera, above every target. (Not "as fast as
-  // possible": a capture loop spinning at 1000 Hz takes CPU from the pipeline that no camera would.)
+  // possible": a capture loop spinning at 1000 Hz takes CPU from the pipeline that no camera
+  // would.)
   double source_fps = 120.0;
 };
 
 constexpr const char* kUsage =
     "usage: stevi-bench [--seconds N] [--json FILE|-] [--quick] [--latency-fps F]\n"
-    "                   [--latency-algorithm canonical|stevie|stevis|stevis-graph] [--source-fps F]\n"
+    "                   [--latency-algorithm canonical|stevie|stevis|stevis-graph] [--source-fps "
+    "F]\n"
     "  --seconds N           time per measurement (default 5; --quick: 1)\n"
-    "  --json FILE           also write the figures as JSON to FILE ('-': stdout, table to stderr)\n"
-    "  --quick               short run: 1 s per measurement, 1 and 16 clients, block matching only\n"
+    "  --json FILE           also write the figures as JSON to FILE ('-': stdout, table to "
+    "stderr)\n"
+    "  --quick               short run: 1 s per measurement, 1 and 16 clients, block matching "
+    "only\n"
     "                        through the server\n"
-    "  --latency-fps F       source rate of the latency and client runs (default 30, 0 < F <= 1000)\n"
+    "  --latency-fps F       source rate of the latency and client runs (default 30, 0 < F <= "
+    "1000)\n"
     "  --latency-algorithm A algorithm of the latency and client runs (default stevie)\n"
     "  --source-fps F        source rate of the throughput runs (default 120, 0 < F <= 1000)\n";
 
@@ -277,7 +296,8 @@ std::optional<Flags> ParseFlags(int argc, char** argv) {
         char* end = nullptr;
         const double number = std::strtod(v->c_str(), &end);
         if (end == v->c_str() || *end != '\0' || !(number > 0) || !std::isfinite(number)) {
-          std::fprintf(stderr, "%s: expected a positive number, got '%s'\n", arg.c_str(), v->c_str());
+          std::fprintf(stderr, "%s: expected a positive number, got '%s'\n", arg.c_str(),
+                       v->c_str());
           return std::nullopt;
         }
         if (arg == "--seconds") {
@@ -360,10 +380,10 @@ v1::PipelineConfig ProtoConfigFor(const Variant& variant, stereo::MatcherKind ki
     case pipeline::Algorithm::kSteViE: config.set_algorithm(v1::ALGORITHM_STEVIE); break;
     case pipeline::Algorithm::kSteViS: config.set_algorithm(v1::ALGORITHM_STEVIS); break;
   }
-  config.mutable_stevis()->set_segmentation(
-      variant.segmentation == detection::SteViSOptions::Segmentation::kGraph
-          ? v1::SEGMENTATION_GRAPH
-          : v1::SEGMENTATION_THRESHOLD);
+  config.mutable_stevis()->set_segmentation(variant.segmentation ==
+                                                    detection::SteViSOptions::Segmentation::kGraph
+                                                ? v1::SEGMENTATION_GRAPH
+                                                : v1::SEGMENTATION_THRESHOLD);
   config.mutable_matcher()->set_kind(kind == stereo::MatcherKind::kBlockMatching
                                          ? v1::MATCHER_KIND_BLOCK_MATCHING
                                          : v1::MATCHER_KIND_SEMI_GLOBAL);
@@ -390,7 +410,11 @@ Stats StatsOf(const std::vector<double>& values) {
 }
 
 Json StatsJson(const Stats& s) {
-  return Json::Object().Set("mean_ms", s.mean).Set("p50_ms", s.p50).Set("p99_ms", s.p99).Set("n", s.n);
+  return Json::Object()
+      .Set("mean_ms", s.mean)
+      .Set("p50_ms", s.p50)
+      .Set("p99_ms", s.p99)
+      .Set("n", s.n);
 }
 
 struct OfflineRun {
@@ -416,7 +440,8 @@ struct OfflineRun {
 
 // The size column of a run: "1280x1024", or "1280x1024/2" when the pipeline bins it by 2.
 std::string RunSizeName(cv::Size size, int max_width_px) {
-  const int factor = geometry::BinningFactor(size.width, max_width_px, geometry::RangeOptions{}.min_disparity_px);
+  const int factor =
+      geometry::BinningFactor(size.width, max_width_px, geometry::RangeOptions{}.min_disparity_px);
   return bench::SizeName(size) + (factor > 1 ? "/" + std::to_string(factor) : "");
 }
 
@@ -492,7 +517,8 @@ Json OfflineJson(const OfflineRun& run) {
       .Set("height", run.size.height)
       .Set("disparities", run.disparities)
       .Set("max_width_px", run.max_width_px)
-      .Set("binning", geometry::BinningFactor(run.size.width, run.max_width_px, geometry::RangeOptions{}.min_disparity_px))
+      .Set("binning", geometry::BinningFactor(run.size.width, run.max_width_px,
+                                              geometry::RangeOptions{}.min_disparity_px))
       .Set("frames", run.frames)
       .Set("detections_per_frame", run.detections_per_frame)
       .Set("tracks_per_frame", run.tracks_per_frame)
@@ -507,7 +533,8 @@ Json OfflineJson(const OfflineRun& run) {
 // ---------------------------------------------------------------------------------------------
 
 // Runs `fn` until `seconds` have passed and at least `min_reps` times; the time of each call.
-std::vector<double> TimeRepeated(const std::function<void()>& fn, double seconds, int min_reps = 3) {
+std::vector<double> TimeRepeated(const std::function<void()>& fn, double seconds,
+                                 int min_reps = 3) {
   fn();  // warm-up (allocations, lazy initialisation)
   std::vector<double> ms;
   const Clock::time_point start = Clock::now();
@@ -521,12 +548,12 @@ std::vector<double> TimeRepeated(const std::function<void()>& fn, double seconds
 }
 
 struct BaselineRow {
-  std::string stage;     // "rectify", "disparity", "saliency", "graph segmentation", "total"
-  std::string naive;     // what the naive stage is
-  std::string ours;      // what our counterpart is
-  Stats naive_ms;        // one thread
-  Stats ours_ms;         // OpenCV's default thread count (as the server runs)
-  Stats ours_1t_ms;      // one thread
+  std::string stage;  // "rectify", "disparity", "saliency", "graph segmentation", "total"
+  std::string naive;  // what the naive stage is
+  std::string ours;   // what our counterpart is
+  Stats naive_ms;     // one thread
+  Stats ours_ms;      // OpenCV's default thread count (as the server runs)
+  Stats ours_1t_ms;   // one thread
   bool available = true;
   std::string note;
 };
@@ -558,49 +585,81 @@ Baseline MeasureBaseline(double seconds, const std::vector<OfflineRun>& offline)
   };
 
   cv::Mat rect_left, rect_right, our_left, our_right;
-  BaselineRow rectify{"rectify", "cv::remap, float maps, bilinear, both images",
-                      "StereoRig::Rectify of a raw rig (fixed-point maps)", {}, {}, {}, true, ""};
+  BaselineRow rectify{"rectify",
+                      "cv::remap, float maps, bilinear, both images",
+                      "StereoRig::Rectify of a raw rig (fixed-point maps)",
+                      {},
+                      {},
+                      {},
+                      true,
+                      ""};
   if (!raw.ok()) rectify.note = "raw rig refused: " + raw.error().message;
-  both(rectify, [&] { naive.Rectify(frame.left, frame.right, rect_left, rect_right); },
-       [&] { (void)remap_rig.Rectify(frame.left, frame.right, our_left, our_right); });
+  both(
+      rectify, [&] { naive.Rectify(frame.left, frame.right, rect_left, rect_right); },
+      [&] { (void)remap_rig.Rectify(frame.left, frame.right, our_left, our_right); });
   b.rows.push_back(rectify);
 
   stereo::MatcherOptions sgbm_options;
   sgbm_options.kind = stereo::MatcherKind::kSemiGlobal;
   std::unique_ptr<stereo::DisparityMatcher> sgbm = stereo::MakeMatcher(sgbm_options);
-  BaselineRow disparity{"disparity", "StereoSGBM MODE_SGBM (5 paths), 64 disp, block 5",
-                        "SGBM 3-way, 64 disp, block 5, padded, texture gate", {}, {}, {}, true, ""};
-  both(disparity, [&] { (void)naive.Disparity(frame.left, frame.right); },
-       [&] { (void)sgbm->Compute(frame.left, frame.right); });
+  BaselineRow disparity{"disparity",
+                        "StereoSGBM MODE_SGBM (5 paths), 64 disp, block 5",
+                        "SGBM 3-way, 64 disp, block 5, padded, texture gate",
+                        {},
+                        {},
+                        {},
+                        true,
+                        ""};
+  both(
+      disparity, [&] { (void)naive.Disparity(frame.left, frame.right); },
+      [&] { (void)sgbm->Compute(frame.left, frame.right); });
   b.rows.push_back(disparity);
 
   std::unique_ptr<stereo::DisparityMatcher> bm = stereo::MakeMatcher({});
-  BaselineRow disparity_bm{"disparity (ours BM)", "StereoSGBM MODE_SGBM (5 paths), 64 disp",
-                           "block matching, block 15, 64 disp (the default matcher)", {}, {}, {},
-                           true, ""};
+  BaselineRow disparity_bm{"disparity (ours BM)",
+                           "StereoSGBM MODE_SGBM (5 paths), 64 disp",
+                           "block matching, block 15, 64 disp (the default matcher)",
+                           {},
+                           {},
+                           {},
+                           true,
+                           ""};
   both(disparity_bm, nullptr, [&] { (void)bm->Compute(frame.left, frame.right); });
   disparity_bm.naive_ms = disparity.naive_ms;  // the same naive stage, not measured twice
   b.rows.push_back(disparity_bm);
 
   const cv::Mat1b left = frame.left;
   const extraction::SaliencyOptions saliency_options;
-  BaselineRow saliency{"saliency", "StaticSaliencyFineGrained, full resolution",
-                       "VOCUS intensity (ComputeSaliency), summed at level 2", {}, {}, {}, true, ""};
-  both(saliency, [&] { (void)naive.Saliency(frame.left); },
-       [&] { (void)extraction::ComputeSaliency(left, saliency_options); });
+  BaselineRow saliency{"saliency",
+                       "StaticSaliencyFineGrained, full resolution",
+                       "VOCUS intensity (ComputeSaliency), summed at level 2",
+                       {},
+                       {},
+                       {},
+                       true,
+                       ""};
+  both(
+      saliency, [&] { (void)naive.Saliency(frame.left); },
+      [&] { (void)extraction::ComputeSaliency(left, saliency_options); });
   b.rows.push_back(saliency);
 
   const detection::SteViSOptions stevis;
-  BaselineRow graph{"graph segmentation", "GraphSegmentation, full resolution",
-                    "GraphSegmentation on the image shrunk by 2^graph_level (level 1)", {}, {}, {},
-                    true, ""};
-  both(graph, [&] { (void)naive.Segment(frame.left); },
-       [&] {
-         cv::Mat small;
-         const double scale = 1.0 / (1 << stevis.graph_level);
-         cv::resize(left, small, cv::Size(), scale, scale, cv::INTER_AREA);
-         (void)extraction::SegmentGraph(small, stevis.graph);
-       });
+  BaselineRow graph{"graph segmentation",
+                    "GraphSegmentation, full resolution",
+                    "GraphSegmentation on the image shrunk by 2^graph_level (level 1)",
+                    {},
+                    {},
+                    {},
+                    true,
+                    ""};
+  both(
+      graph, [&] { (void)naive.Segment(frame.left); },
+      [&] {
+        cv::Mat small;
+        const double scale = 1.0 / (1 << stevis.graph_level);
+        cv::resize(left, small, cv::Size(), scale, scale, cv::INTER_AREA);
+        (void)extraction::SegmentGraph(small, stevis.graph);
+      });
   b.rows.push_back(graph);
 
   // Totals: the naive front end (the sum of its stages) against our whole pipeline per frame on the
@@ -613,8 +672,9 @@ Baseline MeasureBaseline(double seconds, const std::vector<OfflineRun>& offline)
   const double our_rectify = b.rows.front().ours_ms.mean;
   const auto ours_total = [&](const std::string& variant, stereo::MatcherKind kind,
                               const std::string& what) {
-    BaselineRow row{"total", "sum of the naive stages above (no blobs, no tracking)", what,
-                    {}, {}, {}, true, ""};
+    BaselineRow row{
+        "total", "sum of the naive stages above (no blobs, no tracking)", what, {}, {}, {}, true,
+        ""};
     row.naive_ms.mean = naive_sum;
     for (const OfflineRun& run : offline) {
       if (run.variant == variant && run.matcher == kind && run.size == cv::Size(640, 480) &&
@@ -632,8 +692,8 @@ Baseline MeasureBaseline(double seconds, const std::vector<OfflineRun>& offline)
                               "whole pipeline, SteViS graph + SGBM"));
   b.rows.push_back(ours_total("stevis", stereo::MatcherKind::kBlockMatching,
                               "whole pipeline, SteViS threshold + BM (defaults)"));
-  b.rows.push_back(ours_total("stevie", stereo::MatcherKind::kBlockMatching,
-                              "whole pipeline, SteViE + BM"));
+  b.rows.push_back(
+      ours_total("stevie", stereo::MatcherKind::kBlockMatching, "whole pipeline, SteViE + BM"));
   return b;
 }
 
@@ -697,9 +757,10 @@ TrackerRun MeasureTracker(int targets, double seconds) {
   run.updates = static_cast<int>(ms.size());
   run.update_ms = StatsOf(ms);
   run.tracks = static_cast<double>(out.size());
-  run.confirmed = static_cast<double>(std::count_if(out.begin(), out.end(), [](const tracking::Track& t) {
-    return t.state == tracking::TrackState::kConfirmed;
-  }));
+  run.confirmed =
+      static_cast<double>(std::count_if(out.begin(), out.end(), [](const tracking::Track& t) {
+        return t.state == tracking::TrackState::kConfirmed;
+      }));
   return run;
 }
 
@@ -766,7 +827,8 @@ std::unique_ptr<RunningServer> StartServer(const v1::PipelineConfig& pipeline_co
   v1::ServerConfig config;
   config.set_listen("127.0.0.1:0");
   *config.mutable_source() = source;
-  config.set_data_dir(running->dir.path.empty() ? std::string("stevi-bench-data") : running->dir.path);
+  config.set_data_dir(running->dir.path.empty() ? std::string("stevi-bench-data")
+                                                : running->dir.path);
   *config.mutable_pipeline() = pipeline_config;
   if (threads.workers > 0) config.set_pipeline_workers(threads.workers);
   if (threads.opencv > 0) config.set_opencv_threads(threads.opencv);
@@ -805,8 +867,8 @@ struct ThroughputRun {
   std::string source;  // "looped" (judged) or "rendered"
   std::string variant;
   stereo::MatcherKind matcher = stereo::MatcherKind::kBlockMatching;
-  double source_fps = kNaN;    // the source's rate setting
-  Threads threads;             // asked for (the defaults are judged)
+  double source_fps = kNaN;  // the source's rate setting
+  Threads threads;           // asked for (the defaults are judged)
   double seconds = 0;
   uint64_t frames = 0;
   double fps = kNaN;           // frames_processed per second (GetStatus)
@@ -864,7 +926,8 @@ ThroughputRun MeasureThroughput(const Variant& variant, stereo::MatcherKind kind
   run.dropped_capture = b->status.frames_dropped_capture() - a->status.frames_dropped_capture();
   run.failed = b->status.frames_failed() - a->status.frames_failed();
   run.cpu_cores = (b->cpu_s - a->cpu_s) / run.seconds;
-  if (run.frames > 0) run.cpu_ms_per_frame = 1000.0 * (b->cpu_s - a->cpu_s) / static_cast<double>(run.frames);
+  if (run.frames > 0)
+    run.cpu_ms_per_frame = 1000.0 * (b->cpu_s - a->cpu_s) / static_cast<double>(run.frames);
   run.last = b->status;
   return run;
 }
@@ -897,11 +960,11 @@ struct ClientsRun {
   double delivered_fps_min = kNaN;  // per client, the slowest
   uint64_t samples = 0;
   double p50_ms = kNaN, p99_ms = kNaN, max_ms = kNaN, mean_ms = kNaN;
-  uint64_t dropped = 0;               // frames dropped for the clients during the window (sum)
-  int subscribers = 0;                // as GetStatus saw them at the end of the window
+  uint64_t dropped = 0;  // frames dropped for the clients during the window (sum)
+  int subscribers = 0;   // as GetStatus saw them at the end of the window
   double server_cpu_ms_per_frame = kNaN;
   double server_cpu_cores = kNaN;
-  double client_cpu_cores = kNaN;     // the child process holding the clients
+  double client_cpu_cores = kNaN;  // the child process holding the clients
   std::string error;
 };
 
@@ -988,7 +1051,8 @@ ClientsRun MeasureClients(RunningServer& s, int clients, double seconds) {
   run.dropped = static_cast<uint64_t>(result["dropped"]);
   run.subscribers = b->status.subscribers_size();
   run.server_cpu_cores = (b->cpu_s - a->cpu_s) / window;
-  if (frames > 0) run.server_cpu_ms_per_frame = 1000.0 * (b->cpu_s - a->cpu_s) / static_cast<double>(frames);
+  if (frames > 0)
+    run.server_cpu_ms_per_frame = 1000.0 * (b->cpu_s - a->cpu_s) / static_cast<double>(frames);
   run.client_cpu_cores = result["cpu_s"] / result["seconds"];
   return run;
 }
@@ -1219,16 +1283,17 @@ int main(int argc, char** argv) {
   root.Set("tool", "stevi-bench").Set("schema", 1).Set("started_utc", UtcNow());
   Json machine = MachineJson();
   root.Set("build", BuildJson());
-  root.Set("settings", Json::Object()
-                           .Set("seconds_per_measurement", flags.seconds)
-                           .Set("quick", flags.quick)
-                           .Set("latency_source_fps", flags.latency_fps)
-                           .Set("latency_algorithm", flags.latency_algorithm)
-                           .Set("throughput_source_fps", flags.source_fps)
-                           .Set("offline_warmup_frames", kWarmupFrames)
-                           .Set("synthetic_scene", "demo (DefaultScene), noise sigma 2, seed 1")
-                           .Set("rig_640x480", "f 700 px, B 0.6 m")
-                           .Set("rig_1280x1024", "f 1400 px, B 0.6 m (same horizontal field of view)"));
+  root.Set("settings",
+           Json::Object()
+               .Set("seconds_per_measurement", flags.seconds)
+               .Set("quick", flags.quick)
+               .Set("latency_source_fps", flags.latency_fps)
+               .Set("latency_algorithm", flags.latency_algorithm)
+               .Set("throughput_source_fps", flags.source_fps)
+               .Set("offline_warmup_frames", kWarmupFrames)
+               .Set("synthetic_scene", "demo (DefaultScene), noise sigma 2, seed 1")
+               .Set("rig_640x480", "f 700 px, B 0.6 m")
+               .Set("rig_1280x1024", "f 1400 px, B 0.6 m (same horizontal field of view)"));
 
   // 1-2. Stages, resolution and disparity count.
   std::fprintf(stderr, "stevi-bench: %.1f s per measurement\n", flags.seconds);
@@ -1250,7 +1315,8 @@ int main(int argc, char** argv) {
   for (stereo::MatcherKind kind : matchers) {
     for (int d : disparity_counts) {
       if (d == 64) continue;  // measured above
-      disparity_runs.push_back(MeasureOffline(VariantNamed("stevie"), kind, {640, 480}, d, flags.seconds));
+      disparity_runs.push_back(
+          MeasureOffline(VariantNamed("stevie"), kind, {640, 480}, d, flags.seconds));
     }
   }
   const auto find_offline = [&](const std::string& variant, stereo::MatcherKind kind, cv::Size size,
@@ -1288,15 +1354,15 @@ int main(int argc, char** argv) {
   const uint32_t cores = static_cast<uint32_t>(std::max(1, cv::getNumberOfCPUs()));
   for (const Threads threads : {Threads{1, cores}, Threads{0, cores}}) {
     for (const char* name : {"canonical", "stevie"}) {
-      throughput.push_back(MeasureThroughput(VariantNamed(name), stereo::MatcherKind::kBlockMatching,
-                                             flags.seconds, flags.source_fps, false, threads));
+      throughput.push_back(MeasureThroughput(VariantNamed(name),
+                                             stereo::MatcherKind::kBlockMatching, flags.seconds,
+                                             flags.source_fps, false, threads));
     }
   }
   // For reference (not judged): the synthetic source rendering every frame, block matching.
   for (const Variant& variant : Variants()) {
-    throughput.push_back(
-        MeasureThroughput(variant, stereo::MatcherKind::kBlockMatching, flags.seconds,
-                          flags.source_fps, true));
+    throughput.push_back(MeasureThroughput(variant, stereo::MatcherKind::kBlockMatching,
+                                           flags.seconds, flags.source_fps, true));
   }
 
   // 6. Latency and clients, one server at the camera rate.
@@ -1323,8 +1389,7 @@ int main(int argc, char** argv) {
   const auto throughput_of = [&](const std::string& variant) {
     for (const ThroughputRun& run : throughput) {
       if (run.source == "looped" && run.variant == variant && run.threads.workers == 0 &&
-          run.threads.opencv == 0 &&
-          run.matcher == stereo::MatcherKind::kBlockMatching) {
+          run.threads.opencv == 0 && run.matcher == stereo::MatcherKind::kBlockMatching) {
         return run.fps;
       }
     }
@@ -1337,22 +1402,31 @@ int main(int argc, char** argv) {
     return nullptr;
   };
   std::vector<Target> targets;
-  targets.push_back({"SteViS throughput", ">= 30 fps", throughput_of("stevis"), "fps", true, 30,
-                     "server, threshold segmentation, BM, 640x480, 64 disp, GetStatus frames_processed/s"});
+  targets.push_back(
+      {"SteViS throughput", ">= 30 fps", throughput_of("stevis"), "fps", true, 30,
+       "server, threshold segmentation, BM, 640x480, 64 disp, GetStatus frames_processed/s"});
   targets.push_back({"SteViE throughput", ">= 60 fps", throughput_of("stevie"), "fps", true, 60,
                      "server, BM, 640x480, 64 disp, GetStatus frames_processed/s"});
   for (int n : {1, 16}) {
     const ClientsRun* run = clients_of(n);
-    targets.push_back({std::string("latency p99, ").append(std::to_string(n)).append(n == 1 ? " client" : " clients"),
+    targets.push_back({std::string("latency p99, ")
+                           .append(std::to_string(n))
+                           .append(n == 1 ? " client" : " clients"),
                        "<= 50 ms", run ? run->p99_ms : kNaN, "ms", false, 50,
-                       std::string("capture to receipt, ").append(flags.latency_algorithm)
-                           .append(" + BM at ").append(Format("%.0f", flags.latency_fps)).append(" fps")});
+                       std::string("capture to receipt, ")
+                           .append(flags.latency_algorithm)
+                           .append(" + BM at ")
+                           .append(Format("%.0f", flags.latency_fps))
+                           .append(" fps")});
   }
   for (const TrackerRun& run : tracker_runs) {
     if (run.targets != 100) continue;
     targets.push_back({"tracking, 100 tracks", "<= 0.5 ms", run.update_ms.mean, "ms", false, 0.5,
-                       std::string("Tracker::Update mean; p99 ").append(Ms(run.update_ms.p99, "%.3f"))
-                           .append(" ms; ").append(Format("%.0f", run.confirmed)).append(" confirmed tracks")});
+                       std::string("Tracker::Update mean; p99 ")
+                           .append(Ms(run.update_ms.p99, "%.3f"))
+                           .append(" ms; ")
+                           .append(Format("%.0f", run.confirmed))
+                           .append(" confirmed tracks")});
   }
 
   // ---- The table ----
@@ -1368,35 +1442,37 @@ int main(int argc, char** argv) {
     }
   }
   std::fprintf(table, "\nstevi-bench  %s\n", UtcNow().c_str());
-  std::fprintf(table, "machine: %s, %ld CPUs online; build %s; OpenCV %s, %d threads in tables 1-4; "
+  std::fprintf(table,
+               "machine: %s, %ld CPUs online; build %s; OpenCV %s, %d threads in tables 1-4; "
                "%.1f s per measurement%s\n",
                machine_text.c_str(), ::sysconf(_SC_NPROCESSORS_ONLN), STEVI_BUILD_TYPE, CV_VERSION,
                g_opencv_threads_at_start, flags.seconds, flags.quick ? " (quick)" : "");
 
-  std::fprintf(table, "\n1. Stages (ms, mean; total also p99), synthetic demo scene, 64 disparities, "
-                      "rectified input (rectify = copy)\n");
-  std::fprintf(table, "%-11s %-13s %-5s %7s %8s %8s %7s %7s %8s %8s %6s %6s %7s\n", "size", "algorithm",
-               "match", "rectify", "disparity", "extract", "track", "total", "p50", "p99", "frames",
-               "dets", "render");
+  std::fprintf(table,
+               "\n1. Stages (ms, mean; total also p99), synthetic demo scene, 64 disparities, "
+               "rectified input (rectify = copy)\n");
+  std::fprintf(table, "%-11s %-13s %-5s %7s %8s %8s %7s %7s %8s %8s %6s %6s %7s\n", "size",
+               "algorithm", "match", "rectify", "disparity", "extract", "track", "total", "p50",
+               "p99", "frames", "dets", "render");
   for (const OfflineRun& run : offline) {
     if (!run.error.empty()) {
       std::fprintf(table, "%-11s %-13s %-5s error: %s\n",
-                   RunSizeName(run.size, run.max_width_px).c_str(),
-                   run.variant.c_str(), MatcherName(run.matcher), run.error.c_str());
+                   RunSizeName(run.size, run.max_width_px).c_str(), run.variant.c_str(),
+                   MatcherName(run.matcher), run.error.c_str());
       continue;
     }
     std::fprintf(table, "%-11s %-13s %-5s %7s %8s %8s %7s %7s %8s %8s %6d %6.1f %7s\n",
                  RunSizeName(run.size, run.max_width_px).c_str(), run.variant.c_str(),
-                 MatcherName(run.matcher),
-                 Ms(run.Stage("rectify").mean).c_str(), Ms(run.Stage("disparity").mean).c_str(),
-                 Ms(run.Stage("extract").mean).c_str(), Ms(run.Stage("track").mean, "%.3f").c_str(),
-                 Ms(run.Stage("total").mean).c_str(), Ms(run.Stage("total").p50).c_str(),
-                 Ms(run.Stage("total").p99).c_str(), run.frames, run.detections_per_frame,
-                 Ms(run.render.mean).c_str());
+                 MatcherName(run.matcher), Ms(run.Stage("rectify").mean).c_str(),
+                 Ms(run.Stage("disparity").mean).c_str(), Ms(run.Stage("extract").mean).c_str(),
+                 Ms(run.Stage("track").mean, "%.3f").c_str(), Ms(run.Stage("total").mean).c_str(),
+                 Ms(run.Stage("total").p50).c_str(), Ms(run.Stage("total").p99).c_str(), run.frames,
+                 run.detections_per_frame, Ms(run.render.mean).c_str());
   }
 
-  std::fprintf(table, "\n2a. Cost against resolution (total ms, mean; 1280x1024 has 4.27x the pixels;"
-                      " /2 = binned to 640x512, the default)\n");
+  std::fprintf(table,
+               "\n2a. Cost against resolution (total ms, mean; 1280x1024 has 4.27x the pixels;"
+               " /2 = binned to 640x512, the default)\n");
   std::fprintf(table, "%-13s %-5s %9s %10s %7s %12s %7s\n", "algorithm", "match", "640x480",
                "1280x1024", "ratio", "1280x1024/2", "ratio");
   for (const Variant& variant : Variants()) {
@@ -1421,18 +1497,21 @@ int main(int argc, char** argv) {
       const double disp = run ? run->Stage("disparity").mean : kNaN;
       const double ref_disp = ref ? ref->Stage("disparity").mean : kNaN;
       std::fprintf(table, "%-5s %6d %10s %8s %8s\n", MatcherName(kind), d, Ms(disp).c_str(),
-                   Ms(run ? run->Stage("total").mean : kNaN).c_str(), Ms(disp / ref_disp, "%.2fx").c_str());
+                   Ms(run ? run->Stage("total").mean : kNaN).c_str(),
+                   Ms(disp / ref_disp, "%.2fx").c_str());
     }
   }
 
-  std::fprintf(table, "\n3. Naive thesis baseline (1 OpenCV thread, full resolution) vs ours, one 640x480 "
-                      "frame (ms, mean)\n");
+  std::fprintf(table,
+               "\n3. Naive thesis baseline (1 OpenCV thread, full resolution) vs ours, one 640x480 "
+               "frame (ms, mean)\n");
   std::fprintf(table, "%-20s %9s %9s %9s %10s %10s  %s\n", "stage", "naive 1t", "ours", "ours 1t",
                "ours/naive", "1t/naive", "ours is");
   for (const BaselineRow& row : baseline.rows) {
     std::fprintf(table, "%-20s %9s %9s %9s %10s %10s  %s%s%s\n", row.stage.c_str(),
                  Ms(row.naive_ms.mean).c_str(), Ms(row.ours_ms.mean).c_str(),
-                 Ms(row.ours_1t_ms.mean).c_str(), Ms(row.ours_ms.mean / row.naive_ms.mean, "%.3f").c_str(),
+                 Ms(row.ours_1t_ms.mean).c_str(),
+                 Ms(row.ours_ms.mean / row.naive_ms.mean, "%.3f").c_str(),
                  Ms(row.ours_1t_ms.mean / row.naive_ms.mean, "%.3f").c_str(), row.ours.c_str(),
                  row.note.empty() ? "" : "; ", row.note.c_str());
   }
@@ -1446,10 +1525,12 @@ int main(int argc, char** argv) {
                  Ms(run.update_ms.p99, "%.4f").c_str(), run.tracks, run.confirmed);
   }
 
-  std::fprintf(table, "\n5. Sustained throughput through the server (source.fps %.0f, 640x480, 64 disp; "
-                      "looped: the synthetic source plays %d frames rendered once, as a camera costs "
-                      "nothing to read; rendered: it renders each pair on the capture thread; "
-                      "offline cap = 1000 / table-1 total)\n", flags.source_fps, kLoopFrames);
+  std::fprintf(table,
+               "\n5. Sustained throughput through the server (source.fps %.0f, 640x480, 64 disp; "
+               "looped: the synthetic source plays %d frames rendered once, as a camera costs "
+               "nothing to read; rendered: it renders each pair on the capture thread; "
+               "offline cap = 1000 / table-1 total)\n",
+               flags.source_fps, kLoopFrames);
   std::fprintf(table, "%-9s %-13s %-5s %8s %8s %8s %9s %10s %8s %9s  %s\n", "source", "algorithm",
                "match", "fps out", "fps in", "dropped", "CPU ms/f", "CPU cores", "offl cap",
                "wrk/cv", "GetStatus mean stage ms");
@@ -1465,8 +1546,8 @@ int main(int argc, char** argv) {
     for (const v1::StageTiming& t : run.last.timings()) {
       stages.append(t.stage()).append(" ").append(Format("%.2f", t.ms())).append("  ");
     }
-    const std::string threads =
-        std::to_string(run.last.pipeline_workers()) + "/" + std::to_string(run.last.opencv_threads());
+    const std::string threads = std::to_string(run.last.pipeline_workers()) + "/" +
+                                std::to_string(run.last.opencv_threads());
     std::fprintf(table, "%-9s %-13s %-5s %8.1f %8.1f %8llu %9s %10s %8s %9s  %s\n",
                  run.source.c_str(), run.variant.c_str(), MatcherName(run.matcher), run.fps,
                  run.fps_captured, static_cast<unsigned long long>(run.dropped_capture),
@@ -1474,8 +1555,10 @@ int main(int argc, char** argv) {
                  Ms(cap, "%.1f").c_str(), threads.c_str(), stages.c_str());
   }
 
-  std::fprintf(table, "\n6. Clients (%s + BM, source at %.1f fps; clients in a child process, one "
-                      "connection each)\n", flags.latency_algorithm.c_str(), flags.latency_fps);
+  std::fprintf(table,
+               "\n6. Clients (%s + BM, source at %.1f fps; clients in a child process, one "
+               "connection each)\n",
+               flags.latency_algorithm.c_str(), flags.latency_fps);
   if (!clients_error.empty()) std::fprintf(table, "   error: %s\n", clients_error.c_str());
   std::fprintf(table, "%7s %8s %10s %8s %8s %8s %8s %9s %9s %9s\n", "clients", "fps out",
                "slowest/s", "p50 ms", "p99 ms", "max ms", "dropped", "srv ms/f", "srv cores",
@@ -1488,8 +1571,9 @@ int main(int argc, char** argv) {
     std::fprintf(table, "%7d %8.1f %10.1f %8s %8s %8s %8llu %9s %9s %9s\n", run.clients,
                  run.fps_processed, run.delivered_fps_min, Ms(run.p50_ms).c_str(),
                  Ms(run.p99_ms).c_str(), Ms(run.max_ms).c_str(),
-                 static_cast<unsigned long long>(run.dropped), Ms(run.server_cpu_ms_per_frame).c_str(),
-                 Ms(run.server_cpu_cores).c_str(), Ms(run.client_cpu_cores).c_str());
+                 static_cast<unsigned long long>(run.dropped),
+                 Ms(run.server_cpu_ms_per_frame).c_str(), Ms(run.server_cpu_cores).c_str(),
+                 Ms(run.client_cpu_cores).c_str());
   }
 
   std::fprintf(table, "\n7. Targets\n");
@@ -1497,9 +1581,11 @@ int main(int argc, char** argv) {
   bool missed = false;
   for (const Target& t : targets) {
     missed = missed || t.Verdict() != "PASS";
-    std::fprintf(table, "%-22s %-10s %10s  %-4s  %s\n", t.name.c_str(), t.rule.c_str(),
-                 (Ms(t.measured, t.unit == "ms" && t.threshold < 1 ? "%.3f" : "%.1f") + " " + t.unit).c_str(),
-                 t.Verdict().c_str(), t.note.c_str());
+    std::fprintf(
+        table, "%-22s %-10s %10s  %-4s  %s\n", t.name.c_str(), t.rule.c_str(),
+        (Ms(t.measured, t.unit == "ms" && t.threshold < 1 ? "%.3f" : "%.1f") + " " + t.unit)
+            .c_str(),
+        t.Verdict().c_str(), t.note.c_str());
   }
   std::fflush(table);
 
@@ -1510,7 +1596,8 @@ int main(int argc, char** argv) {
     Json disparity = Json::Array();
     for (stereo::MatcherKind kind : matchers) {
       for (int d : disparity_counts) {
-        if (const OfflineRun* run = find_offline("stevie", kind, {640, 480}, d)) disparity.Push(OfflineJson(*run));
+        if (const OfflineRun* run = find_offline("stevie", kind, {640, 480}, d))
+          disparity.Push(OfflineJson(*run));
       }
     }
     Json tracker = Json::Array();

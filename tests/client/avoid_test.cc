@@ -219,10 +219,10 @@ TEST(Assess, BearingIsClockwiseFromNorthInZeroTo360) {
 
 TEST(AssessFrame, TheWorstOfSeveralWins) {
   const std::vector<Obstacle> obstacles = {
-      MakeObstacle(10, {1000, 0, 0}, {-10, 0, 0}),     // CAUTION: 50 s
-      MakeObstacle(11, {200, 0, 0}, {-10, 0, 0}),      // AVOID: 10 s
-      MakeObstacle(12, {150, -100, 0}, {0, 10, 0}),    // WARNING: 12.5 s, 35 m
-      MakeObstacle(13, {0, 300, 0}, {0, 10, 0}),       // CLEAR
+      MakeObstacle(10, {1000, 0, 0}, {-10, 0, 0}),   // CAUTION: 50 s
+      MakeObstacle(11, {200, 0, 0}, {-10, 0, 0}),    // AVOID: 10 s
+      MakeObstacle(12, {150, -100, 0}, {0, 10, 0}),  // WARNING: 12.5 s, 35 m
+      MakeObstacle(13, {0, 300, 0}, {0, 10, 0}),     // CLEAR
   };
   const Advisory a = AssessFrame(7, kNorthAt10, obstacles, kR30);
   EXPECT_EQ(a.t_ns, 7);
@@ -288,10 +288,10 @@ TEST(AssessFrame, NonFiniteInputsAreNeverClear) {
   bad_sigma.sigma_vertical_m = -1;
   Obstacle bad_rate_sigma = MakeObstacle(6, {200, 0, 0}, {-10, 0, 0});
   bad_rate_sigma.range_rate_sigma_mps = nan;
-  const std::vector<Obstacle> obstacles = {MakeObstacle(1, {nan, 0, 0}, {}), bad_rate_sigma,
-                                           MakeObstacle(3, {0, 0, 0}, {inf, 0, 0}), bad_sigma,
-                                           MakeObstacle(4, {500, 0, 0}, {-10, 0, 0}),
-                                           MakeObstacle(5, {1e300, 1e300, 0}, {0, 0, 0})};
+  const std::vector<Obstacle> obstacles = {
+      MakeObstacle(1, {nan, 0, 0}, {}),          bad_rate_sigma,
+      MakeObstacle(3, {0, 0, 0}, {inf, 0, 0}),   bad_sigma,
+      MakeObstacle(4, {500, 0, 0}, {-10, 0, 0}), MakeObstacle(5, {1e300, 1e300, 0}, {0, 0, 0})};
   const Advisory b = AssessFrame(3, kNorthAt10, obstacles, kR30);
   EXPECT_EQ(b.invalid_obstacles, 5) << "4 non-finite or negative inputs and 1 overflowing";
   EXPECT_EQ(b.level, AdvisoryLevel::kWarning);
@@ -315,8 +315,7 @@ TEST(AvoidOptions, DefaultsAreValidAndValidateNamesEveryBadField) {
   const std::vector<std::string> problems = bad.Validate();
   EXPECT_THAT(problems, ElementsAre(HasSubstr("protected_radius_m"), HasSubstr("sigma_factor"),
                                     HasSubstr("avoid_time_s"), HasSubstr("warning_time_s"),
-                                    HasSubstr("caution_time_s"),
-                                    HasSubstr("warning_radius_factor"),
+                                    HasSubstr("caution_time_s"), HasSubstr("warning_radius_factor"),
                                     AllOf(HasSubstr("caution_radius_factor"), HasSubstr("0.4")),
                                     HasSubstr("caution_range_m"), HasSubstr("min_score")));
   AvoidOptions order;
@@ -326,8 +325,8 @@ TEST(AvoidOptions, DefaultsAreValidAndValidateNamesEveryBadField) {
   AdvisorOptions advisor;
   advisor.avoid.protected_radius_m = -1;
   advisor.no_data_after_ns = 0;
-  EXPECT_THAT(advisor.Validate(), ElementsAre(HasSubstr("avoid.protected_radius_m"),
-                                              HasSubstr("no_data_after_ns")));
+  EXPECT_THAT(advisor.Validate(),
+              ElementsAre(HasSubstr("avoid.protected_radius_m"), HasSubstr("no_data_after_ns")));
   EXPECT_THROW(Advisor{advisor}, std::invalid_argument);
 }
 
@@ -442,8 +441,8 @@ TEST(AdvisoryJson, ParsesAsJsonWithEscapedStrings) {
   // A real frame's advisory, end to end.
   Advisor advisor;
   const Advisory avoid = advisor.OnFrame(
-      77, kNorthAt10, {MakeObstacle(9, {150, -100, 0}, {0, 10, 0}), MakeObstacle(8, {200, 0, 0},
-                                                                                   {-10, 0, 0})});
+      77, kNorthAt10,
+      {MakeObstacle(9, {150, -100, 0}, {0, 10, 0}), MakeObstacle(8, {200, 0, 0}, {-10, 0, 0})});
   const std::optional<Json> parsed = JsonParser::Parse(AdvisoryJson(avoid), &error);
   ASSERT_TRUE(parsed.has_value()) << error;
   EXPECT_THAT(parsed->Keys(), ElementsAre("t_ns", "level", "track_id", "bearing_deg", "distance_m",

@@ -23,10 +23,10 @@ using ::testing::ElementsAre;
 using ::testing::HasSubstr;
 using ::testing::IsEmpty;
 using ::testing::IsSupersetOf;
-using ::testing::Not;
-using ::testing::SizeIs;
 using testing::Json;
 using testing::JsonParser;
+using ::testing::Not;
+using ::testing::SizeIs;
 
 // --- A small XML well-formedness check, enough for what the exporter writes: an optional
 // declaration, elements with quoted attributes, text, comments, the five predefined entities and
@@ -205,11 +205,23 @@ std::vector<std::vector<double>> ParseKmlCoordinates(const std::string& text) {
 std::vector<TrackPoint> TwoTracks() {
   const std::int64_t t0 = 1'700'000'000'000'000'000;  // 2023-11-14T22:13:20Z
   return {
-      {.track_id = 7, .unix_time_ns = t0 + 500'000'000, .lat_deg = 43.68395, .lon_deg = 10.39262,
-       .alt_m = 96.25, .horizontal_sigma_m = 2.25},
-      {.track_id = 3, .unix_time_ns = t0 + 250'000'000, .lat_deg = -33.8688197,
-       .lon_deg = 151.2092955, .alt_m = -12.3456, .horizontal_sigma_m = std::nullopt},
-      {.track_id = 7, .unix_time_ns = t0, .lat_deg = 43.6839, .lon_deg = 10.3925, .alt_m = 95,
+      {.track_id = 7,
+       .unix_time_ns = t0 + 500'000'000,
+       .lat_deg = 43.68395,
+       .lon_deg = 10.39262,
+       .alt_m = 96.25,
+       .horizontal_sigma_m = 2.25},
+      {.track_id = 3,
+       .unix_time_ns = t0 + 250'000'000,
+       .lat_deg = -33.8688197,
+       .lon_deg = 151.2092955,
+       .alt_m = -12.3456,
+       .horizontal_sigma_m = std::nullopt},
+      {.track_id = 7,
+       .unix_time_ns = t0,
+       .lat_deg = 43.6839,
+       .lon_deg = 10.3925,
+       .alt_m = 95,
        .horizontal_sigma_m = 1.5},
   };
 }
@@ -383,12 +395,24 @@ TEST(ToKml, EscapesSpecialCharactersInNames) {
 TEST(ToKml, InvalidPointsAreLeftOutAndNamed) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<TrackPoint> points = TwoTracks();
-  points.push_back({.track_id = 7, .unix_time_ns = 0, .lat_deg = 91, .lon_deg = 0, .alt_m = 0,
+  points.push_back({.track_id = 7,
+                    .unix_time_ns = 0,
+                    .lat_deg = 91,
+                    .lon_deg = 0,
+                    .alt_m = 0,
                     .horizontal_sigma_m = std::nullopt});
-  points.push_back({.track_id = 9, .unix_time_ns = 0, .lat_deg = 0, .lon_deg = nan, .alt_m = 0,
+  points.push_back({.track_id = 9,
+                    .unix_time_ns = 0,
+                    .lat_deg = 0,
+                    .lon_deg = nan,
+                    .alt_m = 0,
                     .horizontal_sigma_m = std::nullopt});
-  points.push_back({.track_id = 9, .unix_time_ns = 0, .lat_deg = 0, .lon_deg = 0,
-                    .alt_m = std::numeric_limits<double>::infinity(), .horizontal_sigma_m = -1.0});
+  points.push_back({.track_id = 9,
+                    .unix_time_ns = 0,
+                    .lat_deg = 0,
+                    .lon_deg = 0,
+                    .alt_m = std::numeric_limits<double>::infinity(),
+                    .horizontal_sigma_m = -1.0});
   EXPECT_THAT(ValidateTrackPoints(points),
               ElementsAre(HasSubstr("points[3].lat_deg"), HasSubstr("points[4].lon_deg"),
                           HasSubstr("points[5].alt_m"), HasSubstr("points[5].horizontal_sigma_m")));
@@ -428,8 +452,7 @@ TEST(ToGeoJson, ParsesAsAFeatureCollectionWithLonLatAltPositions) {
   for (const Json& f : features) {
     EXPECT_THAT(f.Keys(), ElementsAre("type", "id", "geometry", "properties"));
     EXPECT_EQ(f.Find("type")->string, "Feature");
-    EXPECT_THAT(f.Find("properties")->Keys(),
-                IsSupersetOf({"track_id", "start", "end", "points"}));
+    EXPECT_THAT(f.Find("properties")->Keys(), IsSupersetOf({"track_id", "start", "end", "points"}));
   }
   EXPECT_EQ(features[0].Find("geometry")->Find("type")->string, "Point");
   const std::vector<Json>& south = features[0].Find("geometry")->Find("coordinates")->items;
@@ -467,8 +490,12 @@ TEST(ToGeoJson, EmptyInputIsAValidEmptyCollection) {
   ASSERT_TRUE(json.has_value());
   EXPECT_THAT(json->Find("features")->items, IsEmpty());
   // Only invalid points: the same.
-  EXPECT_EQ(ToGeoJson({{.track_id = 1, .unix_time_ns = 0, .lat_deg = 100, .lon_deg = 0,
-                        .alt_m = 0, .horizontal_sigma_m = std::nullopt}}),
+  EXPECT_EQ(ToGeoJson({{.track_id = 1,
+                        .unix_time_ns = 0,
+                        .lat_deg = 100,
+                        .lon_deg = 0,
+                        .alt_m = 0,
+                        .horizontal_sigma_m = std::nullopt}}),
             text);
 }
 

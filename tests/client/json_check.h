@@ -20,8 +20,8 @@ struct Json {
   bool boolean = false;
   double number = 0;
   std::string string;
-  std::vector<Json> items;                             // kArray
-  std::vector<std::pair<std::string, Json>> members;   // kObject, in document order
+  std::vector<Json> items;                            // kArray
+  std::vector<std::pair<std::string, Json>> members;  // kObject, in document order
 
   // The member `key` of an object, or null when absent (or not an object).
   const Json* Find(std::string_view key) const {

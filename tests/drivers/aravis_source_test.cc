@@ -109,8 +109,8 @@ TEST(ToGrey, DemosaicsEachBayerPatternToTheScenesGrey) {
   bgr(cv::Rect(64, 0, 32, 64)).setTo(cv::Scalar(255, 0, 0));
   cv::Mat want;
   cv::cvtColor(bgr, want, cv::COLOR_BGR2GRAY);
-  for (PixelFormat format : {PixelFormat::kBayerRG8, PixelFormat::kBayerBG8,
-                             PixelFormat::kBayerGR8, PixelFormat::kBayerGB8}) {
+  for (PixelFormat format : {PixelFormat::kBayerRG8, PixelFormat::kBayerBG8, PixelFormat::kBayerGR8,
+                             PixelFormat::kBayerGB8}) {
     const cv::Mat raw = Mosaic(bgr, format);
     Result<cv::Mat> grey = ToGrey(raw.data, raw.total(), raw.cols, raw.rows, format);
     ASSERT_TRUE(grey.ok()) << grey.error().message;
@@ -120,7 +120,7 @@ TEST(ToGrey, DemosaicsEachBayerPatternToTheScenesGrey) {
     for (int patch = 0; patch < 3; ++patch) {
       const cv::Rect inner(patch * 32 + 4, 4, 24, 56);
       double max_diff = 0;
-      cv::minMaxLoc(cv::abs((*grey)(inner) - want(inner)), nullptr, &max_diff);
+      cv::minMaxLoc(cv::abs((*grey)(inner)-want(inner)), nullptr, &max_diff);
       EXPECT_LE(max_diff, 2) << PixelFormatName(format) << " patch " << patch << ": "
                              << int(grey->at<uint8_t>(32, patch * 32 + 16)) << " vs "
                              << int(want.at<uint8_t>(32, patch * 32 + 16));
@@ -440,8 +440,8 @@ class AravisGigE : public ::testing::Test {
 // hands out the newest, so a consumer slower than the cameras (a loaded machine, a sanitizer
 // build) sees fewer than were formed: the acquisition rate is the formed one.
 struct Acquisition {
-  int delivered = 0;     // pairs Next() returned, each checked
-  uint64_t formed = 0;   // pairs the source formed meanwhile (Counters().pairs)
+  int delivered = 0;    // pairs Next() returned, each checked
+  uint64_t formed = 0;  // pairs the source formed meanwhile (Counters().pairs)
   int errors = 0;
   double seconds = 0;
   std::string last_error;
@@ -514,9 +514,8 @@ TEST_F(AravisGigE, AcquiresBothCamerasAbove25FpsWithinTheTolerance) {
   std::cout << "[ measured ] " << run.formed << " pairs in " << run.seconds << " s = " << fps
             << " fps (" << run.delivered << " delivered and checked); skew last "
             << c.last_skew_ns / 1e6 << " ms, max |skew| " << c.max_abs_skew_ns / 1e6
-            << " ms, mean |skew| " << c.mean_abs_skew_ns / 1e6
-            << " ms; unpaired dropped " << c.unpaired_dropped << ", incomplete "
-            << c.incomplete_dropped << "\n";
+            << " ms, mean |skew| " << c.mean_abs_skew_ns / 1e6 << " ms; unpaired dropped "
+            << c.unpaired_dropped << ", incomplete " << c.incomplete_dropped << "\n";
   EXPECT_EQ(run.errors, 0) << run.last_error;
   EXPECT_GE(fps, 25.0);
   EXPECT_GE(c.pairs, run.formed + 1);
@@ -549,11 +548,11 @@ TEST_F(AravisGigE, PacketLossOnOneCameraDropsAndCountsTheIncompleteFrames) {
   const SourceCounters c = s.Counters();
   const CameraStats left = s.camera_stats(Side::kLeft);
   const CameraStats right = s.camera_stats(Side::kRight);
-  std::cout << "[ measured ] " << run.formed << " pairs in " << run.seconds << " s = "
-            << run.fps() << " fps (" << run.delivered
+  std::cout << "[ measured ] " << run.formed << " pairs in " << run.seconds << " s = " << run.fps()
+            << " fps (" << run.delivered
             << " delivered, all intact); right camera: " << right.frames << " complete frames, "
-            << right.incomplete << " incomplete dropped, "
-            << right.missing_packets << " packets missing, " << right.resent_packets
+            << right.incomplete << " incomplete dropped, " << right.missing_packets
+            << " packets missing, " << right.resent_packets
             << " resent; left camera: " << left.frames << " frames, " << left.incomplete
             << " incomplete; unpaired dropped " << c.unpaired_dropped << "\n";
   // Pairs still flow, every one intact (Collect checks each image), and the losses are counted.
@@ -615,10 +614,9 @@ void ExpectRecoveryAfterOutage(FakeGvCamera& left, double outage_s) {
     }
   }
   ASSERT_TRUE(recovery_s) << "no pair within 10 s of the restart; Next() said:" << errors;
-  std::cout << "[ measured ] loss reported " << detect_s << " s after the kill: \""
-            << lost_message << "\"; down " << SecondsSince(killed) - *recovery_s
-            << " s, last report \"" << down_message << "\"; pairs resumed " << *recovery_s
-            << " s after the restart\n";
+  std::cout << "[ measured ] loss reported " << detect_s << " s after the kill: \"" << lost_message
+            << "\"; down " << SecondsSince(killed) - *recovery_s << " s, last report \""
+            << down_message << "\"; pairs resumed " << *recovery_s << " s after the restart\n";
   EXPECT_LT(*recovery_s, 5.0) << "Next() said:" << errors;
   EXPECT_EQ(s.Counters().reconnects, 1u) << "Next() said:" << errors;
 
@@ -674,8 +672,9 @@ TEST_F(AravisGigE, AnIdleHardwareTriggerIsNoLoss) {
   Result<std::unique_ptr<AravisStereoSource>> source = AravisStereoSource::Open(options, nullptr);
   ASSERT_TRUE(source.ok()) << source.error().message;
   AravisStereoSource& s = **source;
-  EXPECT_EQ(s.Describe(), "aravis Aravis-Fake-GV01 + Aravis-Fake-GV02 640x480 30 fps hardware "
-                          "trigger on Line0");
+  EXPECT_EQ(s.Describe(),
+            "aravis Aravis-Fake-GV01 + Aravis-Fake-GV02 640x480 30 fps hardware "
+            "trigger on Line0");
   // Past the loss time (max(0.5 s, 5 frame periods)) several times over.
   for (int i = 0; i < 4; ++i) {
     Result<StereoFrame> pair = s.Next();

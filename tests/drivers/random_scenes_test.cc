@@ -182,8 +182,8 @@ TEST(RandomScenes, ParametersCoverTheRanges) {
   for (const char* kind : {"aircraft", "drone", "tower", "pole", "building", "balloon"}) {
     EXPECT_TRUE(kinds.count(kind)) << kind;
   }
-  const std::set<std::pair<int, int>> all_sizes = {{640, 480},   {752, 480},   {800, 600},
-                                                   {1024, 768},  {1280, 720},  {1280, 1024},
+  const std::set<std::pair<int, int>> all_sizes = {{640, 480},   {752, 480},  {800, 600},
+                                                   {1024, 768},  {1280, 720}, {1280, 1024},
                                                    {1920, 1080}, {1920, 1200}};
   EXPECT_EQ(sizes, all_sizes);
   for (size_t n = 1; n <= 5; ++n) EXPECT_GT(obstacle_counts[n], 0) << n << " obstacles";

@@ -228,8 +228,7 @@ TEST(Recorder, RoundTripOfGreyAndColourFramesIsExact) {
     SyntheticSource source(SmallSynthetic());
     RecorderOptions options;
     options.queue_frames = 64;
-    std::unique_ptr<Recorder> recorder =
-        StartOrDie(dir, options, InfoFor(source, "cal-000007"));
+    std::unique_ptr<Recorder> recorder = StartOrDie(dir, options, InfoFor(source, "cal-000007"));
     ASSERT_TRUE(recorder);
     EXPECT_TRUE(recorder->Status().recording);
 
@@ -286,8 +285,8 @@ TEST(Recorder, RoundTripOfGreyAndColourFramesIsExact) {
     size_t frame_k = 0, state_k = 0;
     for (size_t i = 0; i < records.size(); ++i) {
       const RecordingRecord& r = records[i];
-      const auto expected_kind = i % 3 == 1 ? RecordingRecord::Kind::kFrame
-                                            : RecordingRecord::Kind::kVehicleState;
+      const auto expected_kind =
+          i % 3 == 1 ? RecordingRecord::Kind::kFrame : RecordingRecord::Kind::kVehicleState;
       ASSERT_EQ(r.kind, expected_kind) << "record " << i;
       if (r.kind == RecordingRecord::Kind::kFrame) {
         ExpectSameFrame(frames[frame_k++], r.frame);
@@ -301,9 +300,8 @@ TEST(Recorder, RoundTripOfGreyAndColourFramesIsExact) {
 
 TEST(RecordedRig, IdealAndCalibratedRigsRebuildBitForBit) {
   // The synthetic source's ideal rig, with awkward numbers.
-  const geometry::StereoRig ideal =
-      geometry::StereoRig::Ideal(cv::Size(641, 479), 701.123456789, 0.6123456789, 320.3, 239.7,
-                                 "synthetic");
+  const geometry::StereoRig ideal = geometry::StereoRig::Ideal(
+      cv::Size(641, 479), 701.123456789, 0.6123456789, 320.3, 239.7, "synthetic");
   Result<v1::RecordedRig> recorded = RecordedRigOf(ideal);
   ASSERT_TRUE(recorded.ok()) << recorded.error().message;
   EXPECT_TRUE(recorded->has_ideal());
@@ -573,9 +571,8 @@ TEST(Recorder, FullQueueDropsAndCountsWithoutBlocking) {
   // Waiting for the writer would take about kBurst encodes; copying twenty frames takes a blink.
   const double per_encode_s = std::chrono::duration<double>(Clock::now() - start).count() /
                               static_cast<double>(std::max<uint64_t>(1, status.frames_written));
-  std::cout << "burst of " << kBurst << " frames: " << burst_s << " s, " << queued
-            << " queued, " << dropped << " dropped; about " << per_encode_s
-            << " s per written frame\n";
+  std::cout << "burst of " << kBurst << " frames: " << burst_s << " s, " << queued << " queued, "
+            << dropped << " dropped; about " << per_encode_s << " s per written frame\n";
   EXPECT_LT(burst_s, 2.0);
   EXPECT_LT(burst_s, 0.5 * kBurst * per_encode_s);
   fs::remove_all(dir);  // tens of MB of incompressible PNG
@@ -801,8 +798,8 @@ TEST(RecordingReader, CorruptRecordsEndTheIterationCleanly) {
   std::vector<Case> cases;
   cases.push_back({"absurd length", std::string("\xff\xff\xff\xff\x0f", 5) + "xyz",
                    "(it announces 4294967295 bytes, more than the 512.0 MiB limit)"});
-  cases.push_back({"long varint", std::string("\xff\xff\xff\xff\xff\x01", 6),
-                   "(bad length prefix)"});
+  cases.push_back(
+      {"long varint", std::string("\xff\xff\xff\xff\xff\x01", 6), "(bad length prefix)"});
   cases.push_back({"length past the end", std::string("\x80\x80\x10", 3) + "abc",
                    "(262144 bytes announced, 3 left)"});
   cases.push_back({"not a message", std::string("\x04\xff\xff\xff\xff", 5), "(not a RecordEntry)"});
@@ -865,8 +862,8 @@ TEST(RecordingReader, CorruptRecordsEndTheIterationCleanly) {
     std::unique_ptr<RecordingReader> reader = OpenOrDie(dir);
     ASSERT_TRUE(reader);
     EXPECT_EQ(ReadAll(*reader).size(), 6u);
-    EXPECT_TRUE(Contains(reader->end_note(), "corrupt record after 3 frames at byte " +
-                                                 std::to_string(good.size())))
+    EXPECT_TRUE(Contains(reader->end_note(),
+                         "corrupt record after 3 frames at byte " + std::to_string(good.size())))
         << reader->end_note();
     EXPECT_TRUE(Contains(reader->end_note(), c.note)) << reader->end_note();
   }

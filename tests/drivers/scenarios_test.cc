@@ -231,11 +231,11 @@ TEST(LowOverGround, TerrainIsLargeAndAsNearAsTheObstacles) {
   const cv::Mat1b hills = HillMask(truth, scene.camera_height_m);
   const int hill_px = cv::countNonZero(hills);
   EXPECT_GT(hill_px, pixels / 10);
-  const cv::Mat obstacle_like = (truth.disparity_px >= min_obstacle) &
-                                (truth.disparity_px <= max_obstacle) & hills;
+  const cv::Mat obstacle_like =
+      (truth.disparity_px >= min_obstacle) & (truth.disparity_px <= max_obstacle) & hills;
   EXPECT_GT(cv::countNonZero(obstacle_like), 1000)
-      << "hill pixels with disparity within the obstacles' " << min_obstacle << ".."
-      << max_obstacle << " px";
+      << "hill pixels with disparity within the obstacles' " << min_obstacle << ".." << max_obstacle
+      << " px";
 
   // One aircraft flies low: just above the horizon, in front of terrain (not the sky).
   const ObstacleTruth* low = nullptr;
@@ -376,9 +376,8 @@ TEST(GroundMarks, RightImageIsLeftShiftedByTheTruthDisparity) {
 TEST(DefaultScene, RendersAsBeforeTheTerrainFeatures) {
   // FNV-1a of left, right, truth disparity and truth ids, computed on the renderer before the
   // terrain change (RelWithDebInfo, g++ 12, x86-64).
-  const std::map<int64_t, uint64_t> expected = {{0, 0xED624F7FCFB69EE7ull},
-                                                {37, 0xF3E01F837B1DC76Dull},
-                                                {150, 0xDF0A14DD81ED2CB0ull}};
+  const std::map<int64_t, uint64_t> expected = {
+      {0, 0xED624F7FCFB69EE7ull}, {37, 0xF3E01F837B1DC76Dull}, {150, 0xDF0A14DD81ED2CB0ull}};
   const SyntheticRenderer renderer{SyntheticOptions{}};
   EXPECT_TRUE(renderer.options().scene.hills.empty());
   EXPECT_TRUE(renderer.options().scene.marks.empty());
@@ -496,14 +495,20 @@ TEST(EveryScenario, RendersAsBeforeTheRendererExtensions) {
   // FNV-1a of left, right, truth disparity and truth ids, computed on the renderer before the
   // extensions (RelWithDebInfo, g++ 12, x86-64).
   const std::map<std::string, uint64_t> expected = {
-      {"clear_sky", 0x39BB9675D81BBF9Full},          {"low_over_ground", 0x64D00D860775A25Bull},
-      {"small_far", 0x3404099C835268CEull},          {"close_pair", 0xCD986D06B4B22478ull},
-      {"low_contrast", 0x5A366E621ACB004Full},       {"tower_on_ground", 0xE0390A2A7C8DC611ull},
-      {"crossing_occlusion", 0x7736AFE06846E8C1ull}, {"entries_exits", 0x787510FD6DE6FB81ull},
-      {"head_on", 0x9FBEA25253A5941ull},             {"departing", 0xD64FEFFC0AAD457Dull},
+      {"clear_sky", 0x39BB9675D81BBF9Full},
+      {"low_over_ground", 0x64D00D860775A25Bull},
+      {"small_far", 0x3404099C835268CEull},
+      {"close_pair", 0xCD986D06B4B22478ull},
+      {"low_contrast", 0x5A366E621ACB004Full},
+      {"tower_on_ground", 0xE0390A2A7C8DC611ull},
+      {"crossing_occlusion", 0x7736AFE06846E8C1ull},
+      {"entries_exits", 0x787510FD6DE6FB81ull},
+      {"head_on", 0x9FBEA25253A5941ull},
+      {"departing", 0xD64FEFFC0AAD457Dull},
       {"flight", 0x3941B1F4CE493CB6ull},
       // Scenes added after the renderer extensions: pinned as first rendered.
-      {"crossing", 0x9266D5D67AA7CDDDull},           {"occlusion", 0xE9102887032340DAull},
+      {"crossing", 0x9266D5D67AA7CDDDull},
+      {"occlusion", 0xE9102887032340DAull},
   };
   std::vector<Scenario> all = EvaluationScenarios();
   for (Scenario& s : TrackingScenarios()) all.push_back(std::move(s));

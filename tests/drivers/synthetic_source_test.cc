@@ -119,9 +119,9 @@ TEST(Render, RightImageIsLeftShiftedByTheDisparity) {
 // Median of OpenCV's own SGBM disparity (not our wrapper) over the interior of a pair.
 double SgbmMedianDisparity(const StereoFrame& frame) {
   const int block = 5, num_disparities = 64, margin = 10;
-  cv::Ptr<cv::StereoSGBM> sgbm = cv::StereoSGBM::create(
-      0, num_disparities, block, 8 * block * block, 32 * block * block, 1, 63, 10, 100, 2,
-      cv::StereoSGBM::MODE_SGBM);
+  cv::Ptr<cv::StereoSGBM> sgbm =
+      cv::StereoSGBM::create(0, num_disparities, block, 8 * block * block, 32 * block * block, 1,
+                             63, 10, 100, 2, cv::StereoSGBM::MODE_SGBM);
   cv::Mat disparity16;
   sgbm->compute(frame.left, frame.right, disparity16);
   std::vector<float> values;
@@ -205,8 +205,9 @@ TEST(Render, SeedChangesTheNoise) {
   // Without noise the sky and the ground are the same in both views.
   flat.noise_sigma = 0.0;
   const StereoFrame clean = SyntheticRenderer(flat).Render(0);
-  EXPECT_EQ(CountDifferent(clean.left(cv::Rect(0, 0, 640, 240)),
-                           clean.right(cv::Rect(0, 0, 640, 240))), 0);
+  EXPECT_EQ(
+      CountDifferent(clean.left(cv::Rect(0, 0, 640, 240)), clean.right(cv::Rect(0, 0, 640, 240))),
+      0);
 }
 
 TEST(Render, MovingObstaclesMoveAndStaticOnesStay) {
@@ -301,13 +302,13 @@ TEST(Validate, ListsEveryProblem) {
   o.scene.obstacles[3].id = o.scene.obstacles[1].id;
   o.scene.obstacles[4].id = 0;
   const std::vector<std::string> problems = o.Validate();
-  EXPECT_THAT(problems, ::testing::UnorderedElementsAre(
-                            "width: must be in 16..8192", "baseline_m: must be > 0",
-                            "fps: must be > 0", "noise_sigma: must be >= 0",
-                            "scene.camera_height_m: must be > 0",
-                            "scene.obstacles[2].size_m: every side must be > 0",
-                            HasSubstr("scene.obstacles[3].id: duplicate id"),
-                            HasSubstr("scene.obstacles[4].id: must be > 0")));
+  EXPECT_THAT(problems,
+              ::testing::UnorderedElementsAre(
+                  "width: must be in 16..8192", "baseline_m: must be > 0", "fps: must be > 0",
+                  "noise_sigma: must be >= 0", "scene.camera_height_m: must be > 0",
+                  "scene.obstacles[2].size_m: every side must be > 0",
+                  HasSubstr("scene.obstacles[3].id: duplicate id"),
+                  HasSubstr("scene.obstacles[4].id: must be > 0")));
 
   const auto source = OpenSyntheticSource(o);
   ASSERT_FALSE(source.ok());
@@ -341,19 +342,18 @@ TEST(Validate, ListsEveryTerrainProblem) {
   o.scene.dashed_lines[1].dash_m = 0.0;
   o.scene.dashed_lines[1].z_end_m = o.scene.dashed_lines[1].z_start_m;
   o.scene.dashed_lines[1].width_m = -1.0;
-  EXPECT_THAT(o.Validate(),
-              ::testing::UnorderedElementsAre(
-                  "scene.hills[1].radii_m: every radius must be > 0",
-                  "scene.hills[1].albedo: must be in 0..1",
-                  "scene.hills[2].contrast: must be in 0..1",
-                  "scene.hills[2].texture_cell_m: must be > 0",
-                  "scene.hills[3].centre_m: must be on or below the ground (y >= camera_height_m)",
-                  "scene.hills[3].centre_m: the camera (0, 0, 0) must be outside the hill",
-                  "scene.marks[1].area_xz_m: must be finite with width and height > 0",
-                  "scene.marks[1].albedo: must be in 0..1",
-                  "scene.dashed_lines[1].width_m: must be > 0",
-                  "scene.dashed_lines[1].z_end_m: must be > z_start_m (may be infinite)",
-                  "scene.dashed_lines[1].dash_m: must be > 0"));
+  EXPECT_THAT(
+      o.Validate(),
+      ::testing::UnorderedElementsAre(
+          "scene.hills[1].radii_m: every radius must be > 0",
+          "scene.hills[1].albedo: must be in 0..1", "scene.hills[2].contrast: must be in 0..1",
+          "scene.hills[2].texture_cell_m: must be > 0",
+          "scene.hills[3].centre_m: must be on or below the ground (y >= camera_height_m)",
+          "scene.hills[3].centre_m: the camera (0, 0, 0) must be outside the hill",
+          "scene.marks[1].area_xz_m: must be finite with width and height > 0",
+          "scene.marks[1].albedo: must be in 0..1", "scene.dashed_lines[1].width_m: must be > 0",
+          "scene.dashed_lines[1].z_end_m: must be > z_start_m (may be infinite)",
+          "scene.dashed_lines[1].dash_m: must be > 0"));
   o.scene.hills.resize(1);
   o.scene.marks.resize(1);
   o.scene.dashed_lines.resize(1);
@@ -399,8 +399,9 @@ TEST(Render, HillsAreTerrainAndHideWhatIsBehindThem) {
   EXPECT_EQ(cv::countNonZero(truth.object_id < -1) + cv::countNonZero(truth.object_id > 2), 0);
   // The hill is shaded and textured.
   cv::Scalar mean, stddev;
-  cv::meanStdDev(frame.left, mean, stddev, (truth.object_id == 0) & (truth.disparity_px > 6.0f) &
-                                               (truth.disparity_px < 8.0f));
+  cv::meanStdDev(
+      frame.left, mean, stddev,
+      (truth.object_id == 0) & (truth.disparity_px > 6.0f) & (truth.disparity_px < 8.0f));
   EXPECT_GT(stddev[0], 8.0);
 }
 
@@ -539,7 +540,8 @@ TEST(Render, AMovingRigSeesStandingObstaclesComeNearer) {
   SyntheticOptions hilly = options;
   hilly.scene.hills.push_back(Hill{{0.0, 45.0, 200.0}, {20.0, 10.0, 20.0}});
   bool named = false;
-  for (const std::string& p : hilly.Validate()) named |= p.find("rig_velocity_mps") != std::string::npos;
+  for (const std::string& p : hilly.Validate())
+    named |= p.find("rig_velocity_mps") != std::string::npos;
   EXPECT_TRUE(named);
 }
 
@@ -645,8 +647,7 @@ TEST(Composite, AnEllipsoidHasTheAnalyticDiscAndDepth) {
   EXPECT_NEAR(truth.disparity_px(240, 320), kFB / 38.0, 1e-4);
   // Its outline is the circle of angular radius asin(r / Z): pi R^2 pixels.
   const double radius_px = 700.0 * std::tan(std::asin(2.0 / 40.0));
-  EXPECT_NEAR(t.visible_px, 3.14159265358979323846 * radius_px * radius_px,
-              0.02 * t.visible_px);
+  EXPECT_NEAR(t.visible_px, 3.14159265358979323846 * radius_px * radius_px, 0.02 * t.visible_px);
   EXPECT_NEAR(t.bbox.width, 2 * radius_px, 2.0);
   // The median over the disc: the depth of the sphere's surface at the disc's median radius.
   EXPECT_DOUBLE_EQ(t.median_disparity_px,
@@ -674,7 +675,7 @@ TEST(Composite, PartsShareOneIdAndOneBoundingBox) {
   // The arm is 4 m wide at a depth of 19.9 m (its front face): 140.7 px; the body 0.4 m tall
   // below the arm's top at -0.3 m.
   EXPECT_NEAR(t.bbox.width, 700.0 * 4.0 / 19.9, 2.0);
-  EXPECT_EQ(truth.object_id(240, 320), 5);                           // the body
+  EXPECT_EQ(truth.object_id(240, 320), 5);                                         // the body
   EXPECT_EQ(truth.object_id(240 + static_cast<int>(700 * -0.25 / 19.9), 300), 5);  // the arm
   // One id only: every obstacle pixel carries it.
   int others = 0;

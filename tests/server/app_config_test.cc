@@ -46,7 +46,8 @@ TEST(LoadServerConfig, ReadsTextFormat) {
 
 TEST(LoadServerConfig, ReadsJson) {
   const std::string path = WriteFile(
-      "server.json", R"({"listen": "127.0.0.1:6001", "pipeline": {"algorithm": "ALGORITHM_CANONICAL"}})");
+      "server.json",
+      R"({"listen": "127.0.0.1:6001", "pipeline": {"algorithm": "ALGORITHM_CANONICAL"}})");
   Result<v1::ServerConfig> config = LoadServerConfig(path);
   ASSERT_TRUE(config.ok()) << config.error().message;
   EXPECT_EQ(config->listen(), "127.0.0.1:6001");
@@ -57,7 +58,8 @@ TEST(LoadServerConfig, NamesTheFileLineAndProblem) {
   Result<v1::ServerConfig> config = LoadServerConfig(path);
   ASSERT_FALSE(config.ok());
   EXPECT_EQ(config.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(config.error().message, AllOf(HasSubstr(path), HasSubstr("line 2"), HasSubstr("speed")));
+  EXPECT_THAT(config.error().message,
+              AllOf(HasSubstr(path), HasSubstr("line 2"), HasSubstr("speed")));
 
   Result<v1::ServerConfig> json = LoadServerConfig(WriteFile("bad.json", "{\"listen\": 5,"));
   ASSERT_FALSE(json.ok());
@@ -120,11 +122,10 @@ TEST(BuildPipelineConfig, NamesBadStevieAndStevisFields) {
   Result<pipeline::PipelineConfig> built = BuildPipelineConfig(config->pipeline());
   ASSERT_FALSE(built.ok());
   EXPECT_EQ(built.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(built.error().message,
-              AllOf(HasSubstr("pipeline.stevis.saliency_threshold"),
-                    HasSubstr("pipeline.stevis.saliency.surround_radii[1]"),
-                    HasSubstr("pipeline.stevie.edges.canny_aperture"),
-                    HasSubstr("pipeline.stevie.ground.min_support_rows")));
+  EXPECT_THAT(built.error().message, AllOf(HasSubstr("pipeline.stevis.saliency_threshold"),
+                                           HasSubstr("pipeline.stevis.saliency.surround_radii[1]"),
+                                           HasSubstr("pipeline.stevie.edges.canny_aperture"),
+                                           HasSubstr("pipeline.stevie.ground.min_support_rows")));
 
   v1::PipelineConfig bad_enum;
   bad_enum.mutable_stevis()->set_segmentation(static_cast<v1::Segmentation>(7));
@@ -148,7 +149,8 @@ TEST(ParseFlags, AcceptsBothSpellingsAndRejectsTheUnknown) {
 TEST(ApplyFlags, OverridesTheFileAndNamesBadValues) {
   v1::ServerConfig config;
   config.set_listen("127.0.0.1:1");
-  Result<Flags> flags = Parse({"--listen", "127.0.0.1:2", "--algorithm", "CANONICAL", "--fps", "30"});
+  Result<Flags> flags =
+      Parse({"--listen", "127.0.0.1:2", "--algorithm", "CANONICAL", "--fps", "30"});
   ASSERT_TRUE(flags.ok());
   ASSERT_TRUE(ApplyFlags(*flags, config).ok());
   EXPECT_EQ(config.listen(), "127.0.0.1:2");
@@ -185,10 +187,12 @@ TEST(ApplyFlags, CamerasReplayAndRecording) {
   EXPECT_EQ(cameras.source().aravis().trigger(), v1::TRIGGER_MODE_HARDWARE);
   EXPECT_EQ(cameras.source().aravis().trigger_line(), "Line1");
   EXPECT_EQ(cameras.record().dir(), "/data/rec");
-  EXPECT_TRUE(ValidateServerConfig(cameras).empty()) << ::testing::PrintToString(ValidateServerConfig(cameras));
+  EXPECT_TRUE(ValidateServerConfig(cameras).empty())
+      << ::testing::PrintToString(ValidateServerConfig(cameras));
 
   v1::ServerConfig replay;
-  ASSERT_TRUE(ApplyFlags(*parse({"--source", "replay", "--replay", "r1", "--rate", "max"}), replay).ok());
+  ASSERT_TRUE(
+      ApplyFlags(*parse({"--source", "replay", "--replay", "r1", "--rate", "max"}), replay).ok());
   EXPECT_EQ(replay.source().kind(), v1::SOURCE_KIND_REPLAY);
   EXPECT_EQ(replay.source().replay().dir(), "r1");
   EXPECT_TRUE(replay.source().replay().has_rate());
@@ -198,9 +202,9 @@ TEST(ApplyFlags, CamerasReplayAndRecording) {
                                         "hardware", "--rate", "fast", "--gain-db", "loud"}),
                                 replay);
   ASSERT_FALSE(bad.ok());
-  EXPECT_THAT(bad.error().message, AllOf(HasSubstr("--roi"), HasSubstr("--exposure-us"),
-                                         HasSubstr("--trigger"), HasSubstr("--rate"),
-                                         HasSubstr("--gain-db")));
+  EXPECT_THAT(bad.error().message,
+              AllOf(HasSubstr("--roi"), HasSubstr("--exposure-us"), HasSubstr("--trigger"),
+                    HasSubstr("--rate"), HasSubstr("--gain-db")));
 
   // Cross-field: what each source needs, and ranges.
   v1::ServerConfig incomplete;
@@ -210,11 +214,10 @@ TEST(ApplyFlags, CamerasReplayAndRecording) {
   incomplete.mutable_source()->mutable_aravis()->set_frame_rate_hz(0);
   incomplete.mutable_record()->set_max_bytes(1000);
   const std::string problems = ::testing::PrintToString(ValidateServerConfig(incomplete));
-  EXPECT_THAT(problems, AllOf(HasSubstr("source.left"), HasSubstr("source.right"),
-                              HasSubstr("source.aravis.trigger_line"),
-                              HasSubstr("source.aravis.buffers"),
-                              HasSubstr("source.aravis.frame_rate_hz"),
-                              HasSubstr("record.max_bytes")));
+  EXPECT_THAT(problems,
+              AllOf(HasSubstr("source.left"), HasSubstr("source.right"),
+                    HasSubstr("source.aravis.trigger_line"), HasSubstr("source.aravis.buffers"),
+                    HasSubstr("source.aravis.frame_rate_hz"), HasSubstr("record.max_bytes")));
   v1::ServerConfig same;
   same.mutable_source()->set_kind(v1::SOURCE_KIND_ARAVIS);
   same.mutable_source()->set_left("GV01");

@@ -67,9 +67,10 @@ class AravisServerTest : public ::testing::Test {
     // An ideal 640x480 rig for the cameras' region of interest (the fake cameras see a ramp, not
     // a scene: the test is about frames, pairing and faults, not about obstacles).
     calibration_ = dir_ + "/rig.yaml";
-    ASSERT_TRUE(geometry::SaveCalibrationYaml(
-                    geometry::IdealCalibration(cv::Size(640, 480), 600, 0.12, 320, 240), calibration_)
-                    .ok());
+    ASSERT_TRUE(
+        geometry::SaveCalibrationYaml(
+            geometry::IdealCalibration(cv::Size(640, 480), 600, 0.12, 320, 240), calibration_)
+            .ok());
     // The left camera by serial number, the right one by address.
     ASSERT_NO_FATAL_FAILURE(server_.Start({"--source", "aravis", "--left", "GV01", "--right",
                                            "127.0.0.2", "--calibration", calibration_, "--fps",
@@ -157,10 +158,10 @@ TEST(AravisServer, AnUnknownCameraIsAClearStartError) {
   testing::FakeGvCamera left("127.0.0.1", "GV01", dir + "/GV01.log");
   ASSERT_NO_FATAL_FAILURE(left.Start());
   ASSERT_NO_FATAL_FAILURE(testing::WaitDiscoverable({left.id()}, {&left}));
-  const testing::RunResult r = testing::Run(
-      {testing::BinaryPath("stevi-server"), "--listen", "127.0.0.1:0", "--data-dir", dir + "/data",
-       "--source", "aravis", "--left", "GV01", "--right", "GV77"},
-      testing::kCommandTimeout);
+  const testing::RunResult r =
+      testing::Run({testing::BinaryPath("stevi-server"), "--listen", "127.0.0.1:0", "--data-dir",
+                    dir + "/data", "--source", "aravis", "--left", "GV01", "--right", "GV77"},
+                   testing::kCommandTimeout);
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("GV77"));
   EXPECT_THAT(r.err, HasSubstr("not found"));

@@ -133,7 +133,8 @@ TEST_F(CalibrationServiceTest, UploadCalibratesAppliesAndTheStreamGoesOnWithIt) 
                   .ok());
   const auto first_new = std::find(ids.begin(), ids.end(), "cal-000001");
   EXPECT_LE(first_new - ids.begin(), static_cast<std::ptrdiff_t>(Engine::kDefaultWorkers));
-  EXPECT_THAT(std::vector<std::string>(first_new, ids.end()), ::testing::Each(std::string("cal-000001")));
+  EXPECT_THAT(std::vector<std::string>(first_new, ids.end()),
+              ::testing::Each(std::string("cal-000001")));
   EXPECT_GE(ids.end() - first_new, 3);
 
   v1::ListCalibrationsResponse list;
@@ -180,10 +181,11 @@ TEST_F(CalibrationServiceTest, CaptureOnTheMovingChessboardStreamsProgressThenTh
   request.set_interval_s(0.3);  // the board holds each pose 5 frames at 20 fps: 0.25 s
   std::vector<v1::CapturedPair> progress;
   v1::CalibrationReport report;
-  const grpc::Status status = client_->CaptureCalibration(request, [&](const v1::CaptureProgress& p) {
-    if (p.has_pair()) progress.push_back(p.pair());
-    if (p.has_report()) report = p.report();
-  });
+  const grpc::Status status =
+      client_->CaptureCalibration(request, [&](const v1::CaptureProgress& p) {
+        if (p.has_pair()) progress.push_back(p.pair());
+        if (p.has_report()) report = p.report();
+      });
   ASSERT_TRUE(status.ok()) << status.error_message();
   ASSERT_EQ(progress.size(), 12u);
   int boards = 0;
@@ -349,9 +351,10 @@ TEST_F(CalibrationServiceTest, ACalibrationWhoseDeadlinePassedIsNeitherStoredNor
   // The capture's calibration and the last one; none from the expired call.
   EXPECT_EQ(after.calibrations_size(), before.calibrations_size() + 2);
   EXPECT_EQ(ActiveCalibrationId(), "synthetic") << "the expired call's apply=true was applied";
-  std::printf("deadline: the expired Calibrate returned after %.2f s; %d calibrations stored "
-              "before, %d after the capture and one more call\n",
-              waited_s, before.calibrations_size(), after.calibrations_size());
+  std::printf(
+      "deadline: the expired Calibrate returned after %.2f s; %d calibrations stored "
+      "before, %d after the capture and one more call\n",
+      waited_s, before.calibrations_size(), after.calibrations_size());
 }
 
 // max_message_bytes bounds every received message: a larger upload is RESOURCE_EXHAUSTED, and

@@ -128,7 +128,8 @@ std::vector<double> Candidates(const FieldDescriptor* f, double v) {
       break;
     default:
       out = {v + 2, v + 1, v - 1, v - 2, v * 2, std::floor(v / 2), 1, 3};
-      if (f->cpp_type() == FieldDescriptor::CPPTYPE_UINT32 || f->cpp_type() == FieldDescriptor::CPPTYPE_UINT64) {
+      if (f->cpp_type() == FieldDescriptor::CPPTYPE_UINT32 ||
+          f->cpp_type() == FieldDescriptor::CPPTYPE_UINT64) {
         std::erase_if(out, [](double c) { return c < 0; });
       }
       break;
@@ -151,20 +152,23 @@ TEST(MergeFromProto, EveryFieldSetAloneArrives) {
     const FieldDescriptor* f = path.back();
     if (f->is_repeated()) {
       // A list of integers (the saliency scales): the default with its last entry dropped.
-      ASSERT_EQ(f->cpp_type(), FieldDescriptor::CPPTYPE_INT32) << name << ": a list this test does not know";
+      ASSERT_EQ(f->cpp_type(), FieldDescriptor::CPPTYPE_INT32)
+          << name << ": a list this test does not know";
       const Message& from = Holder(defaults, path);
       const int size = from.GetReflection()->FieldSize(from, f);
       ASSERT_GE(size, 2) << name;
       v1::PipelineConfig update;
       Message* holder = MutableHolder(&update, path);
       for (int i = 0; i + 1 < size; ++i) {
-        holder->GetReflection()->AddInt32(holder, f, from.GetReflection()->GetRepeatedInt32(from, f, i));
+        holder->GetReflection()->AddInt32(holder, f,
+                                          from.GetReflection()->GetRepeatedInt32(from, f, i));
       }
       pipeline::PipelineConfig config;
       ASSERT_THAT(MergeFromProto(update, config), ::testing::IsEmpty()) << name;
       ASSERT_THAT(config.Validate(), ::testing::IsEmpty()) << name;
       const v1::PipelineConfig back = ToProto(config);
-      EXPECT_EQ(Holder(back, path).GetReflection()->FieldSize(Holder(back, path), f), size - 1) << name;
+      EXPECT_EQ(Holder(back, path).GetReflection()->FieldSize(Holder(back, path), f), size - 1)
+          << name;
       continue;
     }
     const double before = NumberOf(Holder(defaults, path), f);
@@ -181,12 +185,13 @@ TEST(MergeFromProto, EveryFieldSetAloneArrives) {
       }
       const double got = NumberOf(Holder(ToProto(config), path), f);
       EXPECT_NEAR(got, sent, 1e-9 * std::max(1.0, std::abs(sent)))
-          << name << ": set alone to " << sent << " (default " << before << "), the config has " << got;
+          << name << ": set alone to " << sent << " (default " << before << "), the config has "
+          << got;
       arrived = true;
       break;
     }
-    EXPECT_TRUE(arrived) << name << ": no valid value other than the default " << before
-                         << " among" << tried;
+    EXPECT_TRUE(arrived) << name << ": no valid value other than the default " << before << " among"
+                         << tried;
   }
 }
 

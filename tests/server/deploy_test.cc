@@ -177,8 +177,8 @@ TEST(DeployConfigs, TheDemoConfigServesAndStopsWithExitZeroOnSigterm) {
   // moved to where a test may write (flags override the file).
   const std::string data_dir = testing::MakeTempDir("stevi-deploy-data");
   testing::Subprocess server({testing::BinaryPath("stevi-server"), "--config",
-                              SourcePath("deploy/config/demo.textproto"), "--listen",
-                              "127.0.0.1:0", "--data-dir", data_dir});
+                              SourcePath("deploy/config/demo.textproto"), "--listen", "127.0.0.1:0",
+                              "--data-dir", data_dir});
   const std::optional<std::string> serving = server.WaitForStderrLine("serving", 60s);
   ASSERT_TRUE(serving.has_value()) << "stevi-server did not start: " << server.DrainStderr();
   // The config's source and algorithm are what runs, on the overriding loopback address.
@@ -271,13 +271,20 @@ TEST(SystemdUnit, RunsTheServerUnprivilegedAndSandboxed) {
   EXPECT_EQ(One(unit, s, "CapabilityBoundingSet"), "");
   EXPECT_EQ(One(unit, s, "AmbientCapabilities"), "");
   const std::map<std::string, std::string> hardening = {
-      {"NoNewPrivileges", "yes"},       {"ProtectSystem", "strict"},
-      {"ProtectHome", "yes"},           {"PrivateTmp", "yes"},
-      {"ProtectKernelTunables", "yes"}, {"ProtectKernelModules", "yes"},
-      {"ProtectControlGroups", "yes"},  {"RestrictNamespaces", "yes"},
-      {"LockPersonality", "yes"},       {"MemoryDenyWriteExecute", "yes"},
-      {"RestrictRealtime", "yes"},      {"SystemCallArchitectures", "native"},
-      {"UMask", "0077"},                {"DevicePolicy", "closed"},
+      {"NoNewPrivileges", "yes"},
+      {"ProtectSystem", "strict"},
+      {"ProtectHome", "yes"},
+      {"PrivateTmp", "yes"},
+      {"ProtectKernelTunables", "yes"},
+      {"ProtectKernelModules", "yes"},
+      {"ProtectControlGroups", "yes"},
+      {"RestrictNamespaces", "yes"},
+      {"LockPersonality", "yes"},
+      {"MemoryDenyWriteExecute", "yes"},
+      {"RestrictRealtime", "yes"},
+      {"SystemCallArchitectures", "native"},
+      {"UMask", "0077"},
+      {"DevicePolicy", "closed"},
   };
   for (const auto& [key, value] : hardening) EXPECT_EQ(One(unit, s, key), value) << key;
   EXPECT_FALSE(One(unit, s, "LimitNOFILE").empty());
@@ -389,8 +396,8 @@ TEST(SystemdUnit, SystemdAnalyzeSecurityRatesTheExposureLow) {
   }
   ASSERT_EQ(security.exit_code, 0) << security.out << security.err;
   std::smatch m;
-  ASSERT_TRUE(std::regex_search(security.out, m,
-                                std::regex("Overall exposure level for [^:]+: ([0-9.]+)")))
+  ASSERT_TRUE(
+      std::regex_search(security.out, m, std::regex("Overall exposure level for [^:]+: ([0-9.]+)")))
       << security.out;
   const double exposure = std::stod(m[1].str());
   std::cout << "systemd-analyze security: exposure " << exposure << " (0 best, 10 worst)\n";
@@ -512,8 +519,7 @@ TEST(Containerfile, TheSourcesItCopiesAreEnoughToConfigure) {
     for (size_t w = 0; w + 1 < words.size(); ++w) {
       // "COPY a /src/" puts a in /src; "COPY dir /src/dir" makes /src/dir.
       const fs::path in_src = fs::path(context) / dest.substr(5);
-      const fs::path target =
-          dest.back() == '/' ? in_src / fs::path(words[w]).filename() : in_src;
+      const fs::path target = dest.back() == '/' ? in_src / fs::path(words[w]).filename() : in_src;
       fs::create_directories(target.parent_path());
       fs::copy(SourcePath(words[w]), target, fs::copy_options::recursive);
     }

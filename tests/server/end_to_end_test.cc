@@ -28,8 +28,8 @@
 namespace stevi {
 namespace {
 
-using ::testing::HasSubstr;
 using testing::BinaryPath;
+using ::testing::HasSubstr;
 using testing::Subprocess;
 using namespace std::chrono_literals;
 
@@ -132,7 +132,8 @@ TEST_F(ServerProcessTest, CalibrateUploadsPairsAppliesAndTheStreamGoesOn) {
   Result<calibration::ChessboardRenderer> renderer =
       calibration::ChessboardRenderer::Create(rig, board, size);
   ASSERT_TRUE(renderer.ok()) << renderer.error().message;
-  Result<std::vector<cv::Affine3d>> poses = calibration::GenerateBoardPoses(rig, board, size, 12, 3);
+  Result<std::vector<cv::Affine3d>> poses =
+      calibration::GenerateBoardPoses(rig, board, size, 12, 3);
   ASSERT_TRUE(poses.ok()) << poses.error().message;
   for (size_t i = 0; i < poses->size(); ++i) {
     const calibration::RenderedPair pair = renderer->Render((*poses)[i]);
@@ -160,13 +161,13 @@ TEST_F(ServerProcessTest, CalibrateUploadsPairsAppliesAndTheStreamGoesOn) {
   ASSERT_TRUE(parsed.ok()) << parsed.error().message;
   EXPECT_NEAR(cv::norm(parsed->T), 0.6, 0.003);
 
-  const testing::RunResult no_board = Stevi({"calibrate", "--board", "9x6", "--square-mm", "100",
-                                             "--left", dir + "/nothing%02d.png", "--right",
-                                             dir + "/none%02d.png"});
+  const testing::RunResult no_board =
+      Stevi({"calibrate", "--board", "9x6", "--square-mm", "100", "--left",
+             dir + "/nothing%02d.png", "--right", dir + "/none%02d.png"});
   EXPECT_EQ(no_board.exit_code, 1);
   EXPECT_THAT(no_board.err, HasSubstr("no image pair matches"));
-  const testing::RunResult bad_board = Stevi({"calibrate", "--board", "9", "--square-mm", "100",
-                                              "--capture", "3"});
+  const testing::RunResult bad_board =
+      Stevi({"calibrate", "--board", "9", "--square-mm", "100", "--capture", "3"});
   EXPECT_EQ(bad_board.exit_code, 2);
   EXPECT_THAT(bad_board.err, HasSubstr("--board"));
 }
@@ -195,7 +196,8 @@ TEST_F(ServerProcessTest, CalibrateTheRealXimeaCaptures) {
   EXPECT_TRUE(report.swapped_left_right()) << "the camera named left sits on the right";
   EXPECT_FALSE(report.applied()) << "640x512 does not fit the 640x480 source";
   bool size_warning = false;
-  for (const std::string& w : report.warnings()) size_warning |= w.find("640x512") != std::string::npos;
+  for (const std::string& w : report.warnings())
+    size_warning |= w.find("640x512") != std::string::npos;
   EXPECT_TRUE(size_warning) << "the report says why it was not applied";
 }
 
@@ -244,10 +246,9 @@ TEST_F(ServerProcessTest, AvoidWarnsOfACollisionCourseAndStaysClearOfADivergingO
 
 // Without frames the autopilot example says NO_DATA: it never falls silent and never says CLEAR.
 TEST(AvoidWithoutAServer, SaysNoDataAndNeverClear) {
-  const testing::RunResult r =
-      testing::Run({BinaryPath("stevi"), "--server", "127.0.0.1:1", "--timeout", "0.5", "avoid",
-                    "--count", "5"},
-                   kCommandTimeout);
+  const testing::RunResult r = testing::Run(
+      {BinaryPath("stevi"), "--server", "127.0.0.1:1", "--timeout", "0.5", "avoid", "--count", "5"},
+      kCommandTimeout);
   EXPECT_EQ(r.exit_code, 1) << "gives up after 3 reconnection attempts";
   const std::vector<std::string> levels = AdvisoryLevels(r.out);
   ASSERT_GE(levels.size(), 2u) << r.out << r.err;
@@ -258,9 +259,8 @@ TEST(AvoidWithoutAServer, SaysNoDataAndNeverClear) {
 // GeoJSON from a file of `stevi watch --json` lines; both hold the tracks where they are.
 TEST_F(ServerProcessTest, ExportWritesKmlAndGeoJsonAtTheRightPlace) {
   const std::string dir = testing::MakeTempDir("stevi-export");
-  const testing::RunResult kml =
-      Stevi({"export", "--format", "kml", "--count", "20", "--out", dir + "/demo.kml",
-             "--geoid-undulation", "47.5"});
+  const testing::RunResult kml = Stevi({"export", "--format", "kml", "--count", "20", "--out",
+                                        dir + "/demo.kml", "--geoid-undulation", "47.5"});
   ASSERT_EQ(kml.exit_code, 0) << kml.err;
   std::ifstream kml_file(dir + "/demo.kml");
   std::stringstream kml_text;
@@ -294,8 +294,8 @@ TEST_F(ServerProcessTest, ExportWritesKmlAndGeoJsonAtTheRightPlace) {
     const auto& coordinates = geometry.at("coordinates").list_value().values();
     ASSERT_FALSE(coordinates.empty());
     // A LineString's first position or a Point: [lon, lat, alt].
-    const auto& first = coordinates[0].has_list_value() ? coordinates[0].list_value().values()
-                                                        : coordinates;
+    const auto& first =
+        coordinates[0].has_list_value() ? coordinates[0].list_value().values() : coordinates;
     EXPECT_NEAR(first[0].number_value(), 10.3925, 0.002) << "longitude first";
     EXPECT_NEAR(first[1].number_value(), 43.6839, 0.002);
   }
@@ -314,8 +314,8 @@ TEST_F(ServerProcessTest, ExportWritesKmlAndGeoJsonAtTheRightPlace) {
 }
 
 TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
-  const testing::RunResult bad = Stevi({"config", "set", "canonical.threshold_range_m=-5",
-                                        "matcher.block_matching.block_size=8"});
+  const testing::RunResult bad = Stevi(
+      {"config", "set", "canonical.threshold_range_m=-5", "matcher.block_matching.block_size=8"});
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_THAT(bad.err, HasSubstr("INVALID_ARGUMENT"));
   EXPECT_THAT(bad.err, HasSubstr("canonical.threshold_range_m"));
@@ -350,7 +350,8 @@ TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
   EXPECT_EQ(bad_stevis.exit_code, 1);
   EXPECT_THAT(bad_stevis.err, HasSubstr("stevis.saliency_threshold"));
   const testing::RunResult still = Stevi({"config", "get", "--json"});
-  EXPECT_THAT(still.out, HasSubstr("ALGORITHM_STEVIS")) << "a refused change leaves the active config";
+  EXPECT_THAT(still.out, HasSubstr("ALGORITHM_STEVIS"))
+      << "a refused change leaves the active config";
 
   const testing::RunResult status = Stevi({"status"});
   ASSERT_EQ(status.exit_code, 0) << status.err;
@@ -376,7 +377,8 @@ TEST_F(ServerProcessTest, ConfigStatusSnapshotAndCleanStop) {
 
 TEST(Stevi, AnUnreachableServerIsOneClearLine) {
   const testing::RunResult r =
-      testing::Run({BinaryPath("stevi"), "--server", "127.0.0.1:1", "--timeout", "2", "status"}, kCommandTimeout);
+      testing::Run({BinaryPath("stevi"), "--server", "127.0.0.1:1", "--timeout", "2", "status"},
+                   kCommandTimeout);
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("cannot reach the server at 127.0.0.1:1"));
   EXPECT_EQ(CountLines(r.err), 1) << r.err;
@@ -394,9 +396,9 @@ TEST(Stevi, AnUnreachableServerIsOneClearLine) {
 TEST(SteviProcess, SyntheticFramesAndTruthAgree) {
   const std::string dir = testing::MakeTempDir("stevi-process");
   const testing::RunResult r =
-      testing::Run({BinaryPath("stevi-process"), "--frames", "12", "--out", dir + "/tracks.jsonl", "--truth",
-           dir + "/truth.jsonl"},
-          kCommandTimeout);
+      testing::Run({BinaryPath("stevi-process"), "--frames", "12", "--out", dir + "/tracks.jsonl",
+                    "--truth", dir + "/truth.jsonl"},
+                   kCommandTimeout);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   std::ifstream tracks_file(dir + "/tracks.jsonl"), truth_file(dir + "/truth.jsonl");
   std::stringstream tracks_text, truth_text;
@@ -431,7 +433,8 @@ TEST(SteviProcess, SyntheticFramesAndTruthAgree) {
   }
   EXPECT_GE(matched, 0.9 * expected) << matched << " of " << expected;
 
-  const testing::RunResult bad = testing::Run({BinaryPath("stevi-process"), "--frames", "zero"}, kCommandTimeout);
+  const testing::RunResult bad =
+      testing::Run({BinaryPath("stevi-process"), "--frames", "zero"}, kCommandTimeout);
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_THAT(bad.err, HasSubstr("--frames"));
 }
@@ -467,17 +470,17 @@ TEST(SteviProcess, ImageSequenceDepthWithinTwoPercent) {
     ASSERT_TRUE(cv::imwrite(dir + name, frame.right));
     truth_per_frame.push_back(truth.obstacles);
   }
-  ASSERT_TRUE(geometry::SaveCalibrationYaml(
-                  geometry::IdealCalibration(cv::Size(options.width, options.height), options.f_px,
-                                             options.baseline_m, options.width / 2.0,
-                                             options.height / 2.0),
-                  dir + "/calibration.yaml")
-                  .ok());
+  ASSERT_TRUE(
+      geometry::SaveCalibrationYaml(
+          geometry::IdealCalibration(cv::Size(options.width, options.height), options.f_px,
+                                     options.baseline_m, options.width / 2.0, options.height / 2.0),
+          dir + "/calibration.yaml")
+          .ok());
 
-  const testing::RunResult r =
-      testing::Run({BinaryPath("stevi-process"), "--source", "images", "--left", dir + "/left_%03d.png",
-           "--right", dir + "/right_%03d.png", "--calibration", dir + "/calibration.yaml"},
-          kCommandTimeout);
+  const testing::RunResult r = testing::Run(
+      {BinaryPath("stevi-process"), "--source", "images", "--left", dir + "/left_%03d.png",
+       "--right", dir + "/right_%03d.png", "--calibration", dir + "/calibration.yaml"},
+      kCommandTimeout);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const auto frames = ParseJsonLines<v1::TrackFrame>(r.out);
   ASSERT_EQ(frames.size(), depths.size());
@@ -503,10 +506,10 @@ TEST(SteviProcess, ImageSequenceDepthWithinTwoPercent) {
     // The rule for the rig: within 1 % at disparity >= 16 px, else within the quantisation bound
     // dZ = Z^2 / (f B) * dd for a quarter-pixel disparity error.
     const double fB = options.f_px * options.baseline_m;
-    const double allowed_m = fB / truth.depth_m >= 16
-                                 ? 0.01 * truth.depth_m
-                                 : truth.depth_m * truth.depth_m / fB * 0.25;
-    EXPECT_LE(std::abs(measured - truth.depth_m), allowed_m) << "target at " << truth.depth_m << " m";
+    const double allowed_m =
+        fB / truth.depth_m >= 16 ? 0.01 * truth.depth_m : truth.depth_m * truth.depth_m / fB * 0.25;
+    EXPECT_LE(std::abs(measured - truth.depth_m), allowed_m)
+        << "target at " << truth.depth_m << " m";
   }
 }
 

@@ -40,8 +40,8 @@ namespace {
 namespace fs = std::filesystem;
 namespace pb = google::protobuf;
 using namespace std::chrono_literals;
-using ::testing::HasSubstr;
 using testing::Clock;
+using ::testing::HasSubstr;
 
 constexpr char kFps[] = "15";
 
@@ -172,11 +172,15 @@ TEST_F(FaultTest, GarbageBytesOnThePort) {
   const std::vector<Kind> kinds = {
       {"random bytes", [&] { return RandomBytes(rng, 1 + rng() % 65536); }, true},
       {"HTTP/1.1 request",
-       [] { return std::string("GET /stevi.v1.ObstacleService/GetStatus HTTP/1.1\r\nHost: 127.0.0.1\r\n"
-                               "User-Agent: fault-test\r\nAccept: */*\r\n\r\n"); },
+       [] {
+         return std::string(
+             "GET /stevi.v1.ObstacleService/GetStatus HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+             "User-Agent: fault-test\r\nAccept: */*\r\n\r\n");
+       },
        true},
       {"truncated HTTP/2 preface", [&] { return preface.substr(0, 1 + rng() % 23); }, false},
-      {"preface then random frames", [&] { return preface + RandomBytes(rng, 1 + rng() % 4096); }, true},
+      {"preface then random frames", [&] { return preface + RandomBytes(rng, 1 + rng() % 4096); },
+       true},
       {"preface, settings, headers with garbage HPACK",
        [&] {
          const std::string hpack = RandomBytes(rng, 1 + rng() % 200);
@@ -185,8 +189,10 @@ TEST_F(FaultTest, GarbageBytesOnThePort) {
        },
        false},
       {"preface then a 16 MiB frame header",
-       [&] { return preface + FrameHeader(0, 0x4, 0, 0) + FrameHeader(0xffffff, 0x0, 0, 1) +
-                    RandomBytes(rng, 1024); },
+       [&] {
+         return preface + FrameHeader(0, 0x4, 0, 0) + FrameHeader(0xffffff, 0x0, 0, 1) +
+                RandomBytes(rng, 1024);
+       },
        true},
   };
   std::map<std::string, int> closed_by_server, sent;
@@ -212,10 +218,11 @@ TEST_F(FaultTest, GarbageBytesOnThePort) {
       EXPECT_EQ(closed_by_server[kind.name], sent[kind.name])
           << kind.name << ": the server kept some of these connections open for 10 s";
     }
-    std::printf("garbage: %-48s x%d%s\n", kind.name.c_str(), sent[kind.name],
-                kind.server_must_close
-                    ? (", closed by the server " + std::to_string(closed_by_server[kind.name])).c_str()
-                    : "");
+    std::printf(
+        "garbage: %-48s x%d%s\n", kind.name.c_str(), sent[kind.name],
+        kind.server_must_close
+            ? (", closed by the server " + std::to_string(closed_by_server[kind.name])).c_str()
+            : "");
   }
   ASSERT_NO_FATAL_FAILURE(ExpectServing("garbage bytes"));
 }
@@ -243,7 +250,8 @@ TEST_F(FaultTest, HalfOpenConnectionsDoNotBlockRealClients) {
       testing::ReceiveFrames(server_.address(), 15, 30s, &streamed);
   const double stream_s = testing::Seconds(Clock::now() - t0);
   ASSERT_EQ(frames.size(), 15u) << streamed.error_message();
-  for (size_t i = 1; i < frames.size(); ++i) EXPECT_EQ(frames[i].frame_id(), frames[i - 1].frame_id() + 1);
+  for (size_t i = 1; i < frames.size(); ++i)
+    EXPECT_EQ(frames[i].frame_id(), frames[i - 1].frame_id() + 1);
   for (int i = 0; i < 20; ++i) {
     v1::GetStatusResponse status;
     ASSERT_TRUE(client_->GetStatus(&status).ok());
@@ -259,9 +267,10 @@ TEST_F(FaultTest, HalfOpenConnectionsDoNotBlockRealClients) {
     if (n > 0 || (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))) ++still_open;
   }
   for (const int fd : fds) ::close(fd);
-  std::printf("half-open: %d silent + %d preface-only connections; 15 frames streamed in %.2f s "
-              "meanwhile; %d silent ones still open before we closed them\n",
-              kSilent, kPrefaceOnly, stream_s, still_open);
+  std::printf(
+      "half-open: %d silent + %d preface-only connections; 15 frames streamed in %.2f s "
+      "meanwhile; %d silent ones still open before we closed them\n",
+      kSilent, kPrefaceOnly, stream_s, still_open);
   ASSERT_NO_FATAL_FAILURE(ExpectServing("half-open connections (closed)"));
 }
 
@@ -297,11 +306,17 @@ TEST_F(FaultTest, ClientsCancellingMidStream) {
         grpc::Status status;
         std::thread streaming([&] {
           status = c->StreamTracks([&](const v1::TrackFrame&) {
-            { std::lock_guard lock(mu); ++got; }
+            {
+              std::lock_guard lock(mu);
+              ++got;
+            }
             cv.notify_all();
             return true;
           });
-          { std::lock_guard lock(mu); ended = true; }
+          {
+            std::lock_guard lock(mu);
+            ended = true;
+          }
           cv.notify_all();
         });
         bool reached;
@@ -333,11 +348,17 @@ TEST_F(FaultTest, ClientsCancellingMidStream) {
               stub->StreamTracks(&context, v1::StreamTracksRequest());
           v1::TrackFrame frame;
           while (reader->Read(&frame)) {
-            { std::lock_guard lock(mu); ++got; }
+            {
+              std::lock_guard lock(mu);
+              ++got;
+            }
             cv.notify_all();
           }
           status = reader->Finish();
-          { std::lock_guard lock(mu); ended = true; }
+          {
+            std::lock_guard lock(mu);
+            ended = true;
+          }
           cv.notify_all();
         });
         {
@@ -348,7 +369,8 @@ TEST_F(FaultTest, ClientsCancellingMidStream) {
         reading.join();
         if (got < k) fail("raw cycle: only " + std::to_string(got) + " frames");
         if (status.error_code() != grpc::StatusCode::CANCELLED) {
-          fail("raw cycle: " + client::StatusCodeName(status.error_code()) + " " + status.error_message());
+          fail("raw cycle: " + client::StatusCodeName(status.error_code()) + " " +
+               status.error_message());
         } else {
           ++raw_cancelled;
         }
@@ -365,7 +387,8 @@ TEST_F(FaultTest, ClientsCancellingMidStream) {
   // Every subscription of the cancelled streams is gone (bounded wait on the server's report).
   v1::GetStatusResponse status;
   EXPECT_TRUE(testing::WaitForStatus(
-      *client_, [](const v1::GetStatusResponse& s) { return s.subscribers_size() == 0; }, 10s, &status))
+      *client_, [](const v1::GetStatusResponse& s) { return s.subscribers_size() == 0; }, 10s,
+      &status))
       << status.subscribers_size() << " subscribers left";
   std::printf("cancel: %d library Cancel() cycles, %d raw TryCancel() cycles, all ended cleanly\n",
               library_ok.load(), raw_cancelled.load());
@@ -393,7 +416,8 @@ class ConfigFuzzer {
       const std::string path = prefix + f->name();
       if (f->cpp_type() == pb::FieldDescriptor::CPPTYPE_MESSAGE) {
         if (f->is_repeated()) continue;
-        Fill(*r->MutableMessage(&m, f), br->GetMessage(base, f), p, plausible, path + ".", set_paths);
+        Fill(*r->MutableMessage(&m, f), br->GetMessage(base, f), p, plausible, path + ".",
+             set_paths);
         continue;
       }
       if (!Chance(p)) continue;
@@ -422,8 +446,9 @@ class ConfigFuzzer {
           r->SetInt64(&m, f, near ? br->GetInt64(base, f) : Int64());
           break;
         case pb::FieldDescriptor::CPPTYPE_UINT32:
-          r->SetUInt32(&m, f, near ? br->GetUInt32(base, f) + static_cast<uint32_t>(rng_() % 3)
-                                   : static_cast<uint32_t>(Int64()));
+          r->SetUInt32(&m, f,
+                       near ? br->GetUInt32(base, f) + static_cast<uint32_t>(rng_() % 3)
+                            : static_cast<uint32_t>(Int64()));
           break;
         case pb::FieldDescriptor::CPPTYPE_UINT64:
           r->SetUInt64(&m, f, near ? br->GetUInt64(base, f) : static_cast<uint64_t>(Int64()));
@@ -436,9 +461,7 @@ class ConfigFuzzer {
         case pb::FieldDescriptor::CPPTYPE_FLOAT:
           r->SetFloat(&m, f, static_cast<float>(Double(br->GetFloat(base, f))));
           break;
-        case pb::FieldDescriptor::CPPTYPE_BOOL:
-          r->SetBool(&m, f, Chance(0.5));
-          break;
+        case pb::FieldDescriptor::CPPTYPE_BOOL: r->SetBool(&m, f, Chance(0.5)); break;
         case pb::FieldDescriptor::CPPTYPE_ENUM: {
           const pb::EnumDescriptor* e = f->enum_type();
           if (near || Chance(0.5)) {
@@ -449,11 +472,8 @@ class ConfigFuzzer {
           }
           break;
         }
-        case pb::FieldDescriptor::CPPTYPE_STRING:
-          r->SetString(&m, f, String());
-          break;
-        default:
-          continue;
+        case pb::FieldDescriptor::CPPTYPE_STRING: r->SetString(&m, f, String()); break;
+        default: continue;
       }
       set_paths.push_back(path);
     }
@@ -464,8 +484,8 @@ class ConfigFuzzer {
 
   std::string String() {
     static const std::vector<std::string> kOdd = {
-        "", "../../etc/passwd", std::string(3000, 'x'), "\xc3\xa9t\xc3\xa9", "a\nb", "%s%n%x",
-        std::string("nul\0inside", 10)};
+        "",     "../../etc/passwd", std::string(3000, 'x'),        "\xc3\xa9t\xc3\xa9",
+        "a\nb", "%s%n%x",           std::string("nul\0inside", 10)};
     if (Chance(0.5)) return kOdd[rng_() % kOdd.size()];
     std::string s(rng_() % 40, ' ');
     for (char& c : s) c = static_cast<char>(32 + rng_() % 95);
@@ -474,9 +494,32 @@ class ConfigFuzzer {
 
  private:
   int32_t Int32(int32_t base) {
-    static const int32_t kOdd[] = {0, -1, 1, 2, 3, 4, 5, 7, 15, 16, 17, 63, 64, 100, 101, 255, 256,
-                                   1000, 65535, 1 << 20, INT_MAX, INT_MAX - 1, INT_MAX & ~15,
-                                   INT_MIN, INT_MIN + 1, -16};
+    static const int32_t kOdd[] = {0,
+                                   -1,
+                                   1,
+                                   2,
+                                   3,
+                                   4,
+                                   5,
+                                   7,
+                                   15,
+                                   16,
+                                   17,
+                                   63,
+                                   64,
+                                   100,
+                                   101,
+                                   255,
+                                   256,
+                                   1000,
+                                   65535,
+                                   1 << 20,
+                                   INT_MAX,
+                                   INT_MAX - 1,
+                                   INT_MAX & ~15,
+                                   INT_MIN,
+                                   INT_MIN + 1,
+                                   -16};
     switch (rng_() % 4) {
       case 0: return static_cast<int32_t>(rng_());
       case 1: return base * 1000;
@@ -511,8 +554,9 @@ class ConfigFuzzer {
                                   1e9,
                                   -1e9};
     switch (rng_() % 4) {
-      case 0: return std::ldexp(std::uniform_real_distribution<double>(-1, 1)(rng_),
-                                static_cast<int>(rng_() % 2100) - 1050);
+      case 0:
+        return std::ldexp(std::uniform_real_distribution<double>(-1, 1)(rng_),
+                          static_cast<int>(rng_() % 2100) - 1050);
       case 1: return base * 1e6;
       default: return kOdd[rng_() % std::size(kOdd)];
     }
@@ -547,7 +591,8 @@ std::vector<std::string> Problems(const std::string& message) {
   size_t start = 0;
   while (start <= message.size()) {
     const size_t end = message.find("; ", start);
-    out.push_back(message.substr(start, end == std::string::npos ? std::string::npos : end - start));
+    out.push_back(
+        message.substr(start, end == std::string::npos ? std::string::npos : end - start));
     if (end == std::string::npos) break;
     start = end + 2;
   }
@@ -599,8 +644,8 @@ TEST_F(FaultTest, RandomisedOutOfRangePipelineConfigs) {
     const grpc::Status got = client_->GetPipelineConfig(&now);
     if (!got.ok()) {
       std::string why;
-      ASSERT_TRUE(Alive(*server_.process(), &why)) << "the server died on " << update.ShortDebugString()
-                                                   << ": " << why;
+      ASSERT_TRUE(Alive(*server_.process(), &why))
+          << "the server died on " << update.ShortDebugString() << ": " << why;
       FAIL() << "GetPipelineConfig failed: " << got.error_message();
     }
     if (status.ok()) {
@@ -610,9 +655,9 @@ TEST_F(FaultTest, RandomisedOutOfRangePipelineConfigs) {
       // What is active re-validates: setting it again succeeds and changes nothing.
       v1::PipelineConfig again;
       const grpc::Status revalidated = client_->SetPipelineConfig(now, &again);
-      EXPECT_TRUE(revalidated.ok()) << "the active config " << now.ShortDebugString()
-                                    << " (after applying " << update.ShortDebugString()
-                                    << ") does not re-validate: " << revalidated.error_message();
+      EXPECT_TRUE(revalidated.ok())
+          << "the active config " << now.ShortDebugString() << " (after applying "
+          << update.ShortDebugString() << ") does not re-validate: " << revalidated.error_message();
       EXPECT_EQ(again.SerializeAsString(), now.SerializeAsString());
       EXPECT_FALSE(HasNaN(now)) << "NaN accepted into the active config from "
                                 << update.ShortDebugString() << ": " << now.ShortDebugString();
@@ -620,8 +665,8 @@ TEST_F(FaultTest, RandomisedOutOfRangePipelineConfigs) {
       active = now;
     } else {
       EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
-          << client::StatusCodeName(status.error_code()) << " " << status.error_message()
-          << " for " << update.ShortDebugString();
+          << client::StatusCodeName(status.error_code()) << " " << status.error_message() << " for "
+          << update.ShortDebugString();
       if (status.error_code() != grpc::StatusCode::INVALID_ARGUMENT) {
         std::string why;
         ASSERT_TRUE(Alive(*server_.process(), &why)) << why;
@@ -631,8 +676,9 @@ TEST_F(FaultTest, RandomisedOutOfRangePipelineConfigs) {
       for (const std::string& problem : Problems(status.error_message())) {
         const std::string field = problem.substr(0, problem.find(':'));
         EXPECT_TRUE(IsFieldPath(v1::PipelineConfig::descriptor(), field))
-            << "the problem \"" << problem << "\" does not name a PipelineConfig field (message: "
-            << status.error_message() << ")";
+            << "the problem \"" << problem
+            << "\" does not name a PipelineConfig field (message: " << status.error_message()
+            << ")";
         named_fields.insert(field);
       }
       EXPECT_EQ(now.SerializeAsString(), active.SerializeAsString())
@@ -643,8 +689,8 @@ TEST_F(FaultTest, RandomisedOutOfRangePipelineConfigs) {
       grpc::Status streamed;
       const std::vector<v1::TrackFrame> frames =
           testing::ReceiveFrames(server_.address(), 2, 60s, &streamed);
-      ASSERT_EQ(frames.size(), 2u) << "no frames with the active config " << active.ShortDebugString()
-                                   << ": " << streamed.error_message();
+      ASSERT_EQ(frames.size(), 2u) << "no frames with the active config "
+                                   << active.ShortDebugString() << ": " << streamed.error_message();
     }
   }
   // The original config comes back, whole.
@@ -652,9 +698,10 @@ TEST_F(FaultTest, RandomisedOutOfRangePipelineConfigs) {
   const grpc::Status restore = client_->SetPipelineConfig(baseline_.config, &restored);
   ASSERT_TRUE(restore.ok()) << restore.error_message();
   EXPECT_EQ(restored.SerializeAsString(), baseline_.config.SerializeAsString());
-  std::printf("config fuzz: %d requests, %d applied (%d with an infinity), %d refused naming %zu "
-              "distinct fields\n",
-              kRequests, applied, applied_with_inf, refused, named_fields.size());
+  std::printf(
+      "config fuzz: %d requests, %d applied (%d with an infinity), %d refused naming %zu "
+      "distinct fields\n",
+      kRequests, applied, applied_with_inf, refused, named_fields.size());
   EXPECT_GT(applied, kRequests / 20) << "the fuzzer hardly ever produced a valid config";
   EXPECT_GT(refused, kRequests / 4);
   ASSERT_NO_FATAL_FAILURE(ExpectServing("randomised pipeline configs"));
@@ -668,10 +715,17 @@ TEST_F(FaultTest, RandomisedStreamCalibrationAndRecordingRequests) {
   std::mt19937& rng = fuzzer.rng();
 
   // StreamTracks: min_score.
-  const std::vector<double> scores = {0.0, 1.0, 0.5, -0.0, -1e-300, 1.0000001, -1,
+  const std::vector<double> scores = {0.0,
+                                      1.0,
+                                      0.5,
+                                      -0.0,
+                                      -1e-300,
+                                      1.0000001,
+                                      -1,
                                       std::numeric_limits<double>::quiet_NaN(),
                                       std::numeric_limits<double>::infinity(),
-                                      -std::numeric_limits<double>::infinity(), 1e308,
+                                      -std::numeric_limits<double>::infinity(),
+                                      1e308,
                                       std::numeric_limits<double>::denorm_min()};
   int streams_ok = 0, streams_refused = 0;
   for (int i = 0; i < 24; ++i) {
@@ -698,11 +752,24 @@ TEST_F(FaultTest, RandomisedStreamCalibrationAndRecordingRequests) {
   }
 
   // GetCalibration: random ids.
-  std::vector<std::string> ids = {"cal-000001", "cal-1", "cal-0000000000001", "cal-000002",
-                                  "cal-999999999999999", "cal-9999999999999999", "cal-", "cal--1",
-                                  "cal-+1", "CAL-000001", "cal-000001.yaml", "../active",
-                                  "/etc/passwd", "active", "", std::string(100000, '9'),
-                                  std::string("cal-0\0", 6), "cal-00000１"};
+  std::vector<std::string> ids = {"cal-000001",
+                                  "cal-1",
+                                  "cal-0000000000001",
+                                  "cal-000002",
+                                  "cal-999999999999999",
+                                  "cal-9999999999999999",
+                                  "cal-",
+                                  "cal--1",
+                                  "cal-+1",
+                                  "CAL-000001",
+                                  "cal-000001.yaml",
+                                  "../active",
+                                  "/etc/passwd",
+                                  "active",
+                                  "",
+                                  std::string(100000, '9'),
+                                  std::string("cal-0\0", 6),
+                                  "cal-00000１"};
   for (int i = 0; i < 60; ++i) {
     std::string id = fuzzer.String();  // printable ASCII or a valid UTF-8 oddity (proto3 strings)
     if (rng() % 2 == 0) {
@@ -722,7 +789,8 @@ TEST_F(FaultTest, RandomisedStreamCalibrationAndRecordingRequests) {
       EXPECT_TRUE(status.ok()) << "'" << id << "': " << status.error_message();
       EXPECT_EQ(record.summary().calibration_id(), "cal-000001");
     } else if (parsed) {
-      EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND) << "'" << id << "': " << status.error_message();
+      EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND)
+          << "'" << id << "': " << status.error_message();
     } else {
       EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
           << "'" << id.substr(0, 80) << "': " << status.error_message();
@@ -732,11 +800,26 @@ TEST_F(FaultTest, RandomisedStreamCalibrationAndRecordingRequests) {
 
   // StartRecording: random names and limits.
   const std::string escape_abs = sandbox_ + "/absolute-escape";
-  std::vector<std::string> bad_names = {"..", ".", "../escape", "../../escape-2", "a/b", "/abs",
-                                        escape_abs, ".hidden", std::string(65, 'n'), "with space",
-                                        "tab\there", "new\nline", std::string("nul\0x", 5),
-                                        "\xc3\xa9t\xc3\xa9", "back\\slash", "~", "$(touch x)",
-                                        "%2e%2e", "a:b", "*"};
+  std::vector<std::string> bad_names = {"..",
+                                        ".",
+                                        "../escape",
+                                        "../../escape-2",
+                                        "a/b",
+                                        "/abs",
+                                        escape_abs,
+                                        ".hidden",
+                                        std::string(65, 'n'),
+                                        "with space",
+                                        "tab\there",
+                                        "new\nline",
+                                        std::string("nul\0x", 5),
+                                        "\xc3\xa9t\xc3\xa9",
+                                        "back\\slash",
+                                        "~",
+                                        "$(touch x)",
+                                        "%2e%2e",
+                                        "a:b",
+                                        "*"};
   const std::string allowed = "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789-_.";
   for (int i = 0; i < 20; ++i) {
     std::string name = fuzzer.String();
@@ -751,7 +834,8 @@ TEST_F(FaultTest, RandomisedStreamCalibrationAndRecordingRequests) {
     std::string name(1 + rng() % 64, 'a');
     for (char& c : name) c = allowed[rng() % allowed.size()];
     if (name[0] == '.') name[0] = 'r';
-    if (std::find(good_names.begin(), good_names.end(), name) == good_names.end()) good_names.push_back(name);
+    if (std::find(good_names.begin(), good_names.end(), name) == good_names.end())
+      good_names.push_back(name);
   }
   int names_refused = 0;
   for (const std::string& name : bad_names) {
@@ -794,23 +878,27 @@ TEST_F(FaultTest, RandomisedStreamCalibrationAndRecordingRequests) {
   // Nothing outside DATA_DIR/recordings: the sandbox holds only the data directory, which holds
   // only the store's files and `recordings`, which holds only the good names.
   std::vector<std::string> sandbox_entries, data_entries, recording_entries;
-  for (const auto& e : fs::directory_iterator(sandbox_)) sandbox_entries.push_back(e.path().filename());
-  for (const auto& e : fs::directory_iterator(data_dir_)) data_entries.push_back(e.path().filename());
+  for (const auto& e : fs::directory_iterator(sandbox_))
+    sandbox_entries.push_back(e.path().filename());
+  for (const auto& e : fs::directory_iterator(data_dir_))
+    data_entries.push_back(e.path().filename());
   for (const auto& e : fs::directory_iterator(data_dir_ + "/recordings")) {
     recording_entries.push_back(e.path().filename());
   }
   EXPECT_THAT(sandbox_entries, ::testing::UnorderedElementsAre("data"));
-  EXPECT_THAT(data_entries, ::testing::UnorderedElementsAre("cal-000001.yaml", "cal-000001.report.yaml",
-                                                            "active", "recordings"));
+  EXPECT_THAT(data_entries,
+              ::testing::UnorderedElementsAre("cal-000001.yaml", "cal-000001.report.yaml", "active",
+                                              "recordings"));
   EXPECT_THAT(recording_entries, ::testing::UnorderedElementsAreArray(expected_recordings));
   EXPECT_FALSE(fs::exists("/abs"));
 
   std::string codes;
   for (const auto& [code, n] : calibration_codes) codes += " " + code + " x" + std::to_string(n);
-  std::printf("requests: StreamTracks %d streamed, %d refused; GetCalibration %zu ids:%s; "
-              "StartRecording %d bad names refused, %zu good names recorded\n",
-              streams_ok, streams_refused, ids.size(), codes.c_str(), names_refused,
-              expected_recordings.size());
+  std::printf(
+      "requests: StreamTracks %d streamed, %d refused; GetCalibration %zu ids:%s; "
+      "StartRecording %d bad names refused, %zu good names recorded\n",
+      streams_ok, streams_refused, ids.size(), codes.c_str(), names_refused,
+      expected_recordings.size());
   ASSERT_NO_FATAL_FAILURE(ExpectServing("randomised requests"));
 }
 
@@ -830,7 +918,8 @@ TEST(FaultKeepalive, ASilentPeerIsClosedByTheConfiguredKeepalive) {
     const auto start = std::chrono::steady_clock::now();
     testing::SendAll(fd, preface + empty_settings);
     const bool closed = testing::ReadUntilClosed(fd);
-    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     ::close(fd);
     return closed ? std::optional<double>(s) : std::nullopt;
   };
@@ -846,8 +935,10 @@ TEST(FaultKeepalive, ASilentPeerIsClosedByTheConfiguredKeepalive) {
   ASSERT_TRUE(quick_s.has_value()) << "a silent peer was still connected after 10 s";
   EXPECT_GE(*quick_s, 1.0) << "closed before any keepalive could have run";
   EXPECT_FALSE(default_s.has_value()) << "closed after " << *default_s << " s with the defaults";
-  std::printf("keepalive: a silent peer closed after %.2f s with 1 s / 1 s; still open after 5 s "
-              "with the defaults\n", *quick_s);
+  std::printf(
+      "keepalive: a silent peer closed after %.2f s with 1 s / 1 s; still open after 5 s "
+      "with the defaults\n",
+      *quick_s);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -887,7 +978,8 @@ TEST(FaultStart, CorruptCalibrationStoreStillStartsSaysSoAndServes) {
   std::unique_ptr<client::Client> c = testing::MakeClient(server.address());
   v1::GetStatusResponse status;
   EXPECT_TRUE(testing::WaitForStatus(
-      *c, [](const v1::GetStatusResponse& s) { return s.source_state() == v1::SOURCE_STATE_RUNNING; },
+      *c,
+      [](const v1::GetStatusResponse& s) { return s.source_state() == v1::SOURCE_STATE_RUNNING; },
       30s, &status))
       << v1::SourceState_Name(status.source_state());
   EXPECT_EQ(status.calibration_id(), "cal-000001");
@@ -898,7 +990,8 @@ TEST(FaultStart, CorruptCalibrationStoreStillStartsSaysSoAndServes) {
   EXPECT_EQ(list.active_id(), "cal-000001");
   EXPECT_GE(list.store_problems_size(), 4);
   grpc::Status streamed;
-  const std::vector<v1::TrackFrame> frames = testing::ReceiveFrames(server.address(), 5, 30s, &streamed);
+  const std::vector<v1::TrackFrame> frames =
+      testing::ReceiveFrames(server.address(), 5, 30s, &streamed);
   ASSERT_EQ(frames.size(), 5u) << streamed.error_message();
   for (const v1::TrackFrame& f : frames) EXPECT_EQ(f.calibration_id(), "cal-000001");
   // The corrupt calibration files are left as they were, for inspection.
@@ -964,9 +1057,10 @@ TEST(FaultStart, ActiveChoiceSurvivesAnUnreadableCalibration) {
   ASSERT_TRUE(c->GetStatus(&status).ok());
   EXPECT_EQ(status.calibration_id(), "cal-000002")
       << "after the repair the server still uses its fallback: the active choice was lost";
-  std::printf("active choice: first start used %s; `active` then held \"%s\"; after the repair: %s\n",
-              first_calibration.c_str(), ReadText(data_dir + "/active").c_str(),
-              status.calibration_id().c_str());
+  std::printf(
+      "active choice: first start used %s; `active` then held \"%s\"; after the repair: %s\n",
+      first_calibration.c_str(), ReadText(data_dir + "/active").c_str(),
+      status.calibration_id().c_str());
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -985,7 +1079,8 @@ struct FullDiskServer {
 
 bool CanMountTmpfs(const std::string& dir) {
   const testing::RunResult r = testing::Run(
-      {"/usr/bin/unshare", "-rm", "/bin/sh", "-c", "mount -t tmpfs -o size=1m probe \"$0\"", dir}, 20s);
+      {"/usr/bin/unshare", "-rm", "/bin/sh", "-c", "mount -t tmpfs -o size=1m probe \"$0\"", dir},
+      20s);
   return r.exit_code == 0;
 }
 
@@ -997,7 +1092,8 @@ void StartFullDiskServer(FullDiskServer& s) {
   fs::create_directories(out);
   const std::vector<std::string> server_args = {testing::BinaryPath("stevi-server"), "--listen",
                                                 "127.0.0.1:0", "--fps", kFps};
-  const std::string pdeath = fs::exists("/usr/bin/setpriv") ? "/usr/bin/setpriv --pdeathsig KILL -- " : "";
+  const std::string pdeath =
+      fs::exists("/usr/bin/setpriv") ? "/usr/bin/setpriv --pdeathsig KILL -- " : "";
   std::vector<std::string> argv;
   if (fs::exists("/usr/bin/unshare") && CanMountTmpfs(mnt)) {
     s.mode = "6 MiB tmpfs (unshare -rm)";
@@ -1008,7 +1104,8 @@ void StartFullDiskServer(FullDiskServer& s) {
         "mnt=$1; out=$2; shift 2\n"
         "mount -t tmpfs -o size=6m stevi-full \"$mnt\" || exit 97\n"
         "mkdir -p \"$mnt/data\" || exit 98\n" +
-        pdeath + "\"$@\" --data-dir \"$mnt/data\" &\n"
+        pdeath +
+        "\"$@\" --data-dir \"$mnt/data\" &\n"
         "pid=$!\n"
         "trap 'kill -TERM $pid 2>/dev/null' TERM INT\n"
         "while :; do wait $pid; rc=$?; kill -0 $pid 2>/dev/null || break; done\n"
@@ -1026,8 +1123,8 @@ void StartFullDiskServer(FullDiskServer& s) {
   argv.insert(argv.end(), server_args.begin(), server_args.end());
   s.process = std::make_unique<testing::Subprocess>(argv);
   const std::optional<std::string> line = s.process->WaitForStderrLine("serving", 60s);
-  ASSERT_TRUE(line.has_value()) << "the server did not start (" << s.mode << "): "
-                                << s.process->DrainStderr();
+  ASSERT_TRUE(line.has_value()) << "the server did not start (" << s.mode
+                                << "): " << s.process->DrainStderr();
   std::smatch m;
   ASSERT_TRUE(std::regex_search(*line, m, std::regex("127\\.0\\.0\\.1:(\\d+)"))) << *line;
   s.address = "127.0.0.1:" + m[1].str();
@@ -1061,9 +1158,11 @@ TEST(FaultDisk, FullDiskStopsTheRecordingWhichStillReplays) {
 
   // The server keeps streaming and nothing else is lost.
   grpc::Status streamed;
-  const std::vector<v1::TrackFrame> frames = testing::ReceiveFrames(server.address, 10, 30s, &streamed);
+  const std::vector<v1::TrackFrame> frames =
+      testing::ReceiveFrames(server.address, 10, 30s, &streamed);
   ASSERT_EQ(frames.size(), 10u) << streamed.error_message();
-  for (size_t i = 1; i < frames.size(); ++i) EXPECT_EQ(frames[i].frame_id(), frames[i - 1].frame_id() + 1);
+  for (size_t i = 1; i < frames.size(); ++i)
+    EXPECT_EQ(frames[i].frame_id(), frames[i - 1].frame_id() + 1);
   ASSERT_TRUE(c->GetStatus(&status).ok());
   EXPECT_EQ(status.source_state(), v1::SOURCE_STATE_RUNNING);
   testing::ExpectSameState(before, testing::ReadState(*c), "a full disk");
@@ -1088,18 +1187,21 @@ TEST(FaultDisk, FullDiskStopsTheRecordingWhichStillReplays) {
   EXPECT_EQ(code, std::optional<int>(0)) << said;
   const std::string dir = server.recordings + "/full";
   ASSERT_TRUE(fs::exists(dir + "/manifest.json")) << said;
-  const testing::RunResult replay = testing::Run(
-      {testing::BinaryPath("stevi-process"), "--source", "replay", "--replay", dir}, testing::kCommandTimeout);
+  const testing::RunResult replay =
+      testing::Run({testing::BinaryPath("stevi-process"), "--source", "replay", "--replay", dir},
+                   testing::kCommandTimeout);
   ASSERT_EQ(replay.exit_code, 0) << replay.err;
   const size_t replayed = testing::ParseJsonLines<v1::TrackFrame>(replay.out).size();
   EXPECT_EQ(replayed, rec.frames_written());
-  std::printf("full disk (%s): recording stopped after %.2f s, %llu frames, %llu bytes: \"%s\"; "
-              "second start: %s; replay: %zu frames\n",
-              server.mode.c_str(), stop_s, static_cast<unsigned long long>(rec.frames_written()),
-              static_cast<unsigned long long>(rec.bytes_written()), rec.stop_reason().c_str(),
-              second.ok() ? ("ok, stopped: " + status.recording().stop_reason()).c_str()
-                          : (client::StatusCodeName(second.error_code()) + " " + second.error_message()).c_str(),
-              replayed);
+  std::printf(
+      "full disk (%s): recording stopped after %.2f s, %llu frames, %llu bytes: \"%s\"; "
+      "second start: %s; replay: %zu frames\n",
+      server.mode.c_str(), stop_s, static_cast<unsigned long long>(rec.frames_written()),
+      static_cast<unsigned long long>(rec.bytes_written()), rec.stop_reason().c_str(),
+      second.ok()
+          ? ("ok, stopped: " + status.recording().stop_reason()).c_str()
+          : (client::StatusCodeName(second.error_code()) + " " + second.error_message()).c_str(),
+      replayed);
 }
 
 }  // namespace

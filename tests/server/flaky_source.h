@@ -16,7 +16,8 @@ namespace stevi::server::test_support {
 // the rate the engine paces it at (0: as fast as it can).
 class FlakySource : public drivers::StereoSource {
  public:
-  FlakySource(int failures, int frames, double fps = 0) : failures_(failures), frames_(frames), fps_(fps) {
+  FlakySource(int failures, int frames, double fps = 0)
+      : failures_(failures), frames_(frames), fps_(fps) {
     drivers::SyntheticOptions options;
     options.width = 320;
     options.height = 240;

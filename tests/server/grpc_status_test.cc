@@ -18,7 +18,8 @@ const std::vector<std::pair<ErrorCode, std::pair<grpc::StatusCode, std::string>>
       {ErrorCode::kInvalidArgument, {grpc::StatusCode::INVALID_ARGUMENT, "INVALID_ARGUMENT"}},
       {ErrorCode::kNotFound, {grpc::StatusCode::NOT_FOUND, "NOT_FOUND"}},
       {ErrorCode::kAlreadyExists, {grpc::StatusCode::ALREADY_EXISTS, "ALREADY_EXISTS"}},
-      {ErrorCode::kFailedPrecondition, {grpc::StatusCode::FAILED_PRECONDITION, "FAILED_PRECONDITION"}},
+      {ErrorCode::kFailedPrecondition,
+       {grpc::StatusCode::FAILED_PRECONDITION, "FAILED_PRECONDITION"}},
       {ErrorCode::kUnavailable, {grpc::StatusCode::UNAVAILABLE, "UNAVAILABLE"}},
       {ErrorCode::kResourceExhausted, {grpc::StatusCode::RESOURCE_EXHAUSTED, "RESOURCE_EXHAUSTED"}},
       {ErrorCode::kOutOfRange, {grpc::StatusCode::OUT_OF_RANGE, "OUT_OF_RANGE"}},
@@ -41,8 +42,9 @@ TEST(ToGrpcStatus, EveryCodeMapsToTheGrpcCodeOfItsName) {
     EXPECT_EQ(status.error_message(), "what went wrong");
     // The code's own name, as logs print it, is the gRPC name in lower case with spaces.
     std::string name(ErrorCodeName(code));
-    std::transform(name.begin(), name.end(), name.begin(),
-                   [](unsigned char c) { return c == ' ' ? '_' : static_cast<char>(std::toupper(c)); });
+    std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) {
+      return c == ' ' ? '_' : static_cast<char>(std::toupper(c));
+    });
     EXPECT_EQ(name, want.second);
   }
 }

@@ -64,9 +64,8 @@ inline double ProcessCpuSeconds() {
 inline double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
 // A client of the library with a generous unary deadline.
-inline std::unique_ptr<client::Client> MakeClient(const std::string& address,
-                                                  std::chrono::milliseconds timeout =
-                                                      std::chrono::seconds(20)) {
+inline std::unique_ptr<client::Client> MakeClient(
+    const std::string& address, std::chrono::milliseconds timeout = std::chrono::seconds(20)) {
   client::ClientOptions options;
   options.address = address;
   options.timeout = timeout;
@@ -92,7 +91,8 @@ inline std::vector<v1::TrackFrame> ReceiveFrames(const std::string& address, siz
   std::unique_ptr<v1::ObstacleService::Stub> stub = v1::ObstacleService::NewStub(channel);
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + timeout);
-  std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader = stub->StreamTracks(&context, request);
+  std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader =
+      stub->StreamTracks(&context, request);
   std::vector<v1::TrackFrame> frames;
   v1::TrackFrame frame;
   while (frames.size() < n && reader->Read(&frame)) frames.push_back(frame);
@@ -106,8 +106,10 @@ inline std::vector<v1::TrackFrame> ReceiveFrames(const std::string& address, siz
 // Calls GetStatus until `done(status)` holds or `timeout` passes (a bounded poll on the server's
 // own report: there is no event to wait on from outside the process). The last status is in
 // `last`. Polls every 20 ms: that pacing is not what the result depends on.
-inline bool WaitForStatus(client::Client& c, const std::function<bool(const v1::GetStatusResponse&)>& done,
-                          std::chrono::milliseconds timeout, v1::GetStatusResponse* last = nullptr) {
+inline bool WaitForStatus(client::Client& c,
+                          const std::function<bool(const v1::GetStatusResponse&)>& done,
+                          std::chrono::milliseconds timeout,
+                          v1::GetStatusResponse* last = nullptr) {
   const auto deadline = Clock::now() + timeout;
   v1::GetStatusResponse status;
   while (true) {
@@ -143,8 +145,8 @@ inline ServerState ReadState(client::Client& c) {
 inline void ExpectSameState(const ServerState& before, const ServerState& after,
                             const std::string& what) {
   EXPECT_EQ(after.config.SerializeAsString(), before.config.SerializeAsString())
-      << what << ": the active pipeline config changed:\nbefore " << before.config.ShortDebugString()
-      << "\nafter " << after.config.ShortDebugString();
+      << what << ": the active pipeline config changed:\nbefore "
+      << before.config.ShortDebugString() << "\nafter " << after.config.ShortDebugString();
   EXPECT_EQ(after.calibrations.SerializeAsString(), before.calibrations.SerializeAsString())
       << what << ": the calibration list changed:\nbefore "
       << before.calibrations.ShortDebugString() << "\nafter "

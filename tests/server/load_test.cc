@@ -33,13 +33,13 @@ using testing::Seconds;
 // 12 fps: on the 2-core reference machine the pipeline (canonical, block matching, 640x480) and
 // 32 streams use well under the two cores, even with ctest running another test beside this one.
 constexpr double kFps = 12;
-constexpr int kClients = 32;                   // one of them slow
-constexpr auto kLoadDuration = 60s;            // all 32 streaming, after the warm-up
-constexpr auto kSlowConsumerDelay = 300ms;     // the slow client's time per frame
-constexpr uint64_t kWarmupFrames = 60;         // per normal client before the load is measured
-constexpr uint64_t kRateWindowFrames = 60;     // frames of one rate measurement (5 s at 12 fps)
-constexpr double kRateTolerance = 0.10;        // 32-client rate within 10 % of the 1-client rate
-constexpr long kLoadRssBoundKiB = 10 * 1024;   // growth between warm-up and end
+constexpr int kClients = 32;                  // one of them slow
+constexpr auto kLoadDuration = 60s;           // all 32 streaming, after the warm-up
+constexpr auto kSlowConsumerDelay = 300ms;    // the slow client's time per frame
+constexpr uint64_t kWarmupFrames = 60;        // per normal client before the load is measured
+constexpr uint64_t kRateWindowFrames = 60;    // frames of one rate measurement (5 s at 12 fps)
+constexpr double kRateTolerance = 0.10;       // 32-client rate within 10 % of the 1-client rate
+constexpr long kLoadRssBoundKiB = 10 * 1024;  // growth between warm-up and end
 constexpr int kChurnCycles = 1000;
 constexpr int kChurnWarmupCycles = 100;
 constexpr int kChurnThreads = 4;
@@ -73,7 +73,7 @@ struct ClientLog {
   std::atomic<uint64_t> count{0};
   std::atomic<uint64_t> last_dropped{0};  // dropped_frames of the latest frame
   std::atomic<uint64_t> last_frame_id{0};
-  std::atomic<int64_t> max_age_ns{0};      // oldest a frame was on arrival (capture to callback)
+  std::atomic<int64_t> max_age_ns{0};  // oldest a frame was on arrival (capture to callback)
   std::atomic<bool> ended{false};
   grpc::Status status;
 };
@@ -101,7 +101,9 @@ std::optional<double> MeasureRate(client::Client& control, const ClientLog& refe
   if (!control.GetStatus(&a).ok()) return std::nullopt;
   const Clock::time_point t0 = Clock::now();
   const uint64_t target = reference.count.load() + frames;
-  if (!events.WaitUntil(t0 + timeout, [&] { return reference.count.load() >= target || reference.ended.load(); }) ||
+  if (!events.WaitUntil(
+          t0 + timeout,
+          [&] { return reference.count.load() >= target || reference.ended.load(); }) ||
       reference.ended.load()) {
     return std::nullopt;
   }
@@ -182,7 +184,8 @@ TEST(ServerLoad, ThirtyTwoClientsForAMinuteOneSlow) {
     return true;
   });
   for (int i = 0; i < kClients; ++i) {
-    ASSERT_FALSE(logs[i]->ended.load()) << "client " << i << " ended: " << logs[i]->status.error_message();
+    ASSERT_FALSE(logs[i]->ended.load())
+        << "client " << i << " ended: " << logs[i]->status.error_message();
   }
   ASSERT_TRUE(warm) << "the 32 clients did not all get going within 60 s";
   const Clock::time_point warm_at = Clock::now();
@@ -205,8 +208,9 @@ TEST(ServerLoad, ThirtyTwoClientsForAMinuteOneSlow) {
     }
     return false;
   };
-  const Clock::time_point end_window_at = warm_at + kLoadDuration - std::chrono::milliseconds(
-      static_cast<int64_t>(1000.0 * kRateWindowFrames / kFps));
+  const Clock::time_point end_window_at =
+      warm_at + kLoadDuration -
+      std::chrono::milliseconds(static_cast<int64_t>(1000.0 * kRateWindowFrames / kFps));
   EXPECT_FALSE(events.WaitUntil(end_window_at, any_ended)) << "a stream ended during the load";
   const std::optional<double> rate_end =
       MeasureRate(*control, *logs[0], events, kRateWindowFrames, 60s);
@@ -292,7 +296,8 @@ TEST(ServerLoad, ThirtyTwoClientsForAMinuteOneSlow) {
       kFps, *rate_one, *rate_start, ratio_start, *rate_end, ratio_end, load_s, cores_used,
       static_cast<unsigned long long>(min_frames), static_cast<unsigned long long>(max_frames),
       s.frame_ids.size(), static_cast<unsigned long long>(s.dropped.back()),
-      static_cast<unsigned long long>(gap_total), static_cast<unsigned long long>(server_max_dropped),
+      static_cast<unsigned long long>(gap_total),
+      static_cast<unsigned long long>(server_max_dropped),
       static_cast<unsigned long long>(slow_lag_frames), s.max_age_ns.load() * 1e-9,
       normal_max_age_ns * 1e-9, rss_before, rss_after, growth);
 
@@ -333,7 +338,8 @@ void RunCycle(const std::string& address, Cycle kind, std::mt19937& rng, CycleOu
     if (out.unexpected++ == 0) out.first_unexpected = what;
   };
   if (kind == Cycle::kConnectOnly) {
-    if (!channel->WaitForConnected(std::chrono::system_clock::now() + 10s)) fail("connect timed out");
+    if (!channel->WaitForConnected(std::chrono::system_clock::now() + 10s))
+      fail("connect timed out");
   } else {
     std::unique_ptr<v1::ObstacleService::Stub> stub = v1::ObstacleService::NewStub(channel);
     grpc::ClientContext context;
@@ -403,8 +409,8 @@ TEST(ServerLoad, ThousandConnectStreamCancelCyclesLeaveNothingBehind) {
   int by_kind[static_cast<int>(Cycle::kCount)] = {};
   for (const std::vector<CycleOutcome>* set : {&warm, &outcomes}) {
     for (const CycleOutcome& o : *set) {
-      EXPECT_EQ(o.unexpected, 0) << o.unexpected << " unexpected outcomes, the first: "
-                                 << o.first_unexpected;
+      EXPECT_EQ(o.unexpected, 0) << o.unexpected
+                                 << " unexpected outcomes, the first: " << o.first_unexpected;
       unexpected += o.unexpected;
     }
   }

@@ -13,8 +13,8 @@
 namespace stevi {
 namespace {
 
-using ::testing::HasSubstr;
 using testing::BinaryPath;
+using ::testing::HasSubstr;
 using testing::kCommandTimeout;
 using testing::ParseJsonLines;
 
@@ -39,7 +39,8 @@ v1::GetStatusResponse Status(const testing::ServerProcess& server) {
 }
 
 // stevi-process over a recording: its stdout (JSON lines) and exit code.
-testing::RunResult ProcessReplay(const std::string& dir, const std::vector<std::string>& extra = {}) {
+testing::RunResult ProcessReplay(const std::string& dir,
+                                 const std::vector<std::string>& extra = {}) {
   std::vector<std::string> args{BinaryPath("stevi-process"), "--source", "replay", "--replay", dir};
   args.insert(args.end(), extra.begin(), extra.end());
   return testing::Run(args, kCommandTimeout);
@@ -73,7 +74,8 @@ TEST(Recording, HundredSyntheticFramesReplayTwiceByteIdenticalAndAsLive) {
   // 105 processed frames: the recorder has been handed at least as many.
   const testing::RunResult watch = server.Stevi({"watch", "--count", "105", "--json"});
   ASSERT_EQ(watch.exit_code, 0) << watch.err;
-  const v1::RecordingStatus stopped = ParseRecordingStatus(server.Stevi({"record", "stop", "--json"}));
+  const v1::RecordingStatus stopped =
+      ParseRecordingStatus(server.Stevi({"record", "stop", "--json"}));
   EXPECT_FALSE(stopped.active());
   EXPECT_GE(stopped.frames_written(), 100u);
   EXPECT_EQ(stopped.frames_dropped(), 0u);
@@ -85,11 +87,11 @@ TEST(Recording, HundredSyntheticFramesReplayTwiceByteIdenticalAndAsLive) {
   EXPECT_EQ(Status(server).recording().frames_written(), stopped.frames_written());
 
   const std::string out_dir = testing::MakeTempDir("stevi-replay");
-  const testing::RunResult first =
-      ProcessReplay(dir, {"--frames", "100", "--algorithm", "stevie", "--out", out_dir + "/a.jsonl"});
+  const testing::RunResult first = ProcessReplay(
+      dir, {"--frames", "100", "--algorithm", "stevie", "--out", out_dir + "/a.jsonl"});
   ASSERT_EQ(first.exit_code, 0) << first.err;
-  const testing::RunResult second =
-      ProcessReplay(dir, {"--frames", "100", "--algorithm", "stevie", "--out", out_dir + "/b.jsonl"});
+  const testing::RunResult second = ProcessReplay(
+      dir, {"--frames", "100", "--algorithm", "stevie", "--out", out_dir + "/b.jsonl"});
   ASSERT_EQ(second.exit_code, 0) << second.err;
   const std::string a = ReadFile(out_dir + "/a.jsonl");
   const std::string b = ReadFile(out_dir + "/b.jsonl");
@@ -136,8 +138,8 @@ TEST(Recording, RpcChecksNamesAndStopsAtTheDiskLimit) {
     EXPECT_THAT(r.err, HasSubstr("INVALID_ARGUMENT")) << bad;
     EXPECT_THAT(r.err, HasSubstr("name")) << bad;
   }
-  const v1::RecordingStatus started =
-      ParseRecordingStatus(server.Stevi({"record", "start", "--name", "small", "--max-mb", "1", "--json"}));
+  const v1::RecordingStatus started = ParseRecordingStatus(
+      server.Stevi({"record", "start", "--name", "small", "--max-mb", "1", "--json"}));
   EXPECT_TRUE(started.active());
   EXPECT_EQ(started.max_bytes(), 1u << 20);
   EXPECT_THAT(started.dir(), HasSubstr("recordings/small"));

@@ -44,9 +44,9 @@ struct Pki {
 };
 
 void MakeCertificate(const Pki& pki, const std::string& name, const std::string& extensions) {
-  ASSERT_NO_FATAL_FAILURE(OpenSsl({"req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1",
-                                   "-nodes", "-keyout", pki.key(name), "-out",
-                                   pki.dir + "/" + name + ".csr", "-subj", "/CN=" + name}));
+  ASSERT_NO_FATAL_FAILURE(OpenSsl(
+      {"req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes", "-keyout",
+       pki.key(name), "-out", pki.dir + "/" + name + ".csr", "-subj", "/CN=" + name}));
   const std::string ext = pki.dir + "/" + name + ".ext";
   std::ofstream(ext) << extensions << "\n";
   ASSERT_NO_FATAL_FAILURE(OpenSsl({"x509", "-req", "-in", pki.dir + "/" + name + ".csr", "-CA",

@@ -72,7 +72,6 @@ class ServerTest : public ::testing::Test {
 
   std::vector<v1::TrackFrame> Collect(client::Client& c, uint64_t n) { return CollectFrames(c, n); }
 
-
   std::unique_ptr<Server> server_;
   std::unique_ptr<client::Client> client_;
 };
@@ -104,9 +103,8 @@ TEST_F(ServerTest, TwoClientsStreamAtOnceWithAccurateDepth) {
     renderer.Render(f.source_index(), &truth);
     testing::CheckFrame(f, truth, fB, check);
   }
-  std::cout << "server stream: " << check.matched << "/" << check.expected
-            << " obstacles matched, " << check.within << " within 2 %, worst "
-            << 100 * check.worst_relative_error << " %\n";
+  std::cout << "server stream: " << check.matched << "/" << check.expected << " obstacles matched, "
+            << check.within << " within 2 %, worst " << 100 * check.worst_relative_error << " %\n";
   EXPECT_GE(check.recall(), 0.85);
   // The depth is the object's (the median of its visible pixels' disparities), fitted per
   // detection: nearly all within 2 %, none beyond 3 % (a small box seen from below: 2.2 %).
@@ -124,9 +122,8 @@ TEST_F(ServerTest, BadConfigIsRefusedAndTheActiveOneStays) {
   v1::PipelineConfig active;
   const grpc::Status refused = client_->SetPipelineConfig(bad, &active);
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_THAT(refused.error_message(),
-              AllOf(HasSubstr("matcher.block_matching.num_disparities"),
-                    HasSubstr("canonical.threshold_range_m")));
+  EXPECT_THAT(refused.error_message(), AllOf(HasSubstr("matcher.block_matching.num_disparities"),
+                                             HasSubstr("canonical.threshold_range_m")));
   v1::PipelineConfig after;
   ASSERT_TRUE(client_->GetPipelineConfig(&after).ok());
   EXPECT_EQ(after.SerializeAsString(), before.SerializeAsString());
@@ -359,8 +356,8 @@ TEST(ServerLimits, StreamsBeyondMaxStreamsAreRefusedAndAFreedPlaceIsReused) {
   }
   {
     std::unique_lock lock(mu);
-    EXPECT_TRUE(cv.wait_for(lock, std::chrono::seconds(30),
-                            [&] { return received[0] > seen_before + 2; }));
+    EXPECT_TRUE(
+        cv.wait_for(lock, std::chrono::seconds(30), [&] { return received[0] > seen_before + 2; }));
   }
   // One leaves (bounded wait until the server has let it go); its place is taken again.
   holders[0]->Cancel();
@@ -370,7 +367,8 @@ TEST(ServerLimits, StreamsBeyondMaxStreamsAreRefusedAndAFreedPlaceIsReused) {
   v1::GetStatusResponse status;
   while (watcher.GetStatus(&status).ok() && status.subscribers_size() > 1 &&
          std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // poll pacing on the server's report
+    std::this_thread::sleep_for(
+        std::chrono::milliseconds(20));  // poll pacing on the server's report
   }
   EXPECT_EQ(status.subscribers_size(), 1);
   EXPECT_EQ(CollectFrames(third, 3).size(), 3u);
@@ -393,7 +391,8 @@ TEST_F(ServerTest, TracksCarryGeodeticPositionsMatchingTheTruth) {
     double lo, hi;
     std::vector<double> horizontal, vertical, sigma;
   };
-  std::vector<Band> bands{{0, 25, {}, {}, {}}, {25, 35, {}, {}, {}}, {35, 45, {}, {}, {}}, {45, 60, {}, {}, {}}};
+  std::vector<Band> bands{
+      {0, 25, {}, {}, {}}, {25, 35, {}, {}, {}}, {35, 45, {}, {}, {}}, {45, 60, {}, {}, {}}};
   int checked = 0;
   for (const v1::TrackFrame& f : frames) {
     ASSERT_EQ(f.geo_status(), v1::GEO_STATUS_OK) << f.geo_message();
@@ -457,11 +456,12 @@ TEST_F(ServerTest, TracksCarryGeodeticPositionsMatchingTheTruth) {
       for (double x : v) s += x * x;
       return std::sqrt(s / v.size());
     };
-    std::printf("geodetic error %2.0f-%2.0f m: %zu tracks, horizontal rms %.2f m max %.2f m, "
-                "vertical rms %.2f m, reported sigma_h mean %.2f m\n",
-                b.lo, b.hi, b.horizontal.size(), rms(b.horizontal),
-                *std::max_element(b.horizontal.begin(), b.horizontal.end()), rms(b.vertical),
-                std::accumulate(b.sigma.begin(), b.sigma.end(), 0.0) / b.sigma.size());
+    std::printf(
+        "geodetic error %2.0f-%2.0f m: %zu tracks, horizontal rms %.2f m max %.2f m, "
+        "vertical rms %.2f m, reported sigma_h mean %.2f m\n",
+        b.lo, b.hi, b.horizontal.size(), rms(b.horizontal),
+        *std::max_element(b.horizontal.begin(), b.horizontal.end()), rms(b.vertical),
+        std::accumulate(b.sigma.begin(), b.sigma.end(), 0.0) / b.sigma.size());
   }
 }
 
@@ -501,12 +501,13 @@ TEST(ServerFlight, AStandingTowerKeepsItsPlaceWhileTheRigFlies) {
     }
     if (best < 1e9) errors.push_back(best);
   }
-  const double moved =
-      metres(frames.front().vehicle().position().lat_deg(), frames.front().vehicle().position().lon_deg(),
-             frames.back().vehicle().position().lat_deg(), frames.back().vehicle().position().lon_deg());
-  std::printf("rig moved %.2f m; the tower's track stays %.2f m (max %.2f m) from its place, %zu frames\n",
-              moved, std::accumulate(errors.begin(), errors.end(), 0.0) / errors.size(),
-              *std::max_element(errors.begin(), errors.end()), errors.size());
+  const double moved = metres(
+      frames.front().vehicle().position().lat_deg(), frames.front().vehicle().position().lon_deg(),
+      frames.back().vehicle().position().lat_deg(), frames.back().vehicle().position().lon_deg());
+  std::printf(
+      "rig moved %.2f m; the tower's track stays %.2f m (max %.2f m) from its place, %zu frames\n",
+      moved, std::accumulate(errors.begin(), errors.end(), 0.0) / errors.size(),
+      *std::max_element(errors.begin(), errors.end()), errors.size());
   EXPECT_GT(moved, 3.0) << "40 frames at 20 fps at 3 m/s: 5.85 m";
   ASSERT_GE(errors.size(), 30u);
   // 2 % of its range when the pipeline keeps up (measured: mean 0.44 m, max 0.48 m). Under load
@@ -596,8 +597,10 @@ TEST_F(ServerTest, StreamFiltersAreAppliedAndABadOneIsRefused) {
 TEST(FilterTracks, DropsTentativeAndLowScoringTracksKeepingTheOrder) {
   v1::TrackFrame frame;
   const std::vector<std::tuple<uint64_t, v1::TrackState, double>> tracks = {
-      {1, v1::TRACK_STATE_CONFIRMED, 0.9}, {2, v1::TRACK_STATE_TENTATIVE, 0.9},
-      {3, v1::TRACK_STATE_COASTING, 0.3},  {4, v1::TRACK_STATE_CONFIRMED, 0.6},
+      {1, v1::TRACK_STATE_CONFIRMED, 0.9},
+      {2, v1::TRACK_STATE_TENTATIVE, 0.9},
+      {3, v1::TRACK_STATE_COASTING, 0.3},
+      {4, v1::TRACK_STATE_CONFIRMED, 0.6},
       {5, v1::TRACK_STATE_TENTATIVE, 0.1}};
   for (const auto& [id, state, score] : tracks) {
     v1::Track* t = frame.add_tracks();
@@ -650,9 +653,9 @@ TEST(ServerStart, RefusesABadConfigBeforeOpeningAnything) {
   geo.mutable_source()->mutable_synthetic()->set_scene("moon");
   Result<std::unique_ptr<Server>> refused = Server::Start(geo);
   ASSERT_FALSE(refused.ok());
-  EXPECT_THAT(refused.error().message,
-              AllOf(HasSubstr("source.synthetic.scene: unknown scene 'moon'"),
-                    HasSubstr("flight")));
+  EXPECT_THAT(
+      refused.error().message,
+      AllOf(HasSubstr("source.synthetic.scene: unknown scene 'moon'"), HasSubstr("flight")));
   geo.mutable_source()->mutable_synthetic()->clear_scene();
   refused = Server::Start(geo);
   ASSERT_FALSE(refused.ok());

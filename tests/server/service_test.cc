@@ -12,12 +12,12 @@
 namespace stevi::server {
 namespace {
 
-using ::testing::HasSubstr;
 using test_support::FlakySource;
+using ::testing::HasSubstr;
 
 TEST(GetDisparitySnapshotImpl, FailedPreconditionBeforeTheFirstFrame) {
-  Result<std::unique_ptr<Engine>> engine = Engine::Create(std::make_unique<FlakySource>(0, 1),
-                                                          pipeline::PipelineConfig{}, nullptr);
+  Result<std::unique_ptr<Engine>> engine =
+      Engine::Create(std::make_unique<FlakySource>(0, 1), pipeline::PipelineConfig{}, nullptr);
   ASSERT_TRUE(engine.ok());
   v1::DisparitySnapshot snapshot;
   const grpc::Status status =
@@ -27,8 +27,8 @@ TEST(GetDisparitySnapshotImpl, FailedPreconditionBeforeTheFirstFrame) {
 }
 
 TEST(SetPipelineConfigImpl, MergesValidatesAndKeepsTheActiveOnError) {
-  Result<std::unique_ptr<Engine>> engine = Engine::Create(std::make_unique<FlakySource>(0, 1),
-                                                          pipeline::PipelineConfig{}, nullptr);
+  Result<std::unique_ptr<Engine>> engine =
+      Engine::Create(std::make_unique<FlakySource>(0, 1), pipeline::PipelineConfig{}, nullptr);
   ASSERT_TRUE(engine.ok());
   std::mutex mu;
   v1::SetPipelineConfigRequest request;

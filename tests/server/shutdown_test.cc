@@ -174,7 +174,8 @@ TEST(Shutdown, SigtermEndsStreamsStopsTheSourceFlushesTheRecordingInOrderWithinF
 // without its generated code: the request is ServerReflectionRequest{list_services: ""} (field
 // 7, a string), and the answer's list_services_response (field 6) holds ServiceResponse
 // messages (field 1) whose name is field 1. Bounded: every wait has a deadline.
-std::vector<std::string> ListServicesByReflection(const std::string& address, grpc::Status* status) {
+std::vector<std::string> ListServicesByReflection(const std::string& address,
+                                                  grpc::Status* status) {
   std::shared_ptr<grpc::Channel> channel = testing::PrivateChannel(address);
   grpc::GenericStub stub(channel);
   grpc::CompletionQueue cq;
@@ -204,12 +205,15 @@ std::vector<std::string> ListServicesByReflection(const std::string& address, gr
       std::vector<grpc::Slice> slices;
       if (step(&tags[3]) && reply.Dump(&slices).ok()) {
         std::string bytes;
-        for (const grpc::Slice& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+        for (const grpc::Slice& s : slices)
+          bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
         google::protobuf::UnknownFieldSet response, list;
         if (response.ParseFromString(bytes)) {
           for (int i = 0; i < response.field_count(); ++i) {
             const google::protobuf::UnknownField& f = response.field(i);
-            if (f.number() != 6 || f.type() != google::protobuf::UnknownField::TYPE_LENGTH_DELIMITED) continue;
+            if (f.number() != 6 ||
+                f.type() != google::protobuf::UnknownField::TYPE_LENGTH_DELIMITED)
+              continue;
             if (!list.ParseFromString(f.length_delimited())) continue;
             for (int j = 0; j < list.field_count(); ++j) {
               google::protobuf::UnknownFieldSet service;
@@ -220,7 +224,8 @@ std::vector<std::string> ListServicesByReflection(const std::string& address, gr
               }
               for (int k = 0; k < service.field_count(); ++k) {
                 if (service.field(k).number() == 1 &&
-                    service.field(k).type() == google::protobuf::UnknownField::TYPE_LENGTH_DELIMITED) {
+                    service.field(k).type() ==
+                        google::protobuf::UnknownField::TYPE_LENGTH_DELIMITED) {
                   names.push_back(service.field(k).length_delimited());
                 }
               }
@@ -246,9 +251,9 @@ TEST(Reflection, TheRunningServerListsItsServices) {
   ASSERT_NO_FATAL_FAILURE(server.Start({"--fps", "10"}));
   grpc::Status status;
   const std::vector<std::string> names = ListServicesByReflection(server.address(), &status);
-  EXPECT_THAT(names, ::testing::IsSupersetOf({"stevi.v1.ObstacleService",
-                                              "stevi.v1.CalibrationService",
-                                              "grpc.health.v1.Health"}))
+  EXPECT_THAT(names,
+              ::testing::IsSupersetOf({"stevi.v1.ObstacleService", "stevi.v1.CalibrationService",
+                                       "grpc.health.v1.Health"}))
       << status.error_message();
   std::string joined;
   for (const std::string& n : names) joined += " " + n;

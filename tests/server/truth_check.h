@@ -16,9 +16,9 @@
 namespace stevi::testing {
 
 struct DepthCheck {
-  int expected = 0;   // visible obstacles with truth disparity >= min_disparity_px
-  int matched = 0;    // of those, matched by a track (IoU >= 0.3)
-  int within = 0;     // of those, depth within max_relative_error
+  int expected = 0;  // visible obstacles with truth disparity >= min_disparity_px
+  int matched = 0;   // of those, matched by a track (IoU >= 0.3)
+  int within = 0;    // of those, depth within max_relative_error
   double worst_relative_error = 0;
   std::vector<std::string> failures;
   // Per truth obstacle id: how many times each track id matched it.

@@ -110,11 +110,13 @@ void WaitDiscoverable(const std::set<std::string>& ids, const std::vector<FakeGv
     for (const drivers::DeviceEntry& d : devices) found.insert(d.id);
     if (std::includes(found.begin(), found.end(), ids.begin(), ids.end())) return;
     for (FakeGvCamera* camera : cameras) {
-      ASSERT_TRUE(camera == nullptr || camera->Running()) << camera->id() << " exited: " << camera->Log();
+      ASSERT_TRUE(camera == nullptr || camera->Running())
+          << camera->id() << " exited: " << camera->Log();
     }
   }
   std::string present;
-  for (const drivers::DeviceEntry& d : devices) present.append(" ").append(drivers::DescribeDevice(d));
+  for (const drivers::DeviceEntry& d : devices)
+    present.append(" ").append(drivers::DescribeDevice(d));
   FAIL() << "the fake cameras were not discovered within " << timeout.count()
          << " s; present:" << present;
 }

@@ -267,18 +267,12 @@ GtScene ExtractGtObstacles(const cv::Mat1f& truth_px, double f_px, double baseli
 
 const char* BoxVerdictName(BoxVerdict verdict) {
   switch (verdict) {
-    case BoxVerdict::kMatched:
-      return "matched";
-    case BoxVerdict::kFragment:
-      return "fragment";
-    case BoxVerdict::kFpStructure:
-      return "fp-structure";
-    case BoxVerdict::kFpWrongDepth:
-      return "fp-wrong-depth";
-    case BoxVerdict::kFpFree:
-      return "fp-free";
-    case BoxVerdict::kFpNoTruth:
-      return "fp-no-truth";
+    case BoxVerdict::kMatched: return "matched";
+    case BoxVerdict::kFragment: return "fragment";
+    case BoxVerdict::kFpStructure: return "fp-structure";
+    case BoxVerdict::kFpWrongDepth: return "fp-wrong-depth";
+    case BoxVerdict::kFpFree: return "fp-free";
+    case BoxVerdict::kFpNoTruth: return "fp-no-truth";
   }
   return "?";
 }

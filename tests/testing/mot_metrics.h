@@ -32,11 +32,11 @@ namespace stevi::testing {
 // One obstacle of the truth in one frame. Every obstacle of the scene is listed every frame,
 // expected or not, so that the don't-care rule can see the hidden ones.
 struct MotTruth {
-  int id = 0;              // stable over the sequence
-  bool expected = false;   // ground truth this frame: a tracker should report it
-  cv::Rect box;            // the visible part (used when expected)
-  cv::Rect full_box;       // the whole obstacle projected, not clipped to the image (may be empty)
-  double range_m = 0;      // truth range, metres
+  int id = 0;             // stable over the sequence
+  bool expected = false;  // ground truth this frame: a tracker should report it
+  cv::Rect box;           // the visible part (used when expected)
+  cv::Rect full_box;      // the whole obstacle projected, not clipped to the image (may be empty)
+  double range_m = 0;     // truth range, metres
   // The truth time to the closest approach (seconds from this frame), set only when the obstacle
   // is on a collision course (see tracking_eval.h).
   std::optional<double> time_to_collision_s;
@@ -46,21 +46,21 @@ struct MotTruth {
 struct MotTrack {
   std::uint64_t id = 0;
   cv::Rect box;
-  bool measured = false;          // a detection updated it this frame (else it coasts)
-  int hits = 0;                   // frames with a detection so far
-  double range_m = 0;             // raw: the last detection's range
-  double smoothed_range_m = 0;    // the tracker's smoothed range
+  bool measured = false;        // a detection updated it this frame (else it coasts)
+  int hits = 0;                 // frames with a detection so far
+  double range_m = 0;           // raw: the last detection's range
+  double smoothed_range_m = 0;  // the tracker's smoothed range
   std::optional<double> time_to_collision_s;
 };
 
 // What one frame scored.
 struct MotFrame {
-  std::vector<std::pair<int, std::uint64_t>> matches;  // (truth id, track id)
-  std::vector<int> misses;                              // expected truth ids without a track
-  std::vector<std::uint64_t> false_positives;           // track ids
-  std::vector<std::pair<std::uint64_t, int>> dont_care; // (track id, hidden truth id)
-  std::vector<int> id_switches;                         // truth ids whose track id changed
-  std::vector<int> fragmentations;                      // truth ids tracked again after a gap
+  std::vector<std::pair<int, std::uint64_t>> matches;    // (truth id, track id)
+  std::vector<int> misses;                               // expected truth ids without a track
+  std::vector<std::uint64_t> false_positives;            // track ids
+  std::vector<std::pair<std::uint64_t, int>> dont_care;  // (track id, hidden truth id)
+  std::vector<int> id_switches;                          // truth ids whose track id changed
+  std::vector<int> fragmentations;                       // truth ids tracked again after a gap
 };
 
 struct MotSummary {
@@ -71,11 +71,11 @@ struct MotSummary {
   int false_positives = 0;  // FP
   int id_switches = 0;      // IDSW
   int fragmentations = 0;
-  int dont_care = 0;        // unmatched tracks on an obstacle that is not expected
-  double iou_sum = 0;       // over the matches
-  std::set<std::uint64_t> track_ids;       // every reported track id
-  std::map<int, int> expected_frames;      // truth id -> frames expected
-  std::map<int, int> matched_frames;       // truth id -> frames matched
+  int dont_care = 0;                   // unmatched tracks on an obstacle that is not expected
+  double iou_sum = 0;                  // over the matches
+  std::set<std::uint64_t> track_ids;   // every reported track id
+  std::map<int, int> expected_frames;  // truth id -> frames expected
+  std::map<int, int> matched_frames;   // truth id -> frames matched
   // Over the matches whose track was measured this frame (a coasting track's raw range is stale):
   // track minus truth, metres.
   std::vector<double> range_errors_m;

@@ -118,6 +118,8 @@ RunResult Run(const std::vector<std::string>& argv, std::chrono::milliseconds ti
   return result;
 }
 
-std::string BinaryPath(const std::string& name) { return std::string(STEVI_BINARY_DIR) + "/" + name; }
+std::string BinaryPath(const std::string& name) {
+  return std::string(STEVI_BINARY_DIR) + "/" + name;
+}
 
 }  // namespace stevi::testing

@@ -69,10 +69,8 @@ cv::Rect ProjectedBox(const drivers::Obstacle& obstacle, double t_s,
 
 cv::Vec3d PathVelocity(const drivers::Path& path, double t_s) {
   switch (path.kind) {
-    case drivers::Path::Kind::kStatic:
-      return {0.0, 0.0, 0.0};
-    case drivers::Path::Kind::kLinear:
-      return path.velocity_mps;
+    case drivers::Path::Kind::kStatic: return {0.0, 0.0, 0.0};
+    case drivers::Path::Kind::kLinear: return path.velocity_mps;
     case drivers::Path::Kind::kCircle: {
       const double angle = path.phase_rad + path.angular_rate_rad_s * t_s;
       const double speed = path.radius_m * path.angular_rate_rad_s;
@@ -102,7 +100,8 @@ std::vector<MotTruth> ScoringTruth(const drivers::FrameTruth& truth,
   for (const drivers::ObstacleTruth& o : truth.obstacles) {
     MotTruth m;
     m.id = o.id;
-    m.expected = o.visible_px >= kMinVisiblePx && o.depth_m > 0 && fB / o.depth_m >= kMinDisparityPx;
+    m.expected =
+        o.visible_px >= kMinVisiblePx && o.depth_m > 0 && fB / o.depth_m >= kMinDisparityPx;
     m.box = o.bbox;
     m.range_m = o.range_m;
     if (const drivers::Obstacle* obstacle = FindObstacle(options.scene, o.id)) {

@@ -54,17 +54,21 @@ const Dataset& Synthetic() {
   static const Dataset dataset = [] {
     Dataset d;
     const auto t0 = std::chrono::steady_clock::now();
-    d.poses = GenerateBoardPoses(TruthRig(), TestBoard(), testing::kImageSize, kPairs, 2024).value();
-    const ChessboardRenderer renderer = ChessboardRenderer::Create(TruthRig(), TestBoard(), testing::kImageSize).value();
+    d.poses =
+        GenerateBoardPoses(TruthRig(), TestBoard(), testing::kImageSize, kPairs, 2024).value();
+    const ChessboardRenderer renderer =
+        ChessboardRenderer::Create(TruthRig(), TestBoard(), testing::kImageSize).value();
     for (int i = 0; i < kPairs; ++i) {
       d.images.push_back(renderer.Render(d.poses[i]));
-      d.pairs.push_back({Png(d.images.back().left), Png(d.images.back().right), "view" + std::to_string(i)});
+      d.pairs.push_back(
+          {Png(d.images.back().left), Png(d.images.back().right), "view" + std::to_string(i)});
     }
     const auto t1 = std::chrono::steady_clock::now();
     d.detected = DetectPairs(d.pairs, Options()).value();
     const auto t2 = std::chrono::steady_clock::now();
     std::printf("rendered %d pairs in %.2f s, detected in %.2f s\n", kPairs,
-                std::chrono::duration<double>(t1 - t0).count(), std::chrono::duration<double>(t2 - t1).count());
+                std::chrono::duration<double>(t1 - t0).count(),
+                std::chrono::duration<double>(t2 - t1).count());
     return d;
   }();
   return dataset;
@@ -81,7 +85,8 @@ struct Holdout {
   int points = 0;
 };
 
-Holdout CheckOnRandomPoints(const geometry::StereoCalibration& truth, const geometry::StereoCalibration& c) {
+Holdout CheckOnRandomPoints(const geometry::StereoCalibration& truth,
+                            const geometry::StereoCalibration& c) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-1, 1), depth(0.8, 4.0);
   std::vector<cv::Point3d> points;
@@ -121,12 +126,15 @@ Holdout CheckOnRandomPoints(const geometry::StereoCalibration& truth, const geom
   return h;
 }
 
-void ExpectRecoversTruth(const geometry::StereoCalibration& c, const geometry::StereoCalibration& truth) {
+void ExpectRecoversTruth(const geometry::StereoCalibration& c,
+                         const geometry::StereoCalibration& truth) {
   for (int cam = 0; cam < 2; ++cam) {
     const cv::Matx33d& m = cam == 0 ? c.M1 : c.M2;
     const cv::Matx33d& t = cam == 0 ? truth.M1 : truth.M2;
-    EXPECT_LT(Rel(m(0, 0), t(0, 0)), 0.005) << "camera " << cam + 1 << " fx " << m(0, 0) << " truth " << t(0, 0);
-    EXPECT_LT(Rel(m(1, 1), t(1, 1)), 0.005) << "camera " << cam + 1 << " fy " << m(1, 1) << " truth " << t(1, 1);
+    EXPECT_LT(Rel(m(0, 0), t(0, 0)), 0.005)
+        << "camera " << cam + 1 << " fx " << m(0, 0) << " truth " << t(0, 0);
+    EXPECT_LT(Rel(m(1, 1), t(1, 1)), 0.005)
+        << "camera " << cam + 1 << " fy " << m(1, 1) << " truth " << t(1, 1);
     EXPECT_NEAR(m(0, 2), t(0, 2), 1.5) << "camera " << cam + 1 << " cx";
     EXPECT_NEAR(m(1, 2), t(1, 2), 1.5) << "camera " << cam + 1 << " cy";
   }
@@ -139,15 +147,18 @@ TEST(CalibrateStereo, RecoversTheSyntheticRig) {
   const Dataset& d = Synthetic();
   const auto t0 = std::chrono::steady_clock::now();
   const Result<CalibrationResult> result = CalibrateFromCorners(d.detected, Options());
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ASSERT_TRUE(result.ok()) << result.error().message;
   const geometry::StereoCalibration& c = result->calibration;
   const CalibrationReport& r = result->report;
   const geometry::StereoCalibration truth = TruthRig();
   std::printf("%s", FormatReportText(r).c_str());
-  std::printf("solved in %.2f s: fx %.3f / %.3f (truth 520 / 516), baseline %.3f mm (truth %.3f), k1 %.4f / %.4f\n",
-              seconds, c.M1(0, 0), c.M2(0, 0), 1000 * cv::norm(c.T), 1000 * cv::norm(truth.T),
-              c.D1.at<double>(0), c.D2.at<double>(0));
+  std::printf(
+      "solved in %.2f s: fx %.3f / %.3f (truth 520 / 516), baseline %.3f mm (truth %.3f), k1 %.4f "
+      "/ %.4f\n",
+      seconds, c.M1(0, 0), c.M2(0, 0), 1000 * cv::norm(c.T), 1000 * cv::norm(truth.T),
+      c.D1.at<double>(0), c.D2.at<double>(0));
 
   ExpectRecoversTruth(c, truth);
   EXPECT_NEAR(c.D1.at<double>(0), -0.20, 0.01);
@@ -156,7 +167,9 @@ TEST(CalibrateStereo, RecoversTheSyntheticRig) {
   EXPECT_LT(r.rms_left_px, 0.3);
   EXPECT_LT(r.rms_right_px, 0.3);
   // The stereo RMS is the RMS over both cameras' corners.
-  EXPECT_NEAR(r.rms_px, std::sqrt((r.rms_left_px * r.rms_left_px + r.rms_right_px * r.rms_right_px) / 2), 0.01 * r.rms_px);
+  EXPECT_NEAR(r.rms_px,
+              std::sqrt((r.rms_left_px * r.rms_left_px + r.rms_right_px * r.rms_right_px) / 2),
+              0.01 * r.rms_px);
   EXPECT_LT(r.epipolar_mean_px, 0.3);
   EXPECT_GE(r.epipolar_max_px, r.epipolar_mean_px);
 
@@ -207,12 +220,14 @@ TEST(CalibrateStereo, ReportsCoverageOfTheTrueBoards) {
   double mean = 0;
   ASSERT_EQ(r.pairs.size(), d.poses.size());
   for (std::size_t i = 0; i < d.poses.size(); ++i) {
-    const ProjectedBoard truth = ProjectChessboard(TruthRig(), TestBoard(), d.poses[r.pairs[i].index]);
+    const ProjectedBoard truth =
+        ProjectChessboard(TruthRig(), TestBoard(), d.poses[r.pairs[i].index]);
     for (int cam = 0; cam < 2; ++cam) {
       std::vector<cv::Point2f> hull;
       cv::convexHull(cam == 0 ? truth.left : truth.right, hull);
       const double area = cv::contourArea(hull) / testing::kImageSize.area();
-      EXPECT_NEAR(cam == 0 ? r.pairs[i].coverage_left : r.pairs[i].coverage_right, area, 0.002) << "pair " << i;
+      EXPECT_NEAR(cam == 0 ? r.pairs[i].coverage_left : r.pairs[i].coverage_right, area, 0.002)
+          << "pair " << i;
       mean += area / (2.0 * d.poses.size());
       (cam == 0 ? hulls_left : hulls_right).push_back(hull);
     }
@@ -237,8 +252,9 @@ TEST(CalibrateStereo, ReportsCoverageOfTheTrueBoards) {
     EXPECT_LE(reported * grid.area(), maybe_in + 1e-9) << "camera " << cam;
     EXPECT_LE(maybe_in - surely_in, 3);
   }
-  std::printf("coverage: per view mean %.1f %% (min %.1f %%), union %.1f %% / %.1f %%\n", 100 * r.coverage_mean_view,
-              100 * r.coverage_min_view, 100 * r.coverage_union_left, 100 * r.coverage_union_right);
+  std::printf("coverage: per view mean %.1f %% (min %.1f %%), union %.1f %% / %.1f %%\n",
+              100 * r.coverage_mean_view, 100 * r.coverage_min_view, 100 * r.coverage_union_left,
+              100 * r.coverage_union_right);
   // A board with its margin fully in both views keeps its inner corners about two squares from the
   // edges, and out of the strip only one camera sees: the outer ring of cells stays empty.
   EXPECT_GT(r.coverage_union_left, 0.3);
@@ -253,7 +269,9 @@ TEST(CalibrateStereo, SwapsCamerasNamedTheWrongWayRound) {
   ASSERT_TRUE(result.ok()) << result.error().message;
   const CalibrationReport& r = result->report;
   EXPECT_TRUE(r.swap_left_right);
-  EXPECT_THAT(r.warnings, Contains(HasSubstr("left and right swapped: the camera named left sits to the right")));
+  EXPECT_THAT(
+      r.warnings,
+      Contains(HasSubstr("left and right swapped: the camera named left sits to the right")));
   EXPECT_THAT(FormatReportText(r), HasSubstr("LEFT AND RIGHT SWAPPED"));
   // The returned calibration has the roles swapped back: it is the truth rig again.
   const geometry::StereoCalibration& c = result->calibration;
@@ -286,7 +304,8 @@ DetectedPairs FirstPairs(const DetectedPairs& d, int n) {
 }
 
 TEST(CalibrateStereo, GateOnTooFewPairs) {
-  const Result<CalibrationResult> result = CalibrateFromCorners(FirstPairs(Synthetic().detected, 5), Options());
+  const Result<CalibrationResult> result =
+      CalibrateFromCorners(FirstPairs(Synthetic().detected, 5), Options());
   ASSERT_TRUE(result.ok()) << result.error().message;
   const CalibrationReport& r = result->report;
   EXPECT_FALSE(r.passed);
@@ -314,10 +333,12 @@ TEST(CalibrateStereo, GateOnRmsWithNoisyCorners) {
   const Result<CalibrationResult> result = CalibrateFromCorners(noisy, Options());
   ASSERT_TRUE(result.ok()) << result.error().message;
   const CalibrationReport& r = result->report;
-  std::printf("noisy corners (1.5 px): rms %.3f px, epipolar %.3f px\n", r.rms_px, r.epipolar_mean_px);
+  std::printf("noisy corners (1.5 px): rms %.3f px, epipolar %.3f px\n", r.rms_px,
+              r.epipolar_mean_px);
   EXPECT_FALSE(r.passed);
   EXPECT_GT(r.rms_px, 1.0);
-  EXPECT_THAT(r.failures, Contains(AllOf(Field(&GateFailure::gate, "max_rms_px"), Field(&GateFailure::measured, r.rms_px),
+  EXPECT_THAT(r.failures, Contains(AllOf(Field(&GateFailure::gate, "max_rms_px"),
+                                         Field(&GateFailure::measured, r.rms_px),
                                          Field(&GateFailure::limit, 1.0))));
 }
 
@@ -335,7 +356,8 @@ TEST(CalibrateStereo, LeavesOutAPairNumberedBackwards) {
   EXPECT_EQ(r.rejected[0].index, 3);
   EXPECT_EQ(r.rejected[0].reason, RejectReason::kOutlier);
   EXPECT_THAT(r.rejected[0].detail, HasSubstr("times the median pair's"));
-  std::printf("pair #3 numbered backwards: %s; rms %.3f px\n", r.rejected[0].detail.c_str(), r.rms_px);
+  std::printf("pair #3 numbered backwards: %s; rms %.3f px\n", r.rejected[0].detail.c_str(),
+              r.rms_px);
   ExpectRecoversTruth(result->calibration, TruthRig());
 
   // Without outlier rejection the solve is ruined: the RMS gate fails, or the result is not even a
@@ -347,7 +369,8 @@ TEST(CalibrateStereo, LeavesOutAPairNumberedBackwards) {
     std::printf("kept: rms %.3f px\n", ruined->report.rms_px);
     EXPECT_FALSE(ruined->report.passed);
     EXPECT_THAT(ruined->report.failures, Contains(Field(&GateFailure::gate, "max_rms_px")));
-    EXPECT_THAT(ruined->report.warnings, Contains(HasSubstr("pair #3 (view3) has an RMS error of")));
+    EXPECT_THAT(ruined->report.warnings,
+                Contains(HasSubstr("pair #3 (view3) has an RMS error of")));
   } else {
     std::printf("kept: %s\n", ruined.error().message.c_str());
     EXPECT_THAT(ruined.error().message, HasSubstr("worst pairs: #3 (view3)"));
@@ -369,7 +392,9 @@ TEST(CalibrateStereo, GateOnEpipolarError) {
 
 // A PNG signature and IHDR announcing a huge image, and nothing else.
 std::string HugePngHeader() {
-  std::string s = std::string("\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR\x00\x00\x13\x88\x00\x00\x13\x88\x08\x00\x00\x00\x00", 29);
+  std::string s = std::string(
+      "\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR\x00\x00\x13\x88\x00\x00\x13\x88\x08\x00\x00\x00\x00",
+      29);
   return s;
 }
 
@@ -389,17 +414,18 @@ TEST(CalibrateStereo, RejectsBadPairsWithTheReason) {
   const std::string& png = std::get<std::string>(d.pairs[4].left);
   pairs.push_back({std::vector<uint8_t>(png.begin(), png.end()), d.pairs[4].right, "good4"});
   // Bad pairs.
-  pairs.push_back({std::string("GIF89a garbage"), d.pairs[5].right, "garbage"});                    // 5
-  pairs.push_back({d.pairs[5].left, Png(small_right), "mismatch"});                                  // 6
-  pairs.push_back({Png(small_left), Png(small_right), "smaller"});                                   // 7
-  pairs.push_back({d.pairs[6].left, HugePngHeader(), "huge"});                                       // 8
-  pairs.push_back({cv::Mat(testing::kImageSize, CV_32FC1, cv::Scalar(0)), d.pairs[6].right, "float"});  // 9
-  pairs.push_back({d.pairs[7].left, Png(blank), "no board right"});                                   // 10
-  pairs.push_back({Png(blank), d.pairs[7].right, "no board left"});                                   // 11
-  pairs.push_back({Png(blank), Png(blank), "no board"});                                              // 12
+  pairs.push_back({std::string("GIF89a garbage"), d.pairs[5].right, "garbage"});  // 5
+  pairs.push_back({d.pairs[5].left, Png(small_right), "mismatch"});               // 6
+  pairs.push_back({Png(small_left), Png(small_right), "smaller"});                // 7
+  pairs.push_back({d.pairs[6].left, HugePngHeader(), "huge"});                    // 8
+  pairs.push_back(
+      {cv::Mat(testing::kImageSize, CV_32FC1, cv::Scalar(0)), d.pairs[6].right, "float"});  // 9
+  pairs.push_back({d.pairs[7].left, Png(blank), "no board right"});                         // 10
+  pairs.push_back({Png(blank), d.pairs[7].right, "no board left"});                         // 11
+  pairs.push_back({Png(blank), Png(blank), "no board"});                                    // 12
   std::string truncated = std::get<std::string>(d.pairs[8].left);
   truncated.resize(truncated.size() / 3);
-  pairs.push_back({truncated, d.pairs[8].right, "truncated"});                                        // 13
+  pairs.push_back({truncated, d.pairs[8].right, "truncated"});  // 13
 
   const Result<CalibrationResult> result = CalibrateStereo(pairs, Options());
   ASSERT_TRUE(result.ok()) << result.error().message;
@@ -412,11 +438,14 @@ TEST(CalibrateStereo, RejectsBadPairsWithTheReason) {
     RejectReason reason;
     std::string detail;
   } expected[] = {
-      {5, RejectReason::kUndecodable, "left image: not a PNG or JPEG image (starts with 47 49 46 38)"},
+      {5, RejectReason::kUndecodable,
+       "left image: not a PNG or JPEG image (starts with 47 49 46 38)"},
       {6, RejectReason::kSizeMismatch, "left image is 640x480, right image is 320x240"},
       {7, RejectReason::kSizeDiffers, "images of 320x240, while 9 pairs are 640x480"},
-      {8, RejectReason::kTooLarge, "right image: image of 5000x5000 pixels exceeds the maximum of 4096x4096; not decoded"},
-      {9, RejectReason::kUndecodable, "left image: unsupported image type CV_32FC1 (expected 8-bit grey, BGR or BGRA)"},
+      {8, RejectReason::kTooLarge,
+       "right image: image of 5000x5000 pixels exceeds the maximum of 4096x4096; not decoded"},
+      {9, RejectReason::kUndecodable,
+       "left image: unsupported image type CV_32FC1 (expected 8-bit grey, BGR or BGRA)"},
       {10, RejectReason::kNoBoardRight, "no board of 9x6 inner corners found in the right image"},
       {11, RejectReason::kNoBoardLeft, "no board of 9x6 inner corners found in the left image"},
       {12, RejectReason::kNoBoard, "no board of 9x6 inner corners found in either image"},
@@ -447,14 +476,17 @@ TEST(CalibrateStereo, ClearErrorsForUnusableInput) {
   EXPECT_EQ(e.code, ErrorCode::kInvalidArgument);
   EXPECT_EQ(e.message, "no image pairs given");
 
-  e = error_of({{std::string("junk"), std::string("junk"), "a"}, {std::string(), blank, "b"}}, Options());
+  e = error_of({{std::string("junk"), std::string("junk"), "a"}, {std::string(), blank, "b"}},
+               Options());
   EXPECT_EQ(e.code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(e.message, HasSubstr("no usable pair: every one of the 2 pairs was rejected before detection"));
+  EXPECT_THAT(e.message,
+              HasSubstr("no usable pair: every one of the 2 pairs was rejected before detection"));
   EXPECT_THAT(e.message, HasSubstr("#1 (b): left image: empty image data"));
 
   e = error_of({{blank, blank, ""}, {blank, blank, ""}, {blank, blank, ""}}, Options());
   EXPECT_EQ(e.code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(e.message, HasSubstr("no board of 9x6 inner corners found in any pair; check the board size"));
+  EXPECT_THAT(e.message,
+              HasSubstr("no board of 9x6 inner corners found in any pair; check the board size"));
 
   // The board is there but the size given is wrong.
   const std::vector<ImagePair> three(d.pairs.begin(), d.pairs.begin() + 3);
@@ -462,12 +494,17 @@ TEST(CalibrateStereo, ClearErrorsForUnusableInput) {
   wrong.board = BoardSpec{10, 7, 0.03};
   e = error_of(three, wrong);
   EXPECT_EQ(e.code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(e.message, HasSubstr("no board of 10x7 inner corners found in any pair; check the board size"));
+  EXPECT_THAT(e.message,
+              HasSubstr("no board of 10x7 inner corners found in any pair; check the board size"));
 
   e = error_of({d.pairs[0], d.pairs[1], {d.pairs[2].left, blank, "right blank"}}, Options());
   EXPECT_EQ(e.code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(e.message, HasSubstr("too few pairs: 2 of 3 have the board in both images, at least 3 are needed"));
-  EXPECT_THAT(e.message, HasSubstr("#2 (right blank): no board of 9x6 inner corners found in the right image"));
+  EXPECT_THAT(
+      e.message,
+      HasSubstr("too few pairs: 2 of 3 have the board in both images, at least 3 are needed"));
+  EXPECT_THAT(
+      e.message,
+      HasSubstr("#2 (right blank): no board of 9x6 inner corners found in the right image"));
 
   e = error_of({{d.pairs[0].left, blank, ""}, {blank, d.pairs[1].right, ""}}, Options());
   EXPECT_THAT(e.message, HasSubstr("no pair has the board of 9x6 inner corners in both images"));
@@ -481,23 +518,28 @@ TEST(CalibrateStereo, ClearErrorsForUnusableInput) {
   EXPECT_EQ(e.code, ErrorCode::kInvalidArgument);
   EXPECT_THAT(e.message, HasSubstr("board.inner_cols: must be in [3, 100] (got 1)"));
   EXPECT_THAT(e.message, HasSubstr("gates.max_rms_px: must be > 0 pixels (got 0)"));
-  EXPECT_THAT(e.message, HasSubstr("rectify_alpha: must be in [0, 1], or -1 for OpenCV's choice (got 2)"));
-  EXPECT_THAT(e.message, HasSubstr("max_image_size: each side must be in [16, 65535] pixels (got 0x0)"));
+  EXPECT_THAT(e.message,
+              HasSubstr("rectify_alpha: must be in [0, 1], or -1 for OpenCV's choice (got 2)"));
+  EXPECT_THAT(e.message,
+              HasSubstr("max_image_size: each side must be in [16, 65535] pixels (got 0x0)"));
 
   // Corners that do not fit the board.
   DetectedPairs bad = FirstPairs(d.detected, 4);
   bad.pairs[2].right.pop_back();
   const Result<CalibrationResult> from_corners = CalibrateFromCorners(bad, Options());
   ASSERT_FALSE(from_corners.ok());
-  EXPECT_THAT(from_corners.error().message, HasSubstr("54 and 53 corners, the board of 9x6 has 54"));
+  EXPECT_THAT(from_corners.error().message,
+              HasSubstr("54 and 53 corners, the board of 9x6 has 54"));
 }
 
 TEST(CalibrationReport, RoundTripsThroughYaml) {
   const Dataset& d = Synthetic();
   DetectedPairs detected = d.detected;
   detected.pairs_given += 2;
-  detected.rejected.push_back({18, "", RejectReason::kNoBoardLeft, "no board of 9x6 inner corners found in the left image"});
-  detected.rejected.push_back({19, "odd: name \"quoted\"", RejectReason::kTooLarge, "right image: too large"});
+  detected.rejected.push_back({18, "", RejectReason::kNoBoardLeft,
+                               "no board of 9x6 inner corners found in the left image"});
+  detected.rejected.push_back(
+      {19, "odd: name \"quoted\"", RejectReason::kTooLarge, "right image: too large"});
   CalibrationOptions options = Options();
   options.gates.min_pairs = 30;
   const Result<CalibrationResult> result = CalibrateFromCorners(detected, options);
@@ -554,7 +596,8 @@ TEST(CalibrationReport, RoundTripsThroughYaml) {
   ASSERT_FALSE(bad.ok());
   EXPECT_THAT(bad.error().message, HasSubstr("rms_px: missing"));
   EXPECT_THAT(bad.error().message, HasSubstr("rejected[0].reason: unknown value \"lost_it\""));
-  EXPECT_THAT(ParseReportYaml("{ not: [yaml").error().message, HasSubstr("calibration report: not valid YAML"));
+  EXPECT_THAT(ParseReportYaml("{ not: [yaml").error().message,
+              HasSubstr("calibration report: not valid YAML"));
   EXPECT_EQ(ParseReportYaml("- a list").error().code, ErrorCode::kInvalidArgument);
 }
 

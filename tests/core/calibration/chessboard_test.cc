@@ -21,7 +21,8 @@ using ::testing::HasSubstr;
 using testing::TestBoard;
 using testing::TruthRig;
 
-std::string Encode(const cv::Mat& image, const std::string& ext, const std::vector<int>& params = {}) {
+std::string Encode(const cv::Mat& image, const std::string& ext,
+                   const std::vector<int>& params = {}) {
   std::vector<uchar> bytes;
   EXPECT_TRUE(cv::imencode(ext, image, bytes, params));
   return std::string(bytes.begin(), bytes.end());
@@ -38,14 +39,15 @@ cv::Mat Noise(cv::Size size, int type, uint64_t seed) {
 std::string PngHeaderOnly(uint32_t width, uint32_t height) {
   std::string s = std::string("\x89PNG\r\n\x1a\n", 8);
   auto be32 = [&](uint32_t v) {
-    for (int shift = 24; shift >= 0; shift -= 8) s.push_back(static_cast<char>((v >> shift) & 0xFF));
+    for (int shift = 24; shift >= 0; shift -= 8)
+      s.push_back(static_cast<char>((v >> shift) & 0xFF));
   };
   be32(13);
   s += "IHDR";
   be32(width);
   be32(height);
   s += std::string("\x08\x00\x00\x00\x00", 5);  // 8-bit grey, no interlace
-  be32(0);                                       // CRC (not checked by the header reader)
+  be32(0);                                      // CRC (not checked by the header reader)
   return s;
 }
 
@@ -129,7 +131,8 @@ TEST(DecodeGreyImage, DecodesPngExactlyAndJpegToGrey) {
   const cv::Mat grey = Noise({61, 43}, CV_8UC1, 3);
   const std::string png = Encode(grey, ".png");
   const Result<cv::Mat> decoded = DecodeGreyImage(
-      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(png.data()), png.size()), {4096, 4096});
+      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(png.data()), png.size()),
+      {4096, 4096});
   ASSERT_TRUE(decoded.ok()) << decoded.error().message;
   EXPECT_EQ(decoded->type(), CV_8UC1);
   EXPECT_EQ(cv::norm(*decoded, grey, cv::NORM_INF), 0);
@@ -149,14 +152,17 @@ TEST(DecodeGreyImage, RefusesOversizedHeadersWithoutDecoding) {
   // Only a header: decoding would fail, so kResourceExhausted proves nothing was decoded.
   for (const std::string& bytes : {PngHeaderOnly(5000, 5000), JpegHeaderOnly(4097, 100)}) {
     const Result<cv::Mat> decoded = DecodeGreyImage(
-        std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()), {4096, 4096});
+        std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()),
+        {4096, 4096});
     ASSERT_FALSE(decoded.ok());
     EXPECT_EQ(decoded.error().code, ErrorCode::kResourceExhausted);
-    EXPECT_THAT(decoded.error().message, HasSubstr("exceeds the maximum of 4096x4096; not decoded"));
+    EXPECT_THAT(decoded.error().message,
+                HasSubstr("exceeds the maximum of 4096x4096; not decoded"));
   }
   // A real image one pixel over a smaller limit.
   const std::string png = Encode(Noise({101, 50}, CV_8UC1, 5), ".png");
-  const auto span = std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(png.data()), png.size());
+  const auto span =
+      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(png.data()), png.size());
   EXPECT_EQ(DecodeGreyImage(span, {100, 100}).error().code, ErrorCode::kResourceExhausted);
   EXPECT_TRUE(DecodeGreyImage(span, {101, 50}).ok());
 }
@@ -165,7 +171,8 @@ TEST(DecodeGreyImage, RefusesCorruptData) {
   std::string png = Encode(Noise({64, 64}, CV_8UC1, 6), ".png");
   for (std::size_t i = 40; i < png.size() - 12; i += 3) png[i] = static_cast<char>(png[i] ^ 0x5A);
   const Result<cv::Mat> decoded = DecodeGreyImage(
-      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(png.data()), png.size()), {4096, 4096});
+      std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(png.data()), png.size()),
+      {4096, 4096});
   ASSERT_FALSE(decoded.ok());
   EXPECT_EQ(decoded.error().code, ErrorCode::kInvalidArgument);
   EXPECT_THAT(decoded.error().message, HasSubstr("cannot decode the image"));
@@ -175,15 +182,17 @@ TEST(BoardSpec, ValidatesAndListsObjectPoints) {
   EXPECT_THAT(TestBoard().Validate(), ::testing::IsEmpty());
   const std::vector<cv::Point3f> points = TestBoard().ObjectPoints();
   ASSERT_EQ(points.size(), 54u);
-  EXPECT_EQ(points[1], cv::Point3f(0.03f, 0, 0));   // along a row first
-  EXPECT_EQ(points[9], cv::Point3f(0, 0.03f, 0));   // then the next row
+  EXPECT_EQ(points[1], cv::Point3f(0.03f, 0, 0));  // along a row first
+  EXPECT_EQ(points[9], cv::Point3f(0, 0.03f, 0));  // then the next row
   EXPECT_NEAR(points.back().x, 0.24, 1e-6);
   EXPECT_NEAR(points.back().y, 0.15, 1e-6);
 
   const std::vector<std::string> problems = BoardSpec{6, 6, -0.01}.Validate();
   EXPECT_THAT(problems, ::testing::Contains(HasSubstr("inner_cols, inner_rows: must differ")));
-  EXPECT_THAT(problems, ::testing::Contains(HasSubstr("square_size_m: must be in (0, 10] metres (got -0.01)")));
-  EXPECT_THAT((BoardSpec{2, 6, 0.02}.Validate()), ::testing::Contains(HasSubstr("inner_cols: must be in [3, 100] (got 2)")));
+  EXPECT_THAT(problems, ::testing::Contains(
+                            HasSubstr("square_size_m: must be in (0, 10] metres (got -0.01)")));
+  EXPECT_THAT((BoardSpec{2, 6, 0.02}.Validate()),
+              ::testing::Contains(HasSubstr("inner_cols: must be in [3, 100] (got 2)")));
 }
 
 // Largest distance between detected corners and the truth, index by index.
@@ -201,7 +210,8 @@ TEST(DetectChessboard, FindsRenderedCornersWithinATenthOfAPixel) {
   const BoardSpec board = TestBoard();
   Result<ChessboardRenderer> renderer = ChessboardRenderer::Create(rig, board, testing::kImageSize);
   ASSERT_TRUE(renderer.ok()) << renderer.error().message;
-  Result<std::vector<cv::Affine3d>> poses = GenerateBoardPoses(rig, board, testing::kImageSize, 6, 11);
+  Result<std::vector<cv::Affine3d>> poses =
+      GenerateBoardPoses(rig, board, testing::kImageSize, 6, 11);
   ASSERT_TRUE(poses.ok()) << poses.error().message;
   // Also a board turned upside down: the detectors number it from the other end, and the
   // numbering rule must bring corner 0 back to the board's own corner 0.
@@ -223,19 +233,21 @@ TEST(DetectChessboard, FindsRenderedCornersWithinATenthOfAPixel) {
     for (const cv::Affine3d& pose : *poses) {
       const RenderedPair images = renderer->Render(pose);
       const ProjectedBoard truth = ProjectChessboard(rig, board, pose);
-      for (const auto& [image, expected] : {std::pair{&images.left, &truth.left}, {&images.right, &truth.right}}) {
+      for (const auto& [image, expected] :
+           {std::pair{&images.left, &truth.left}, {&images.right, &truth.right}}) {
         const Result<std::vector<cv::Point2f>> corners = DetectChessboard(*image, board, options);
         ASSERT_TRUE(corners.ok()) << name << ": " << corners.error().message;
         const double e = WorstError(*corners, *expected);
         // cornerSubPix alone is measured, not held to the tenth of a pixel (see the README).
         EXPECT_LT(e, saddle ? 0.1 : 0.3) << name;
         worst = std::max(worst, e);
-        for (std::size_t i = 0; i < corners->size(); ++i) sum += cv::norm((*corners)[i] - (*expected)[i]);
+        for (std::size_t i = 0; i < corners->size(); ++i)
+          sum += cv::norm((*corners)[i] - (*expected)[i]);
         n += static_cast<int>(corners->size());
       }
     }
-    std::printf("%-40s corner error over %zu views: mean %.4f px, worst %.4f px\n", name.c_str(), 2 * poses->size(),
-                sum / n, worst);
+    std::printf("%-40s corner error over %zu views: mean %.4f px, worst %.4f px\n", name.c_str(),
+                2 * poses->size(), sum / n, worst);
     (saddle ? mean_saddle : mean_subpix) = sum / n;
   }
   EXPECT_LT(mean_saddle, 0.03);
@@ -256,7 +268,8 @@ TEST(DetectChessboard, ReportsNoBoardAndWrongSizes) {
   EXPECT_EQ(none.error().code, ErrorCode::kNotFound);
   EXPECT_THAT(none.error().message, HasSubstr("no board of 9x6 inner corners found"));
 
-  for (const BoardSpec wrong : {BoardSpec{10, 6, 0.03}, BoardSpec{9, 7, 0.03}, BoardSpec{11, 8, 0.03}}) {
+  for (const BoardSpec wrong :
+       {BoardSpec{10, 6, 0.03}, BoardSpec{9, 7, 0.03}, BoardSpec{11, 8, 0.03}}) {
     const Result<std::vector<cv::Point2f>> found = DetectChessboard(images->left, wrong);
     ASSERT_FALSE(found.ok()) << wrong.Name();
     EXPECT_EQ(found.error().code, ErrorCode::kNotFound);
@@ -265,8 +278,10 @@ TEST(DetectChessboard, ReportsNoBoardAndWrongSizes) {
   const Result<std::vector<cv::Point2f>> colour = DetectChessboard(cv::Mat(20, 20, CV_8UC3), board);
   ASSERT_FALSE(colour.ok());
   EXPECT_EQ(colour.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(colour.error().message, HasSubstr("expected a non-empty 8-bit grey image (CV_8UC1), got CV_8UC3"));
-  EXPECT_EQ(DetectChessboard(images->left, BoardSpec{5, 5, 0.03}).error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(colour.error().message,
+              HasSubstr("expected a non-empty 8-bit grey image (CV_8UC1), got CV_8UC3"));
+  EXPECT_EQ(DetectChessboard(images->left, BoardSpec{5, 5, 0.03}).error().code,
+            ErrorCode::kInvalidArgument);
 }
 
 TEST(ChessboardRenderer, AntiAliasesAndAppliesTheLens) {
@@ -285,13 +300,16 @@ TEST(ChessboardRenderer, AntiAliasesAndAppliesTheLens) {
   // The centre of the square between corners 0, 1, 9 and 10 is dark, the next one light, and the
   // image corner (off the board) is background.
   const ProjectedBoard truth = ProjectChessboard(rig, board, pose);
-  const cv::Point2f dark_centre = (truth.left[0] + truth.left[1] + truth.left[9] + truth.left[10]) * 0.25f;
-  const cv::Point2f light_centre = (truth.left[1] + truth.left[2] + truth.left[10] + truth.left[11]) * 0.25f;
+  const cv::Point2f dark_centre =
+      (truth.left[0] + truth.left[1] + truth.left[9] + truth.left[10]) * 0.25f;
+  const cv::Point2f light_centre =
+      (truth.left[1] + truth.left[2] + truth.left[10] + truth.left[11]) * 0.25f;
   EXPECT_EQ(images->left(cvRound(dark_centre.y), cvRound(dark_centre.x)), 30);
   EXPECT_EQ(images->left(cvRound(light_centre.y), cvRound(light_centre.x)), 225);
   EXPECT_EQ(images->left(0, 0), 110);
 
-  const Result<RenderedPair> bad = RenderChessboardPair(rig, BoardSpec{9, 6, 0}, pose, {0, 10}, {.supersampling = 0});
+  const Result<RenderedPair> bad =
+      RenderChessboardPair(rig, BoardSpec{9, 6, 0}, pose, {0, 10}, {.supersampling = 0});
   ASSERT_FALSE(bad.ok());
   EXPECT_THAT(bad.error().message, HasSubstr("board.square_size_m"));
   EXPECT_THAT(bad.error().message, HasSubstr("image_size"));
@@ -301,9 +319,12 @@ TEST(ChessboardRenderer, AntiAliasesAndAppliesTheLens) {
 TEST(GenerateBoardPoses, IsDeterministicVariedAndInViewOfBothCameras) {
   const auto rig = TruthRig();
   const BoardSpec board = TestBoard();
-  const Result<std::vector<cv::Affine3d>> a = GenerateBoardPoses(rig, board, testing::kImageSize, 18, 42);
-  const Result<std::vector<cv::Affine3d>> b = GenerateBoardPoses(rig, board, testing::kImageSize, 18, 42);
-  const Result<std::vector<cv::Affine3d>> c = GenerateBoardPoses(rig, board, testing::kImageSize, 18, 43);
+  const Result<std::vector<cv::Affine3d>> a =
+      GenerateBoardPoses(rig, board, testing::kImageSize, 18, 42);
+  const Result<std::vector<cv::Affine3d>> b =
+      GenerateBoardPoses(rig, board, testing::kImageSize, 18, 42);
+  const Result<std::vector<cv::Affine3d>> c =
+      GenerateBoardPoses(rig, board, testing::kImageSize, 18, 43);
   ASSERT_TRUE(a.ok() && b.ok() && c.ok());
   ASSERT_EQ(a->size(), 18u);
   double max_tilt = 0, differs = 0;
@@ -317,7 +338,8 @@ TEST(GenerateBoardPoses, IsDeterministicVariedAndInViewOfBothCameras) {
     const ProjectedBoard projected = ProjectChessboard(rig, board, (*a)[i]);
     for (const auto* view : {&projected.left, &projected.right}) {
       for (const cv::Point2f& p : *view) {
-        EXPECT_TRUE(p.x > 0 && p.y > 0 && p.x < 639 && p.y < 479) << "pose " << i << " corner " << p;
+        EXPECT_TRUE(p.x > 0 && p.y > 0 && p.x < 639 && p.y < 479)
+            << "pose " << i << " corner " << p;
       }
     }
     const cv::Rect box = cv::boundingRect(projected.left);
@@ -329,9 +351,9 @@ TEST(GenerateBoardPoses, IsDeterministicVariedAndInViewOfBothCameras) {
   EXPECT_GT(differs, 0.01);
   EXPECT_LE(max_tilt, 30 * std::sqrt(2.0) + 0.1);
   EXPECT_GT(max_tilt, 15);
-  // The boards reach out over the image as far as they can: the inner corners stay about two squares
-  // (the margin, then the outer squares) from every edge, and on the left also out of the ~100 px
-  // strip the right camera does not see at half a metre. That leaves about 380 x 330 px.
+  // The boards reach out over the image as far as they can: the inner corners stay about two
+  // squares (the margin, then the outer squares) from every edge, and on the left also out of the
+  // ~100 px strip the right camera does not see at half a metre. That leaves about 380 x 330 px.
   std::printf("left corners span x %.0f..%.0f, y %.0f..%.0f\n", min_x, max_x, min_y, max_y);
   EXPECT_GT(max_x - min_x, 0.55 * 640);
   EXPECT_GT(max_y - min_y, 0.65 * 480);

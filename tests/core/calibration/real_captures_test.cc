@@ -1,6 +1,6 @@
-// Calibration of a real stereo rig from its chessboard captures (../shared/data/calib_ximea_stereo):
-// 25 pairs of 640x512 grey JPEGs, a board of 6x9 inner corners of 24 mm, the camera named left
-// physically on the right.
+// Calibration of a real stereo rig from its chessboard captures
+// (../shared/data/calib_ximea_stereo): 25 pairs of 640x512 grey JPEGs, a board of 6x9 inner corners
+// of 24 mm, the camera named left physically on the right.
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -46,7 +46,9 @@ std::optional<std::pair<double, double>> OwnerFocalLengths(const std::string& pa
 
 TEST(RealCaptures, CalibratesTheXimeaRig) {
   const std::optional<std::string> data = testing::DataDir();
-  if (!data) GTEST_SKIP() << "reference data not found at " << testing::DataDirWanted() << " (set STEVI_DATA_DIR)";
+  if (!data)
+    GTEST_SKIP() << "reference data not found at " << testing::DataDirWanted()
+                 << " (set STEVI_DATA_DIR)";
   const std::string dir = *data + "/calib_ximea_stereo";
   if (!std::filesystem::is_directory(dir)) GTEST_SKIP() << dir << " is missing";
 
@@ -70,7 +72,8 @@ TEST(RealCaptures, CalibratesTheXimeaRig) {
   const CalibrationReport& r = result->report;
   const geometry::StereoCalibration& c = result->calibration;
   std::printf("%s", FormatReportText(r).c_str());
-  std::printf("detection %.2f s, calibration %.2f s\n", std::chrono::duration<double>(t1 - t0).count(),
+  std::printf("detection %.2f s, calibration %.2f s\n",
+              std::chrono::duration<double>(t1 - t0).count(),
               std::chrono::duration<double>(t2 - t1).count());
 
   // left10.jpg has no (complete) board; its right image does.
@@ -93,14 +96,15 @@ TEST(RealCaptures, CalibratesTheXimeaRig) {
   EXPECT_LT(c.T[0], 0);
   const Result<geometry::StereoRig> rig = geometry::StereoRig::FromCalibration(c);
   ASSERT_TRUE(rig.ok()) << rig.error().message;
-  std::printf("rig: rectified f %.2f px, baseline %.2f mm\n", rig->f_px(), 1000 * rig->baseline_m());
+  std::printf("rig: rectified f %.2f px, baseline %.2f mm\n", rig->f_px(),
+              1000 * rig->baseline_m());
   EXPECT_NEAR(1000 * rig->baseline_m(), 92.5, 2.0);
 
   // The owner's calibration (same focal length for both cameras, rational model): about 518 px.
   if (const auto owner = OwnerFocalLengths(dir + "/intrinsics.yml")) {
     // Camera 1 of the result is the owner's M2 (the images named right), camera 2 the owner's M1.
-    std::printf("fx: %.2f / %.2f px; owner's intrinsics.yml: %.2f / %.2f px\n", c.M1(0, 0), c.M2(0, 0),
-                owner->second, owner->first);
+    std::printf("fx: %.2f / %.2f px; owner's intrinsics.yml: %.2f / %.2f px\n", c.M1(0, 0),
+                c.M2(0, 0), owner->second, owner->first);
     EXPECT_NEAR(c.M1(0, 0), owner->second, 0.005 * owner->second);
     EXPECT_NEAR(c.M2(0, 0), owner->first, 0.005 * owner->first);
   } else {

@@ -36,8 +36,8 @@ geometry::StereoCalibration MakeCalibration(int i) {
   c.R = r;
   c.T = cv::Vec3d(-0.1 - 0.001 * i, 0.002, -0.001);
   cv::Mat R1, R2, P1, P2, Q;
-  cv::stereoRectify(cv::Mat(c.M1), c.D1, cv::Mat(c.M2), c.D2, c.image_size, cv::Mat(c.R), cv::Mat(c.T), R1, R2,
-                    P1, P2, Q, cv::CALIB_ZERO_DISPARITY, 0);
+  cv::stereoRectify(cv::Mat(c.M1), c.D1, cv::Mat(c.M2), c.D2, c.image_size, cv::Mat(c.R),
+                    cv::Mat(c.T), R1, R2, P1, P2, Q, cv::CALIB_ZERO_DISPARITY, 0);
   c.R1 = cv::Matx33d(R1);
   c.R2 = cv::Matx33d(R2);
   c.P1 = cv::Matx34d(P1);
@@ -55,11 +55,13 @@ CalibrationReport MakeReport(bool passed, double rms_px) {
   r.pairs_given = 12;
   r.pairs_used = 1;
   r.pairs.push_back({0, "view0", 0.2, 0.25, 0.1, 0.3, 0.31});
-  r.rejected.push_back({1, "view1", RejectReason::kNoBoardRight, "no board of 9x6 inner corners found in the right image"});
+  r.rejected.push_back({1, "view1", RejectReason::kNoBoardRight,
+                        "no board of 9x6 inner corners found in the right image"});
   r.rms_px = rms_px;
   r.passed = passed;
   if (!passed) {
-    r.failures.push_back({"max_rms_px", rms_px, 1.0, "stereo RMS reprojection error 1.700 px > 1.000 px (max_rms_px)"});
+    r.failures.push_back({"max_rms_px", rms_px, 1.0,
+                          "stereo RMS reprojection error 1.700 px > 1.000 px (max_rms_px)"});
   }
   r.coverage_grid = cv::Size(10, 8);
   return r;
@@ -86,7 +88,8 @@ TEST(CalibrationId, NamesAndParses) {
   EXPECT_EQ(CalibrationId{1234567}.Name(), "cal-1234567");
   EXPECT_EQ(CalibrationId::Parse("cal-000042")->value, 42);
   EXPECT_EQ(CalibrationId::Parse("cal-42")->value, 42);
-  for (const char* bad : {"", "cal-", "cal-0", "cal-12a", "42", "cal--1", "CAL-000001", "cal-0000000000000001"}) {
+  for (const char* bad :
+       {"", "cal-", "cal-0", "cal-12a", "42", "cal--1", "CAL-000001", "cal-0000000000000001"}) {
     EXPECT_FALSE(CalibrationId::Parse(bad).has_value()) << bad;
   }
 }
@@ -149,7 +152,8 @@ TEST(CalibrationStore, IdsIncreaseAndSurviveReopening) {
   const std::string dir = testing::MakeTempDir("stevi-store");
   {
     std::unique_ptr<CalibrationStore> store = OpenClean(dir);
-    for (int i = 0; i < 3; ++i) EXPECT_EQ(store->Add(MakeCalibration(i), MakeReport(true, 0.2))->value, i + 1);
+    for (int i = 0; i < 3; ++i)
+      EXPECT_EQ(store->Add(MakeCalibration(i), MakeReport(true, 0.2))->value, i + 1);
   }
   {
     std::unique_ptr<CalibrationStore> store = OpenClean(dir);
@@ -204,9 +208,10 @@ TEST(CalibrationStore, StoresButRefusesToActivateAFailedCalibration) {
   const Status s = store->Activate(*failed);
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.error().code, ErrorCode::kFailedPrecondition);
-  EXPECT_EQ(s.error().message,
-            "cal-000002 failed its quality gates (stereo RMS reprojection error 1.700 px > 1.000 px "
-            "(max_rms_px)); it can be inspected but not activated");
+  EXPECT_EQ(
+      s.error().message,
+      "cal-000002 failed its quality gates (stereo RMS reprojection error 1.700 px > 1.000 px "
+      "(max_rms_px)); it can be inspected but not activated");
   EXPECT_EQ(store->ActiveId()->value, 1);
   EXPECT_EQ(ReadText(dir + "/active"), "cal-000001\n");
 }
@@ -228,11 +233,14 @@ TEST(CalibrationStore, OpensADamagedDirectoryAndFallsBackToTheLastGoodOne) {
   const std::string dir = testing::MakeTempDir("stevi-store");
   {
     std::unique_ptr<CalibrationStore> store = OpenClean(dir);
-    ASSERT_TRUE(store->Add(MakeCalibration(0), MakeReport(true, 0.2)).ok());   // 1
-    ASSERT_TRUE(store->Add(MakeCalibration(1), MakeReport(true, 0.2)).ok());   // 2: the last good one
-    ASSERT_TRUE(store->Add(MakeCalibration(2), MakeReport(true, 0.2)).ok());   // 3: to be corrupted
-    ASSERT_TRUE(store->Add(MakeCalibration(3), MakeReport(false, 1.7)).ok());  // 4: failed its gates
-    ASSERT_TRUE(store->Add(MakeCalibration(4), MakeReport(true, 0.2)).ok());   // 5: report to be lost
+    ASSERT_TRUE(store->Add(MakeCalibration(0), MakeReport(true, 0.2)).ok());  // 1
+    ASSERT_TRUE(
+        store->Add(MakeCalibration(1), MakeReport(true, 0.2)).ok());  // 2: the last good one
+    ASSERT_TRUE(store->Add(MakeCalibration(2), MakeReport(true, 0.2)).ok());  // 3: to be corrupted
+    ASSERT_TRUE(
+        store->Add(MakeCalibration(3), MakeReport(false, 1.7)).ok());  // 4: failed its gates
+    ASSERT_TRUE(
+        store->Add(MakeCalibration(4), MakeReport(true, 0.2)).ok());  // 5: report to be lost
     ASSERT_TRUE(store->Activate(CalibrationId{3}).ok());
   }
   // cal-000003.yaml: M1 becomes 3x2.
@@ -248,10 +256,12 @@ TEST(CalibrationStore, OpensADamagedDirectoryAndFallsBackToTheLastGoodOne) {
   ASSERT_TRUE(opened.ok()) << opened.error().message;
   for (const std::string& p : opened->problems) std::printf("problem: %s\n", p.c_str());
   EXPECT_THAT(opened->problems,
-              ElementsAre(HasSubstr("cal-000006.report.yaml: no calibration file beside it (an interrupted Add?); left out"),
+              ElementsAre(HasSubstr("cal-000006.report.yaml: no calibration file beside it (an "
+                                    "interrupted Add?); left out"),
                           HasSubstr("cal-000003.yaml: M1: expected a 3x3 matrix"),
                           "cal-000005.report.yaml: missing; cal-000005 is left out",
-                          "active: points to cal-000003, which is unreadable; using cal-000002 (the last good one)"));
+                          "active: points to cal-000003, which is unreadable; using cal-000002 "
+                          "(the last good one)"));
   CalibrationStore& store = *opened->store;
   std::vector<int64_t> ids;
   for (const CalibrationSummary& s : store.List()) ids.push_back(s.id.value);
@@ -266,23 +276,26 @@ TEST(CalibrationStore, OpensADamagedDirectoryAndFallsBackToTheLastGoodOne) {
   WriteText(dir + "/active", "cal-000012\n");
   opened = CalibrationStore::Open(dir);
   ASSERT_TRUE(opened.ok());
-  EXPECT_THAT(opened->problems, ::testing::Contains("active: points to cal-000012, which is missing (no "
-                                                    "cal-000012.yaml); using cal-000007 (the last good one)"));
+  EXPECT_THAT(opened->problems,
+              ::testing::Contains("active: points to cal-000012, which is missing (no "
+                                  "cal-000012.yaml); using cal-000007 (the last good one)"));
   EXPECT_EQ(opened->store->ActiveId()->value, 7);
   EXPECT_EQ(opened->store->Add(MakeCalibration(6), MakeReport(true, 0.2))->value, 13);
 
   // An active file naming a calibration that failed its gates.
   WriteText(dir + "/active", "cal-000004");
   opened = CalibrationStore::Open(dir);
-  EXPECT_THAT(opened->problems, ::testing::Contains("active: points to cal-000004, which failed its quality gates; "
-                                                    "using cal-000013 (the last good one)"));
+  EXPECT_THAT(opened->problems,
+              ::testing::Contains("active: points to cal-000004, which failed its quality gates; "
+                                  "using cal-000013 (the last good one)"));
 
   // A corrupt active file.
   WriteText(dir + "/active", std::string("\x01garbage", 8));
   opened = CalibrationStore::Open(dir);
   ASSERT_TRUE(opened.ok());
-  EXPECT_THAT(opened->problems, ::testing::Contains("active: cannot read \"?garbage\" as a calibration id; using "
-                                                    "cal-000013 (the last good one)"));
+  EXPECT_THAT(opened->problems,
+              ::testing::Contains("active: cannot read \"?garbage\" as a calibration id; using "
+                                  "cal-000013 (the last good one)"));
   EXPECT_EQ(opened->store->ActiveId()->value, 13);
 }
 
@@ -292,8 +305,8 @@ TEST(CalibrationStore, NoGoodCalibrationMeansNoneActive) {
   WriteText(dir + "/active", "cal-000001\n");
   Result<OpenedStore> opened = CalibrationStore::Open(dir);
   ASSERT_TRUE(opened.ok());
-  EXPECT_THAT(opened->problems,
-              ElementsAre("active: points to cal-000001, which failed its quality gates; no calibration is active"));
+  EXPECT_THAT(opened->problems, ElementsAre("active: points to cal-000001, which failed its "
+                                            "quality gates; no calibration is active"));
   EXPECT_FALSE(opened->store->ActiveId().has_value());
   EXPECT_EQ(opened->store->Active().error().code, ErrorCode::kFailedPrecondition);
 }

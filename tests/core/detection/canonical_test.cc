@@ -54,7 +54,6 @@ std::optional<Detection> Overlapping(const std::vector<Detection>& detections, c
   return best;
 }
 
-
 TEST(DetectCanonical, AnalyticMapGivesTheRectanglesAndTheirDepths) {
   const StereoRig rig = TestRig();
   DisparityMap map = EmptyMap(rig.image_size());
@@ -92,7 +91,7 @@ TEST(DetectCanonical, DropsWideBlobsBlobsBelowTheFloorAndSmallBlobs) {
   Paint(map, cv::Rect(20, 20, 540, 30), 30.0);  // 540 > 0.8 * 640: the skyline
   Paint(map, cv::Rect(50, 200, 60, 60), 2.0);   // below the 2.5 px floor
   Paint(map, cv::Rect(200, 200, 60, 60), 4.5);  // 93 m: beyond the automatic threshold
-                                                 // (20 sigmas = 5 px: 84 m)
+                                                // (20 sigmas = 5 px: 84 m)
   Paint(map, cv::Rect(500, 300, 4, 4), 30.0);   // 16 px < 20 px
   const std::vector<Detection> detections = DetectCanonical(map, rig, RangeOptions{}, {});
   ASSERT_EQ(detections.size(), 1u);
@@ -189,7 +188,6 @@ DisparityMap FromTruth(const cv::Mat1f& truth) {
   map.num_disparities = 64;
   return map;
 }
-
 
 // True when a visible pixel of `o` is next to (8-neighbourhood) a visible pixel of another
 // obstacle of `near`: their disparities are both above the threshold, so one blob holds both.

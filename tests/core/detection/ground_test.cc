@@ -66,7 +66,8 @@ TEST(FitGround, AWallFillingManyRowsIsNotGround) {
   stereo::DisparityMap map = EmptyMap();
   cv::RNG rng(3);
   for (int v = 280; v < 480; ++v) {
-    for (int u = 100; u < 500; ++u) map.fixed(v, u) = static_cast<int16_t>(std::lround((8.75 + rng.gaussian(0.1)) * 16));
+    for (int u = 100; u < 500; ++u)
+      map.fixed(v, u) = static_cast<int16_t>(std::lround((8.75 + rng.gaussian(0.1)) * 16));
   }
   EXPECT_FALSE(FitGround(map, GroundOptions()).has_value());
 }
@@ -134,8 +135,8 @@ TEST(GroundOptions, ValidateNamesEveryProblem) {
                     HasSubstr("margin_fraction")));
 }
 
-// RangeRegions' test of short hypotheses against their surroundings (regions.h), on an analytic map:
-// a camera 3 m over flat ground, a hillside band at 9 px (46.7 m) standing out from the ground
+// RangeRegions' test of short hypotheses against their surroundings (regions.h), on an analytic
+// map: a camera 3 m over flat ground, a hillside band at 9 px (46.7 m) standing out from the ground
 // rows 250..300, and candidate patches the same size cut out of it or standing free.
 class ShortBlobSurroundings : public ::testing::Test {
  protected:
@@ -144,9 +145,9 @@ class ShortBlobSurroundings : public ::testing::Test {
   stereo::DisparityMap map;
   cv::Mat1b candidates = cv::Mat1b(480, 640, uchar{0});
   GroundModel ground{kB / kHeight, 240.0, 100};
-  const cv::Rect hill_patch{80, 262, 20, 15};   // inside the hillside: same range all around
-  const cv::Rect aircraft{400, 262, 20, 15};    // 12 px (35 m) against the ground (4..7 px)
-  const cv::Rect sky_patch{80, 100, 20, 15};    // above the horizon: never judged
+  const cv::Rect hill_patch{80, 262, 20, 15};  // inside the hillside: same range all around
+  const cv::Rect aircraft{400, 262, 20, 15};   // 12 px (35 m) against the ground (4..7 px)
+  const cv::Rect sky_patch{80, 100, 20, 15};   // above the horizon: never judged
 
   void SetUp() override {
     map.num_disparities = 64;
@@ -184,7 +185,8 @@ TEST_F(ShortBlobSurroundings, APatchOfAContinuousSurfaceBelowTheHorizonIsTerrain
   EXPECT_EQ(found.size(), 2u);
 }
 
-TEST_F(ShortBlobSurroundings, DisabledEveryPatchStaysWithoutAGroundModelThePrincipalRowIsTheHorizon) {
+TEST_F(ShortBlobSurroundings,
+       DisabledEveryPatchStaysWithoutAGroundModelThePrincipalRowIsTheHorizon) {
   StereoBlobOptions off;
   off.max_attached_fraction = 1.0;
   EXPECT_EQ(Hypotheses(off, ground).size(), 3u);
@@ -199,8 +201,9 @@ TEST_F(ShortBlobSurroundings, DisabledEveryPatchStaysWithoutAGroundModelThePrinc
 TEST(StereoBlobOptions, ValidateNamesTheAttachedFraction) {
   StereoBlobOptions options;
   options.max_attached_fraction = 1.5;
-  EXPECT_THAT(options.Validate(), ::testing::ElementsAre(AllOf(HasSubstr("max_attached_fraction"),
-                                                               HasSubstr("[0, 1]"), HasSubstr("1.5"))));
+  EXPECT_THAT(options.Validate(),
+              ::testing::ElementsAre(AllOf(HasSubstr("max_attached_fraction"), HasSubstr("[0, 1]"),
+                                           HasSubstr("1.5"))));
 }
 
 }  // namespace

@@ -60,7 +60,8 @@ TEST(RangeRegions, SparseDisparitiesRangeTheWholeAppearanceRegion) {
   std::normal_distribution<double> noise(0.0, 0.2);
   const int matched = object.area() / 20;
   for (int i = 0; i < matched; ++i) {
-    map.fixed(y(rng), x(rng)) = static_cast<int16_t>(std::lround((12.0 + noise(rng)) * DisparityMap::kScale));
+    map.fixed(y(rng), x(rng)) =
+        static_cast<int16_t>(std::lround((12.0 + noise(rng)) * DisparityMap::kScale));
   }
   const std::vector<Detection> detections = Hypotheses(appearance, map);
   ASSERT_EQ(detections.size(), 1u);
@@ -284,7 +285,8 @@ TEST(EstimateNoiseSigma, MeasuresGaussianNoiseOnFlatAndTexturedImages) {
     for (int y = 0; y < 480; ++y) {
       for (int x = 0; x < 640; ++x) {
         // A smooth gradient and slow waves: texture that a local plane does not explain away.
-        textured(y, x) = static_cast<float>(60 + 0.15 * x + 0.1 * y + 20 * std::sin(x / 9.0) * std::cos(y / 13.0));
+        textured(y, x) = static_cast<float>(60 + 0.15 * x + 0.1 * y +
+                                            20 * std::sin(x / 9.0) * std::cos(y / 13.0));
       }
     }
     std::normal_distribution<float> noise(0.0f, static_cast<float>(sigma));

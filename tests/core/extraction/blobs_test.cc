@@ -106,10 +106,10 @@ TEST(ExtractBlobs, BlobAtTheImageBorderHasAClosedPerimeter) {
 
 // Every raw, central and normalised moment of `got` near `want` (relative, with a floor).
 void ExpectMomentsNear(const cv::Moments& got, const cv::Moments& want) {
-  const double g[] = {got.m00,  got.m10,  got.m01,  got.m20,  got.m11,  got.m02,  got.m30,
-                      got.m21,  got.m12,  got.m03,  got.mu20, got.mu11, got.mu02, got.mu30,
-                      got.mu21, got.mu12, got.mu03, got.nu20, got.nu11, got.nu02, got.nu30,
-                      got.nu21, got.nu12, got.nu03};
+  const double g[] = {got.m00,  got.m10,  got.m01,  got.m20,  got.m11,  got.m02,
+                      got.m30,  got.m21,  got.m12,  got.m03,  got.mu20, got.mu11,
+                      got.mu02, got.mu30, got.mu21, got.mu12, got.mu03, got.nu20,
+                      got.nu11, got.nu02, got.nu30, got.nu21, got.nu12, got.nu03};
   const double w[] = {want.m00,  want.m10,  want.m01,  want.m20,  want.m11,  want.m02,
                       want.m30,  want.m21,  want.m12,  want.m03,  want.mu20, want.mu11,
                       want.mu02, want.mu30, want.mu21, want.mu12, want.mu03, want.nu20,
@@ -121,8 +121,7 @@ void ExpectMomentsNear(const cv::Moments& got, const cv::Moments& want) {
 
 TEST(ExtractBlobs, MomentsAreThoseOfTheBlobInImageCoordinates) {
   cv::Mat1b mask(200, 300, uchar{0});
-  cv::ellipse(mask, cv::Point(210, 140), cv::Size(40, 18), 30, 0, 360, cv::Scalar(255),
-              cv::FILLED);
+  cv::ellipse(mask, cv::Point(210, 140), cv::Size(40, 18), 30, 0, 360, cv::Scalar(255), cv::FILLED);
   mask(cv::Rect(20, 30, 25, 40)).setTo(255);
   const BlobSet set = ExtractBlobs(mask, 1);
   ASSERT_EQ(set.blobs.size(), 2u);
@@ -180,8 +179,8 @@ cv::Mat1i FloodFillLabels(const cv::Mat1b& mask, const cv::Mat1s& disparity, int
         for (int dy = -1; dy <= 1; ++dy) {
           for (int dx = -1; dx <= 1; ++dx) {
             const cv::Point q(p.x + dx, p.y + dy);
-            if ((dx == 0 && dy == 0) || q.x < 0 || q.y < 0 || q.x >= mask.cols || q.y >= mask.rows ||
-                mask(q) == 0 || labels(q) != 0 ||
+            if ((dx == 0 && dy == 0) || q.x < 0 || q.y < 0 || q.x >= mask.cols ||
+                q.y >= mask.rows || mask(q) == 0 || labels(q) != 0 ||
                 std::abs(disparity(q) - disparity(p)) > max_step) {
               continue;
             }
@@ -214,7 +213,8 @@ TEST(ExtractDisparityBlobs, EqualsAFloodFillOnRandomInputs) {
     for (int band = 0; band < 3; ++band) {
       const int x0 = rng.uniform(0, size.width);
       const int x1 = std::min(size.width, x0 + rng.uniform(1, 20));
-      disparity(cv::Rect(x0, 0, x1 - x0, size.height)) += static_cast<int16_t>(rng.uniform(-200, 200));
+      disparity(cv::Rect(x0, 0, x1 - x0, size.height)) +=
+          static_cast<int16_t>(rng.uniform(-200, 200));
     }
     const int max_step = rng.uniform(0, 24);
     const int min_area = rng.uniform(1, 20);

@@ -125,9 +125,9 @@ TEST(DetectEdges, EqualsCannyOnTheSmoothedImage) {
   cv::RNG rng(91);
   for (int trial = 0; trial < 24; ++trial) {
     const cv::Size size(rng.uniform(3, 200), rng.uniform(3, 150));
-    cv::Mat1b image = RectangleImage(size, cv::Rect(size.width / 4, size.height / 4, size.width / 2,
-                                                    size.height / 2),
-                                     60, 170, rng.uniform(0.0, 30.0), 1000 + trial);
+    cv::Mat1b image = RectangleImage(
+        size, cv::Rect(size.width / 4, size.height / 4, size.width / 2, size.height / 2), 60, 170,
+        rng.uniform(0.0, 30.0), 1000 + trial);
     if (trial % 3 == 0) rng.fill(image, cv::RNG::UNIFORM, 0, 256);
     for (const int aperture : {3, 5, 7}) {
       for (const bool l2 : {false, true}) {

@@ -161,7 +161,9 @@ TEST(CloseFillOpen, ClosesAGappedOutlineFillsItAndDropsSpecks) {
   EXPECT_EQ(cv::countNonZero(CloseFillOpen(edges, no_fill)(cv::Rect(30, 30, 40, 20))), 0);
 }
 
-TEST(MorphologyOptions, DefaultsAreValid) { EXPECT_THAT(MorphologyOptions{}.Validate(), IsEmpty()); }
+TEST(MorphologyOptions, DefaultsAreValid) {
+  EXPECT_THAT(MorphologyOptions{}.Validate(), IsEmpty());
+}
 
 TEST(MorphologyOptions, ListsEveryProblem) {
   MorphologyOptions options;

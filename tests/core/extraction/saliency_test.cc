@@ -48,7 +48,8 @@ Map NaiveDown(const Map& level) {
       double sum = 0;
       for (int dy = 0; dy <= 1; ++dy) {
         for (int dx = 0; dx <= 1; ++dx) {
-          sum += blurred(std::min(2 * y + dy, level.rows - 1), std::min(2 * x + dx, level.cols - 1));
+          sum +=
+              blurred(std::min(2 * y + dy, level.rows - 1), std::min(2 * x + dx, level.cols - 1));
         }
       }
       out(y, x) = sum / 4;
@@ -165,7 +166,8 @@ NaiveSaliency NaiveCompute(const cv::Mat1b& grey, const SaliencyOptions& o) {
   n.off /= count;
   n.on_peaks = NaivePeaks(n.on, o.peak_fraction);
   n.off_peaks = NaivePeaks(n.off, o.peak_fraction);
-  n.saliency = n.on / std::sqrt(std::max(1, n.on_peaks)) + n.off / std::sqrt(std::max(1, n.off_peaks));
+  n.saliency =
+      n.on / std::sqrt(std::max(1, n.on_peaks)) + n.off / std::sqrt(std::max(1, n.off_peaks));
   double max_value = 0;
   cv::minMaxLoc(n.saliency, nullptr, &max_value);
   n.saliency /= std::max(max_value, o.min_contrast);
@@ -223,7 +225,7 @@ TEST(CentreSurround, MatchesDirectSummationAtEveryLevelAndRadius) {
     Map level;
     pyramid[k].convertTo(level, CV_64F);
     for (const int r : {1, 3, 7, 40}) {  // 40 is wider than levels 3 and 4: every box is clipped
-      if (r == 40 && k < 2) continue;      // (and slow to sum directly at levels 0 and 1)
+      if (r == 40 && k < 2) continue;    // (and slow to sum directly at levels 0 and 1)
       cv::Mat1f on, off;
       CentreSurround(pyramid[k], r, on, off);
       Map want_on, want_off;
@@ -362,7 +364,7 @@ TEST(CountPeaks, CountsPlateausOnceAndIgnoresLowMaxima) {
   cv::Mat1f map(20, 20, 0.0f);
   map(5, 5) = 10;
   map(cv::Rect(12, 12, 3, 2)).setTo(8);  // plateau
-  map(2, 15) = 3;                         // below half the maximum
+  map(2, 15) = 3;                        // below half the maximum
   EXPECT_EQ(CountPeaks(map, 0.5), 2);
   EXPECT_EQ(CountPeaks(map, 0.2), 3);
   EXPECT_EQ(CountPeaks(cv::Mat1f(5, 5, 0.0f), 0.5), 0);
@@ -377,11 +379,10 @@ TEST(SaliencyOptions, ListsEveryProblem) {
   options.peak_fraction = 0;
   options.min_contrast = -1;
   const std::vector<std::string> problems = options.Validate();
-  EXPECT_THAT(problems, UnorderedElementsAre(HasSubstr("centre_level:"), HasSubstr("scales[1]:"),
-                                             HasSubstr("scales[2]:"),
-                                             HasSubstr("surround_radii: must not be empty"),
-                                             HasSubstr("peak_fraction:"),
-                                             HasSubstr("min_contrast:")));
+  EXPECT_THAT(problems, UnorderedElementsAre(
+                            HasSubstr("centre_level:"), HasSubstr("scales[1]:"),
+                            HasSubstr("scales[2]:"), HasSubstr("surround_radii: must not be empty"),
+                            HasSubstr("peak_fraction:"), HasSubstr("min_contrast:")));
   options = SaliencyOptions{};
   options.surround_radii = {3, 0, 65};
   EXPECT_THAT(options.Validate(), UnorderedElementsAre(HasSubstr("surround_radii[1]:"),

@@ -41,8 +41,9 @@ std::pair<int, double> Majority(const cv::Mat1i& labels) {
   for (int y = 0; y < labels.rows; ++y) {
     for (int x = 0; x < labels.cols; ++x) ++counts[labels(y, x)];
   }
-  const auto best = std::max_element(counts.begin(), counts.end(),
-                                     [](const auto& a, const auto& b) { return a.second < b.second; });
+  const auto best =
+      std::max_element(counts.begin(), counts.end(),
+                       [](const auto& a, const auto& b) { return a.second < b.second; });
   return {best->first, static_cast<double>(best->second) / labels.total()};
 }
 
@@ -109,7 +110,7 @@ TEST(SegmentByIntensity, OffsetShiftsTheThreshold) {
 TEST(SegmentByColour, FindsARedSquareOnGreenWithAWrappingHueRange) {
   cv::Mat3b bgr(100, 120, cv::Vec3b(30, 160, 40));  // green
   const cv::Rect square(30, 20, 40, 40);
-  bgr(square).setTo(cv::Vec3b(20, 20, 230));            // red, hue ~0
+  bgr(square).setTo(cv::Vec3b(20, 20, 230));                   // red, hue ~0
   bgr(cv::Rect(30, 20, 20, 40)).setTo(cv::Vec3b(60, 0, 230));  // purplish red, hue ~172
   cv::Mat3b hsv;
   cv::cvtColor(bgr, hsv, cv::COLOR_BGR2HSV);

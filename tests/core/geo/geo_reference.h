@@ -41,7 +41,7 @@ inline Eigen::Matrix3d EcefFromNed(double lat_deg, double lon_deg) {
   const double so = std::sin(lon_deg * kDeg), co = std::cos(lon_deg * kDeg);
   Eigen::Matrix3d m;
   m << -sl * co, -so, -cl * co,  //
-      -sl * so, co, -cl * so,     //
+      -sl * so, co, -cl * so,    //
       cl, 0, -sl;
   return m;
 }

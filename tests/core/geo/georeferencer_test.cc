@@ -20,7 +20,6 @@
 namespace stevi::geo {
 namespace {
 
-using ::testing::HasSubstr;
 using ref::Geodetic;
 using ref::kDeg;
 using ref::NormalSectionRadius;
@@ -28,6 +27,7 @@ using ref::OnOsculatingSphere;
 using ref::ReferenceDcm;
 using ref::ReferenceFrdFromCam;
 using ref::ReferenceFromNed;
+using ::testing::HasSubstr;
 
 const double kE2 = GeographicLib::Constants::WGS84_f() * (2 - GeographicLib::Constants::WGS84_f());
 constexpr double kPisaLat = 43.6839;  // Pisa airport
@@ -55,8 +55,8 @@ struct Inverse {
 Inverse Geodesic(double lat0, double lon0, double lat1, double lon1) {
   Inverse inv;
   double azi2 = 0;
-  GeographicLib::Geodesic::WGS84().Inverse(lat0, lon0, lat1, lon1, inv.distance_m,
-                                           inv.azimuth_deg, azi2);
+  GeographicLib::Geodesic::WGS84().Inverse(lat0, lon0, lat1, lon1, inv.distance_m, inv.azimuth_deg,
+                                           azi2);
   return inv;
 }
 
@@ -72,9 +72,9 @@ TEST(GeoreferenceLevel, MatchesIndependentGeodesy) {
   struct Case {
     double lat, lon, alt, heading;
   };
-  const std::vector<Case> rigs = {{kPisaLat, kPisaLon, 0, 0},     {kPisaLat, kPisaLon, 50, 37},
-                                  {-33.9, 151.2, 500, 200},       {64.1, -21.9, 3000, -90},
-                                  {0.0, 179.9995, 120, 95},       {-78.0, 166.7, 10, 311}};
+  const std::vector<Case> rigs = {{kPisaLat, kPisaLon, 0, 0}, {kPisaLat, kPisaLon, 50, 37},
+                                  {-33.9, 151.2, 500, 200},   {64.1, -21.9, 3000, -90},
+                                  {0.0, 179.9995, 120, 95},   {-78.0, 166.7, 10, 311}};
   const std::vector<Eigen::Vector3d> points = {
       {0, 0, 100}, {20, -5, 80}, {-30, 10, 250}, {5, 2, 10}, {0, -40, 300}};
   double worst_distance = 0, worst_alt = 0, worst_azimuth = 0, worst_azimuth_skew = 0;
@@ -110,9 +110,10 @@ TEST(GeoreferenceLevel, MatchesIndependentGeodesy) {
       EXPECT_LE(drop, horizontal * horizontal / (2 * 6.3e6)) << where;
     }
   }
-  std::printf("level rig vs geodesy: worst |distance| %.3g m, |alt| %.3g m, |azimuth| %.3g deg "
-              "(%.2f of its bound)\n",
-              worst_distance, worst_alt, worst_azimuth, worst_azimuth_skew);
+  std::printf(
+      "level rig vs geodesy: worst |distance| %.3g m, |alt| %.3g m, |azimuth| %.3g deg "
+      "(%.2f of its bound)\n",
+      worst_distance, worst_alt, worst_azimuth, worst_azimuth_skew);
 }
 
 TEST(GeoreferenceLevel, OnTheEllipsoidDistanceIsTheHorizontalRange) {
@@ -197,20 +198,24 @@ TEST(GeoreferenceChain, MatchesTheEcefRouteForAnyAttitude) {
       lon(-180, 180), alt(-50, 5000), coord(-50, 50), depth(1, 400), lever(-3, 3);
   double worst = 0;
   for (int i = 0; i < 300; ++i) {
-    const MountOptions mount{.roll_deg = angle(rng), .pitch_deg = angle(rng),
+    const MountOptions mount{.roll_deg = angle(rng),
+                             .pitch_deg = angle(rng),
                              .yaw_deg = heading(rng),
                              .lever_arm_m = {lever(rng), lever(rng), lever(rng)}};
     const Georeferencer g(mount);
-    VehicleState state{.lat_deg = lat(rng), .lon_deg = lon(rng), .alt_m = alt(rng),
-                       .roll_deg = angle(rng), .pitch_deg = angle(rng), .yaw_deg = heading(rng)};
+    VehicleState state{.lat_deg = lat(rng),
+                       .lon_deg = lon(rng),
+                       .alt_m = alt(rng),
+                       .roll_deg = angle(rng),
+                       .pitch_deg = angle(rng),
+                       .yaw_deg = heading(rng)};
     const Eigen::Vector3d p(coord(rng), coord(rng), depth(rng));
     const GeoPoint out = MustGeoreference(g, state, p);
 
     const Eigen::Matrix3d body_from_cam =
         ReferenceDcm(mount.roll_deg, mount.pitch_deg, mount.yaw_deg) * ReferenceFrdFromCam();
-    const Eigen::Vector3d ned =
-        ReferenceDcm(state.roll_deg, state.pitch_deg, state.yaw_deg) *
-        (body_from_cam * p + mount.lever_arm_m);
+    const Eigen::Vector3d ned = ReferenceDcm(state.roll_deg, state.pitch_deg, state.yaw_deg) *
+                                (body_from_cam * p + mount.lever_arm_m);
     const Geodetic want = ReferenceFromNed({state.lat_deg, state.lon_deg, state.alt_m}, ned);
     const double miss = Geodesic(want.lat_deg, want.lon_deg, out.lat_deg, out.lon_deg).distance_m;
     EXPECT_LT(miss, 1e-6) << "case " << i;
@@ -312,10 +317,14 @@ TEST(PositionSigma, MatchesMonteCarloOfTheExactChain) {
   const MountOptions mount{
       .roll_deg = 5, .pitch_deg = -10, .yaw_deg = 30, .lever_arm_m = {1, 0.5, 0.3}};
   const Georeferencer g(mount);
-  VehicleState state{.lat_deg = kPisaLat, .lon_deg = kPisaLon, .alt_m = 150, .roll_deg = 20,
-                     .pitch_deg = 25, .yaw_deg = 140,
-                     .sigma = {.horizontal_m = 0.8, .vertical_m = 1.2, .tilt_deg = 0.6,
-                               .yaw_deg = 1.5}};
+  VehicleState state{
+      .lat_deg = kPisaLat,
+      .lon_deg = kPisaLon,
+      .alt_m = 150,
+      .roll_deg = 20,
+      .pitch_deg = 25,
+      .yaw_deg = 140,
+      .sigma = {.horizontal_m = 0.8, .vertical_m = 1.2, .tilt_deg = 0.6, .yaw_deg = 1.5}};
   const Eigen::Vector3d p(-10, 4, 80);
   const Eigen::Matrix3d cov_cam = LineOfSightCovariance(p, 3, 0.5, 700);
   const PositionSigma want = g.Sigma(state, p, cov_cam);
@@ -342,9 +351,10 @@ TEST(PositionSigma, MatchesMonteCarloOfTheExactChain) {
   const Eigen::Matrix3d sample = sum / kSamples;
   const double rel = (sample - want.covariance_ned_m2).norm() / want.covariance_ned_m2.norm();
   EXPECT_LT(rel, 0.03) << "sample\n" << sample << "\nfirst order\n" << want.covariance_ned_m2;
-  std::printf("sigma vs Monte Carlo (%d samples): relative Frobenius difference %.4f; "
-              "horizontal %.3f m, vertical %.3f m\n",
-              kSamples, rel, want.horizontal_m, want.vertical_m);
+  std::printf(
+      "sigma vs Monte Carlo (%d samples): relative Frobenius difference %.4f; "
+      "horizontal %.3f m, vertical %.3f m\n",
+      kSamples, rel, want.horizontal_m, want.vertical_m);
 }
 
 TEST(PositionSigma, DiagonalCovarianceFromTrackSigmas) {

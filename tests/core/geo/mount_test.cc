@@ -21,8 +21,7 @@ const Eigen::Vector3d kCamY = Eigen::Vector3d::UnitY();  // down in the image
 const Eigen::Vector3d kCamZ = Eigen::Vector3d::UnitZ();  // the optical axis
 
 void ExpectNear(const Eigen::Vector3d& got, const Eigen::Vector3d& want, double tol = 1e-15) {
-  EXPECT_LT((got - want).norm(), tol) << "got " << got.transpose() << ", want "
-                                        << want.transpose();
+  EXPECT_LT((got - want).norm(), tol) << "got " << got.transpose() << ", want " << want.transpose();
 }
 
 TEST(BodyFromCam, DefaultLooksForwardLevel) {
@@ -50,7 +49,7 @@ TEST(BodyFromCam, PitchMinusNinetyLooksDown) {
 TEST(BodyFromCam, RollTurnsAboutTheOpticalAxis) {
   const Eigen::Matrix3d r = BodyFromCamRotation({.roll_deg = 90});
   ExpectNear(r * kCamZ, {1, 0, 0});
-  ExpectNear(r * kCamX, {0, 0, 1});   // right side down
+  ExpectNear(r * kCamX, {0, 0, 1});  // right side down
   ExpectNear(r * kCamY, {0, -1, 0});
 }
 

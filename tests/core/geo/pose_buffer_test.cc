@@ -37,8 +37,8 @@ double Distance(double lat0, double lon0, double lat1, double lon1) {
 }
 
 VehicleState State(int64_t t_ns, double lat, double lon, double alt, double yaw_deg = 0) {
-  return VehicleState{.t_ns = t_ns, .lat_deg = lat, .lon_deg = lon, .alt_m = alt,
-                      .yaw_deg = yaw_deg};
+  return VehicleState{
+      .t_ns = t_ns, .lat_deg = lat, .lon_deg = lon, .alt_m = alt, .yaw_deg = yaw_deg};
 }
 
 // A state `distance_m` from (lat, lon) along the geodesic at azimuth `azi_deg`.
@@ -329,7 +329,9 @@ TEST(PoseBuffer, ConcurrentAddAndAt) {
 
 TEST(PoseBufferOptionsValidate, NamesEveryBadField) {
   EXPECT_THAT(PoseBufferOptions{}.Validate(), IsEmpty());
-  const PoseBufferOptions bad{.capacity = 1, .max_age_s = 0, .max_extrapolation_s = -0.1,
+  const PoseBufferOptions bad{.capacity = 1,
+                              .max_age_s = 0,
+                              .max_extrapolation_s = -0.1,
                               .max_gap_s = std::numeric_limits<double>::infinity()};
   const std::vector<std::string> problems = bad.Validate();
   EXPECT_THAT(problems, SizeIs(4));

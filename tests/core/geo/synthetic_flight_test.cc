@@ -85,14 +85,14 @@ class GaussMarkov {
 
 struct Noise {
   const char* name;
-  PoseSigma pose;           // the stated (and simulated) pose accuracy
-  double pixel_sigma_px;    // centroid noise on u and v
+  PoseSigma pose;         // the stated (and simulated) pose accuracy
+  double pixel_sigma_px;  // centroid noise on u and v
   double disparity_sigma_px;
 };
 
 struct Stats {
   int frames = 0;
-  double max_h = 0, max_v = 0;                   // max |e_h| / sigma_h, |e_v| / sigma_v
+  double max_h = 0, max_v = 0;                        // max |e_h| / sigma_h, |e_v| / sigma_v
   double sum_major2 = 0, sum_minor2 = 0, sum_v2 = 0;  // normalised squared errors
   double sum_eh2 = 0, sum_trace_h = 0, sum_ev2 = 0, sum_sv2 = 0;  // unnormalised
   double sum_sigma_h = 0;
@@ -211,13 +211,14 @@ void RunScenario(const Noise& noise) {
     Fly(noise, seed, stats);
     if (::testing::Test::HasFatalFailure()) return;
   }
-  std::printf("%s: %d frames, range %.0f-%.0f m, mean sigma_h %.2f m\n"
-              "  max |e_h|/sigma_h %.2f, max |e_v|/sigma_v %.2f\n"
-              "  RMS normalised error: major %.3f, minor %.3f, vertical %.3f\n"
-              "  RMS error / RMS sigma: horizontal %.3f, vertical %.3f\n",
-              noise.name, stats.frames, stats.min_range, stats.max_range,
-              stats.sum_sigma_h / stats.frames, stats.max_h, stats.max_v, stats.RmsMajor(),
-              stats.RmsMinor(), stats.RmsVertical(), stats.RmsRatioH(), stats.RmsRatioV());
+  std::printf(
+      "%s: %d frames, range %.0f-%.0f m, mean sigma_h %.2f m\n"
+      "  max |e_h|/sigma_h %.2f, max |e_v|/sigma_v %.2f\n"
+      "  RMS normalised error: major %.3f, minor %.3f, vertical %.3f\n"
+      "  RMS error / RMS sigma: horizontal %.3f, vertical %.3f\n",
+      noise.name, stats.frames, stats.min_range, stats.max_range, stats.sum_sigma_h / stats.frames,
+      stats.max_h, stats.max_v, stats.RmsMajor(), stats.RmsMinor(), stats.RmsVertical(),
+      stats.RmsRatioH(), stats.RmsRatioV());
   EXPECT_GE(stats.frames, 8 * 90);
   EXPECT_LE(stats.max_h, kK);
   EXPECT_LE(stats.max_v, kK);
@@ -258,14 +259,21 @@ TEST(SyntheticFlight, StationaryObstacleHasNoVelocity) {
     const double tp = i * 0.01;
     const Attitude a = TrueAttitude(tp);
     const Geodetic p = TruePosition(tp);
-    ASSERT_TRUE(buffer.Add({.t_ns = i * (kSecond / 100), .lat_deg = p.lat_deg, .lon_deg = p.lon_deg,
-                            .alt_m = p.alt_m, .roll_deg = a.roll_deg, .pitch_deg = a.pitch_deg,
-                            .yaw_deg = a.yaw_deg, .velocity_ned_mps = {kSpeedMps, 0, 0}})
+    ASSERT_TRUE(buffer
+                    .Add({.t_ns = i * (kSecond / 100),
+                          .lat_deg = p.lat_deg,
+                          .lon_deg = p.lon_deg,
+                          .alt_m = p.alt_m,
+                          .roll_deg = a.roll_deg,
+                          .pitch_deg = a.pitch_deg,
+                          .yaw_deg = a.yaw_deg,
+                          .velocity_ned_mps = {kSpeedMps, 0, 0}})
                     .ok());
   }
   // The largest angular acceleration of the wobble, rad/s^2.
   const double max_accel = (2.0 * std::pow(kTwoPi * 0.7, 2) + 1.5 * std::pow(kTwoPi * 0.5, 2) +
-                            1.0 * std::pow(kTwoPi * 0.3, 2)) * kDeg;
+                            1.0 * std::pow(kTwoPi * 0.3, 2)) *
+                           kDeg;
   double worst = 0, worst_without_rate = 0;
   for (int k = 0; k < 110; ++k) {
     const double t = 0.005 + k / 30.0;
@@ -288,8 +296,10 @@ TEST(SyntheticFlight, StationaryObstacleHasNoVelocity) {
         georeferencer.Georeference(no_rate, {.position_m = p_cam, .velocity_mps = v_cam});
     worst_without_rate = std::max(worst_without_rate, without->velocity_ned_mps.norm());
   }
-  std::printf("stationary obstacle: worst |velocity| %.3f m/s with the angular rate, %.2f m/s "
-              "without\n", worst, worst_without_rate);
+  std::printf(
+      "stationary obstacle: worst |velocity| %.3f m/s with the angular rate, %.2f m/s "
+      "without\n",
+      worst, worst_without_rate);
   EXPECT_GT(worst_without_rate, 10 * worst);
 }
 

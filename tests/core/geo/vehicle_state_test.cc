@@ -93,8 +93,8 @@ TEST(VehicleStateValidate, NamesEveryBadField) {
   s.sigma = {.horizontal_m = -1, .vertical_m = kNaN, .tilt_deg = -0.1, .yaw_deg = -2};
   const std::vector<std::string> problems = s.Validate();
   EXPECT_THAT(problems, SizeIs(11));
-  EXPECT_THAT(problems, Contains(AllOf(HasSubstr("lat_deg: must be in [-90, 90]"),
-                                       HasSubstr("(got 91)"))));
+  EXPECT_THAT(problems,
+              Contains(AllOf(HasSubstr("lat_deg: must be in [-90, 90]"), HasSubstr("(got 91)"))));
   EXPECT_THAT(problems, Contains(AllOf(HasSubstr("lon_deg:"), HasSubstr("(got -180.5)"))));
   EXPECT_THAT(problems, Contains(AllOf(HasSubstr("alt_m:"), HasSubstr("ellipsoid"),
                                        HasSubstr("(got 120000)"))));
@@ -112,8 +112,12 @@ TEST(VehicleStateValidate, NamesEveryBadField) {
 }
 
 TEST(VehicleStateValidate, BoundsAreInclusive) {
-  VehicleState s{.lat_deg = -90, .lon_deg = 180, .alt_m = -1000, .roll_deg = 180,
-                 .pitch_deg = -90, .yaw_deg = -360};
+  VehicleState s{.lat_deg = -90,
+                 .lon_deg = 180,
+                 .alt_m = -1000,
+                 .roll_deg = 180,
+                 .pitch_deg = -90,
+                 .yaw_deg = -360};
   EXPECT_THAT(s.Validate(), IsEmpty());
 }
 

@@ -38,7 +38,8 @@ TEST(DepthSigma, IsDepthSquaredOverFocalBaselineTimesDisparitySigma) {
   EXPECT_DOUBLE_EQ(DepthSigma(10.0, 700.0, 0.5, 0.0), 0.0);
   // Matches the derivative of Z(d): |dZ/dd| = f B / d^2 = Z^2 / (f B).
   const double d = 12.0, h = 1e-4;
-  const double numeric = (DepthFromDisparity(d - h, 700, 0.5) - DepthFromDisparity(d + h, 700, 0.5)) / (2 * h);
+  const double numeric =
+      (DepthFromDisparity(d - h, 700, 0.5) - DepthFromDisparity(d + h, 700, 0.5)) / (2 * h);
   EXPECT_NEAR(DepthSigma(DepthFromDisparity(d, 700, 0.5), 700, 0.5, 1.0), numeric, 1e-6);
 }
 
@@ -109,8 +110,8 @@ TEST(RangeOptionsValidate, RejectsNonFiniteValues) {
   RangeOptions options;
   options.min_disparity_px = std::numeric_limits<double>::quiet_NaN();
   options.disparity_sigma_px = std::numeric_limits<double>::infinity();
-  EXPECT_THAT(options.Validate(), ElementsAre(HasSubstr("min_disparity_px"),
-                                              HasSubstr("disparity_sigma_px")));
+  EXPECT_THAT(options.Validate(),
+              ElementsAre(HasSubstr("min_disparity_px"), HasSubstr("disparity_sigma_px")));
 }
 
 }  // namespace

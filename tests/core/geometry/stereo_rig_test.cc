@@ -107,7 +107,7 @@ TEST(ParseCalibrationYaml, ReadsTransposedVectors) {
   EXPECT_EQ(c->image_size, cv::Size(640, 480));
   EXPECT_EQ(c->M1(0, 0), 500.0);
   EXPECT_EQ(c->T, cv::Vec3d(-0.12, 0, 0));  // given as 1x3
-  EXPECT_EQ(c->D2.size(), cv::Size(5, 1));   // given as 5x1, stored as one row
+  EXPECT_EQ(c->D2.size(), cv::Size(5, 1));  // given as 5x1, stored as one row
   EXPECT_EQ(c->D2.type(), CV_64FC1);
   EXPECT_FALSE(c->Q.has_value());
 }
@@ -131,9 +131,9 @@ TEST(ParseCalibrationYaml, MissingKeyIsNamed) {
 }
 
 TEST(ParseCalibrationYaml, MalformedMatrixIsNamedWithItsShape) {
-  const std::string text =
-      Replace(kIdealYaml, "   cols: 3\n   dt: d\n   data: [ 500., 0., 320., 0., 500., 240., 0., 0., 1. ]",
-              "   cols: 2\n   dt: d\n   data: [ 500., 0., 320., 0., 500., 240. ]");
+  const std::string text = Replace(
+      kIdealYaml, "   cols: 3\n   dt: d\n   data: [ 500., 0., 320., 0., 500., 240., 0., 0., 1. ]",
+      "   cols: 2\n   dt: d\n   data: [ 500., 0., 320., 0., 500., 240. ]");
   Result<StereoCalibration> c = ParseCalibrationYaml(text);
   ASSERT_FALSE(c.ok());
   EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
@@ -149,10 +149,11 @@ TEST(ParseCalibrationYaml, ReportsEveryKeyProblemAtOnce) {
   text.erase(from, to - from);
   Result<StereoCalibration> c = ParseCalibrationYaml(text);
   ASSERT_FALSE(c.ok());
-  EXPECT_THAT(c.error().message,
-              AllOf(HasSubstr("image_width: expected a positive integer"),
-                    HasSubstr("D1: expected a 1xN or Nx1 matrix with N in {4, 5, 8, 12, 14}, got 1x6"),
-                    HasSubstr("R: missing"), Not(HasSubstr("M1")), Not(HasSubstr("T:"))));
+  EXPECT_THAT(
+      c.error().message,
+      AllOf(HasSubstr("image_width: expected a positive integer"),
+            HasSubstr("D1: expected a 1xN or Nx1 matrix with N in {4, 5, 8, 12, 14}, got 1x6"),
+            HasSubstr("R: missing"), Not(HasSubstr("M1")), Not(HasSubstr("T:"))));
 }
 
 TEST(ParseCalibrationYaml, ScalarWhereMatrixExpectedIsNamed) {
@@ -170,8 +171,10 @@ TEST(ParseCalibrationYaml, UnparsableTextIsInvalidArgumentWithTheLine) {
 }
 
 TEST(ParseCalibrationYaml, AcceptsPlainListsOfNumbers) {
-  std::string text = Replace(kIdealYaml, "T: !!opencv-matrix\n   rows: 1\n   cols: 3\n   dt: d\n   data: [ -0.12, 0., 0. ]",
-                             "T: [ -0.25, 0, 0.001 ]");
+  std::string text =
+      Replace(kIdealYaml,
+              "T: !!opencv-matrix\n   rows: 1\n   cols: 3\n   dt: d\n   data: [ -0.12, 0., 0. ]",
+              "T: [ -0.25, 0, 0.001 ]");
   text = Replace(text, "M2: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data:", "M2:");
   Result<StereoCalibration> c = ParseCalibrationYaml(text);
   ASSERT_TRUE(c.ok()) << c.error().message;
@@ -182,7 +185,8 @@ TEST(ParseCalibrationYaml, AcceptsPlainListsOfNumbers) {
   const std::string wrong_length = Replace(text, "T: [ -0.25, 0, 0.001 ]", "T: [ -0.25, 0 ]");
   Result<StereoCalibration> bad = ParseCalibrationYaml(wrong_length);
   ASSERT_FALSE(bad.ok());
-  EXPECT_THAT(bad.error().message, HasSubstr("T: expected a 3x1 or 1x3 matrix, got a list of 2 numbers"));
+  EXPECT_THAT(bad.error().message,
+              HasSubstr("T: expected a 3x1 or 1x3 matrix, got a list of 2 numbers"));
 }
 
 TEST(ParseCalibrationYaml, TopLevelMustBeAMap) {
@@ -197,7 +201,8 @@ TEST(ParseCalibrationYaml, InvalidValuesAreReported) {
   text = Replace(text, "data: [ -0.12, 0., 0. ]", "data: [ 0., 0., 0. ]");
   Result<StereoCalibration> c = ParseCalibrationYaml(text);
   ASSERT_FALSE(c.ok());
-  EXPECT_THAT(c.error().message, AllOf(HasSubstr("R: not a rotation"), HasSubstr("T: the baseline")));
+  EXPECT_THAT(c.error().message,
+              AllOf(HasSubstr("R: not a rotation"), HasSubstr("T: the baseline")));
 }
 
 TEST(LoadCalibrationYaml, MissingFileIsNotFoundAndNamesThePath) {
@@ -310,8 +315,8 @@ TEST(IdealCalibration, MatchesOpenCvStereoRectify) {
   const StereoCalibration ideal = IdealCalibration(cv::Size(640, 480), 600.0, 0.25, 320.0, 240.0);
   cv::Mat r1, r2, p1, p2, q;
   cv::stereoRectify(cv::Mat(ideal.M1), ideal.D1, cv::Mat(ideal.M2), ideal.D2, ideal.image_size,
-                    cv::Mat(ideal.R), cv::Mat(ideal.T), r1, r2, p1, p2, q,
-                    cv::CALIB_ZERO_DISPARITY, 0.0);
+                    cv::Mat(ideal.R), cv::Mat(ideal.T), r1, r2, p1, p2, q, cv::CALIB_ZERO_DISPARITY,
+                    0.0);
   EXPECT_LT(MaxAbsDiff(cv::Mat(*ideal.R1), r1), 1e-9);
   EXPECT_LT(MaxAbsDiff(cv::Mat(*ideal.R2), r2), 1e-9);
   EXPECT_LT(MaxAbsDiff(cv::Mat(*ideal.P1), p1), 1e-6);
@@ -387,7 +392,9 @@ TEST(StereoRigFromCalibration, IdealCalibrationNeedsNoRemap) {
   EXPECT_DOUBLE_EQ(rig->cx(), 320.0);
   EXPECT_DOUBLE_EQ(rig->cy(), 240.0);
   EXPECT_EQ(rig->calibration_id(), "bench");
-  EXPECT_EQ(MaxAbsDiff(cv::Mat(rig->Q()), cv::Mat(*IdealCalibration(c.image_size, 615, 0.1, 320, 240).Q)), 0.0);
+  EXPECT_EQ(
+      MaxAbsDiff(cv::Mat(rig->Q()), cv::Mat(*IdealCalibration(c.image_size, 615, 0.1, 320, 240).Q)),
+      0.0);
 }
 
 TEST(StereoRigFromCalibration, LeftCameraOnTheRightIsAClearError) {
@@ -452,11 +459,14 @@ TEST(StereoRigFromCalibration, RawRigRectifiesPointsToEqualRowsAndTrueDepth) {
   std::vector<cv::Point2d> left_raw, right_raw, left_rect, right_rect;
   cv::Mat rvec_right;
   cv::Rodrigues(cv::Mat(raw.R), rvec_right);
-  cv::projectPoints(points, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), cv::Mat(raw.M1), raw.D1, left_raw);
+  cv::projectPoints(points, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), cv::Mat(raw.M1), raw.D1,
+                    left_raw);
   cv::projectPoints(points, rvec_right, cv::Mat(raw.T), cv::Mat(raw.M2), raw.D2, right_raw);
   const cv::TermCriteria exact(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-12);
-  cv::undistortPoints(left_raw, left_rect, cv::Mat(raw.M1), raw.D1, cv::Mat(*c.R1), cv::Mat(*c.P1), exact);
-  cv::undistortPoints(right_raw, right_rect, cv::Mat(raw.M2), raw.D2, cv::Mat(*c.R2), cv::Mat(*c.P2), exact);
+  cv::undistortPoints(left_raw, left_rect, cv::Mat(raw.M1), raw.D1, cv::Mat(*c.R1), cv::Mat(*c.P1),
+                      exact);
+  cv::undistortPoints(right_raw, right_rect, cv::Mat(raw.M2), raw.D2, cv::Mat(*c.R2),
+                      cv::Mat(*c.P2), exact);
 
   int checked = 0;
   for (std::size_t i = 0; i < points.size(); ++i) {
@@ -580,11 +590,12 @@ TEST(StereoRigRectify, MovesRawDotsToTheirPredictedRectifiedPositions) {
   ASSERT_EQ(rect_left.type(), CV_8UC1);
   ASSERT_EQ(rect_left.size(), cv::Size(640, 480));
 
-  auto check = [&](const cv::Mat& rect, const cv::Matx33d& M, const cv::Mat& D, const cv::Matx33d& R,
-                   const cv::Matx34d& P, const char* side) {
+  auto check = [&](const cv::Mat& rect, const cv::Matx33d& M, const cv::Mat& D,
+                   const cv::Matx33d& R, const cv::Matx34d& P, const char* side) {
     std::vector<cv::Point2d> predicted;
-    cv::undistortPoints(dots, predicted, cv::Mat(M), D, cv::Mat(R), cv::Mat(P),
-                        cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-12));
+    cv::undistortPoints(
+        dots, predicted, cv::Mat(M), D, cv::Mat(R), cv::Mat(P),
+        cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 100, 1e-12));
     int found = 0;
     for (std::size_t i = 0; i < dots.size(); ++i) {
       const cv::Point2d& q = predicted[i];
@@ -632,7 +643,8 @@ std::optional<StereoCalibration> XimeaOwnerCalibration(std::string& dir, std::st
     return std::nullopt;
   }
   dir = *data + "/calib_ximea_stereo/";
-  if (!std::filesystem::exists(dir + "intrinsics.yml") || !std::filesystem::exists(dir + "extrinsics.yml")) {
+  if (!std::filesystem::exists(dir + "intrinsics.yml") ||
+      !std::filesystem::exists(dir + "extrinsics.yml")) {
     why = "XIMEA calibration not found in " + dir;
     return std::nullopt;
   }
@@ -676,7 +688,8 @@ TEST(StereoRigRealData, XimeaRigIsRefusedUntilSwapped) {
   EXPECT_GT(owner->T[0], 0.0);
   Result<StereoRig> refused = StereoRig::FromCalibration(*owner);
   ASSERT_FALSE(refused.ok());
-  EXPECT_THAT(refused.error().message, AllOf(HasSubstr("T_x > 0"), HasSubstr("swap left and right")));
+  EXPECT_THAT(refused.error().message,
+              AllOf(HasSubstr("T_x > 0"), HasSubstr("swap left and right")));
 
   Result<StereoRig> rig = StereoRig::FromCalibration(SwapLeftAndRight(*owner), "ximea");
   ASSERT_TRUE(rig.ok()) << rig.error().message;
@@ -726,13 +739,14 @@ TEST(StereoRigRealData, XimeaChessboardRectifiesOntoEqualRows) {
     }
     for (int row = 0; row < pattern.height; ++row) {
       for (int col = 0; col + 1 < pattern.width; ++col) {
-        square_sum += cv::norm(points[row * pattern.width + col + 1] - points[row * pattern.width + col]);
+        square_sum +=
+            cv::norm(points[row * pattern.width + col + 1] - points[row * pattern.width + col]);
         ++squares;
       }
     }
     const double square_m = square_sum / squares;
-    std::printf("ximea pair %s: mean |v_l - v_r| = %.3f px, square = %.2f mm, depth %.2f m\n", index,
-                row_error, square_m * 1e3, points.front()[2]);
+    std::printf("ximea pair %s: mean |v_l - v_r| = %.3f px, square = %.2f mm, depth %.2f m\n",
+                index, row_error, square_m * 1e3, points.front()[2]);
     EXPECT_LT(row_error, 0.5) << index;
     EXPECT_NEAR(square_m, 0.024, 0.024 * 0.03) << index;
     ++pairs_checked;

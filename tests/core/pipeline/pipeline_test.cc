@@ -19,8 +19,6 @@
 namespace stevi::pipeline {
 namespace {
 
-
-
 // Checks the depth of every detection matched (IoU >= 0.3) to an isolated obstacle whose truth
 // disparity is at least 8 px; returns how many were checked. The tolerance is `tol` of the depth,
 // or, when quantisation_px > 0 and the disparity is below 16 px, the larger of that and the
@@ -129,12 +127,13 @@ TEST(PipelineProcess, ConsecutiveFramesKeepTrackIds) {
     // (A blob that covers two obstacles is split between their tracks: count the union.)
     cv::Mat1b measured_boxes(frame.left.size(), uchar{0});
     for (const tracking::Track& t : result->tracks) {
-      if (t.misses == 0) measured_boxes(t.detection.bbox & cv::Rect(cv::Point(), frame.left.size())).setTo(255);
+      if (t.misses == 0)
+        measured_boxes(t.detection.bbox & cv::Rect(cv::Point(), frame.left.size())).setTo(255);
     }
     for (const detection::Detection& d : result->detections) {
       const int covered = cv::countNonZero(measured_boxes(d.bbox));
-      EXPECT_GE(covered, 0.5 * d.bbox.area()) << "frame " << index << ": detection " << d.bbox
-                                              << " untracked";
+      EXPECT_GE(covered, 0.5 * d.bbox.area())
+          << "frame " << index << ": detection " << d.bbox << " untracked";
     }
     std::vector<cv::Rect> boxes, truth_boxes;
     std::vector<uint64_t> track_ids;
@@ -297,13 +296,14 @@ TEST(PipelineProcess, WideFramesAreBinnedAndKeepTheirQuality) {
   Score binned, full;
   run(PipelineConfig{}.max_width_px, binned);
   run(0, full);
-  std::printf("1280x960 SteViE: binned by 2 (default) %d/%d expected found, %d detections; "
-              "unbinned %d/%d found, %d detections\n",
-              binned.matched, binned.expected, binned.detections, full.matched, full.expected,
-              full.detections);
+  std::printf(
+      "1280x960 SteViE: binned by 2 (default) %d/%d expected found, %d detections; "
+      "unbinned %d/%d found, %d detections\n",
+      binned.matched, binned.expected, binned.detections, full.matched, full.expected,
+      full.detections);
   ASSERT_GT(binned.expected, 20);
-  EXPECT_GE(binned.matched, 0.9 * binned.expected);     // recall
-  EXPECT_GE(binned.matched, 0.9 * binned.detections);   // precision
+  EXPECT_GE(binned.matched, 0.9 * binned.expected);    // recall
+  EXPECT_GE(binned.matched, 0.9 * binned.detections);  // precision
   EXPECT_EQ(binned.depths, binned.matched);
 }
 
@@ -317,7 +317,7 @@ TEST(ConfigStoreSet, RejectsABadConfigNamingEveryFieldAndKeepsTheActiveOne) {
   bad.matcher.block_matching.num_disparities = 50;  // not a multiple of 16
   bad.canonical.open_size_px = 2;                   // even
   bad.range.min_disparity_px = -1;
-  bad.max_width_px = 10;                            // neither 0 nor 64..16384
+  bad.max_width_px = 10;  // neither 0 nor 64..16384
   Result<std::shared_ptr<const PipelineConfig>> set = store.Set(bad);
   ASSERT_FALSE(set.ok());
   EXPECT_EQ(set.error().code, ErrorCode::kInvalidArgument);

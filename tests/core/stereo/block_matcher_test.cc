@@ -34,8 +34,7 @@ std::string Describe(const SadBlockMatcherParams& p) {
   std::ostringstream s;
   s << "{nd " << p.num_disparities << ", min " << p.min_disparity << ", block " << p.block_size
     << ", cap " << p.prefilter_cap << ", texture " << p.texture_threshold << ", uniq "
-    << p.uniqueness_ratio << ", speckle " << p.speckle_window_size << "/" << p.speckle_range
-    << "}";
+    << p.uniqueness_ratio << ", speckle " << p.speckle_window_size << "/" << p.speckle_range << "}";
   return s.str();
 }
 
@@ -91,8 +90,8 @@ void ExpectSame(SadBlockMatcher& matcher, const cv::Mat& left, const cv::Mat& ri
   ASSERT_EQ(ours.size(), left.size()) << what;
   if (!expected) {
     // cv::StereoBM throws: ours is all unmatched.
-    EXPECT_EQ(cv::countNonZero(ours != Unmatched(p)), 0) << what << " " << Describe(p) << " "
-                                                         << path;
+    EXPECT_EQ(cv::countNonZero(ours != Unmatched(p)), 0)
+        << what << " " << Describe(p) << " " << path;
     return;
   }
   const int differing = cv::countNonZero(ours != *expected);
@@ -257,8 +256,8 @@ TEST(SadBlockMatcherTest, ParameterGrid) {
 // Sizes from smaller than the block up to moderate, odd and even, around num_disparities + block.
 TEST(SadBlockMatcherTest, SmallAndOddSizes) {
   const std::vector<cv::Size> sizes = {
-      {1, 1},   {4, 4},   {5, 5},   {6, 6},   {7, 40},  {40, 7},  {9, 7},   {16, 16},
-      {17, 9},  {22, 22}, {30, 21}, {64, 20}, {69, 16}, {70, 17}, {78, 19}, {79, 15},
+      {1, 1},   {4, 4},   {5, 5},   {6, 6},    {7, 40},   {40, 7},   {9, 7},     {16, 16},
+      {17, 9},  {22, 22}, {30, 21}, {64, 20},  {69, 16},  {70, 17},  {78, 19},   {79, 15},
       {80, 33}, {83, 40}, {86, 23}, {100, 30}, {127, 61}, {143, 26}, {150, 151}, {333, 211}};
   for (const cv::Size size : sizes) {
     const std::vector<std::pair<std::string, Pair>> images = {

@@ -111,12 +111,13 @@ TEST(BlockMatchingOptionsValidate, BlockSizeRangeAndDisparityCap) {
   BlockMatchingOptions o;
   o.block_size = 3;
   o.num_disparities = 1024;
-  EXPECT_THAT(o.Validate(), testing::ElementsAre("block_size: must be in 5..255 (got 3)",
-                                                 "num_disparities: must be at most 512 (got 1024)"));
+  EXPECT_THAT(o.Validate(),
+              testing::ElementsAre("block_size: must be in 5..255 (got 3)",
+                                   "num_disparities: must be at most 512 (got 1024)"));
   o.block_size = 5;
   o.num_disparities = 0;
-  EXPECT_THAT(o.Validate(), testing::ElementsAre(
-                                "num_disparities: must be a positive multiple of 16 (got 0)"));
+  EXPECT_THAT(o.Validate(),
+              testing::ElementsAre("num_disparities: must be a positive multiple of 16 (got 0)"));
 }
 
 TEST(SemiGlobalOptionsValidate, DefaultsAreValid) {
@@ -164,10 +165,12 @@ TEST(SemiGlobalOptionsValidate, NamesTextureThresholdWhenNegative) {
 TEST(SemiGlobalOptionsValidate, PenaltiesAgainstAutomaticValues) {
   SemiGlobalOptions o;  // block 5: automatic p1 = 200, p2 = 800
   o.p1 = 900;
-  EXPECT_THAT(o.Validate(), testing::ElementsAre(HasSubstr("p1: must be less than the automatic p2")));
+  EXPECT_THAT(o.Validate(),
+              testing::ElementsAre(HasSubstr("p1: must be less than the automatic p2")));
   o.p1 = 0;
   o.p2 = 150;
-  EXPECT_THAT(o.Validate(), testing::ElementsAre(HasSubstr("p2: must be greater than the automatic p1")));
+  EXPECT_THAT(o.Validate(),
+              testing::ElementsAre(HasSubstr("p2: must be greater than the automatic p1")));
   o.p2 = 300;
   EXPECT_THAT(o.Validate(), IsEmpty());
   o.p1 = -1;
@@ -180,9 +183,11 @@ TEST(MatcherOptionsValidate, PrefixesTheSelectedKindOnly) {
   options.block_matching.block_size = 8;
   options.semi_global.block_size = 4;
   options.kind = MatcherKind::kBlockMatching;
-  EXPECT_THAT(options.Validate(), testing::ElementsAre("block_matching.block_size: must be odd (got 8)"));
+  EXPECT_THAT(options.Validate(),
+              testing::ElementsAre("block_matching.block_size: must be odd (got 8)"));
   options.kind = MatcherKind::kSemiGlobal;
-  EXPECT_THAT(options.Validate(), testing::ElementsAre("semi_global.block_size: must be odd (got 4)"));
+  EXPECT_THAT(options.Validate(),
+              testing::ElementsAre("semi_global.block_size: must be odd (got 4)"));
   EXPECT_EQ(MatcherKindName(MatcherKind::kSemiGlobal), "semi_global");
   EXPECT_EQ(MatcherKindName(MatcherKind::kBlockMatching), "block_matching");
 }
@@ -204,7 +209,8 @@ TEST(MatcherOptions, ReportsTheSelectedSearchRange) {
 class ConstantDisparity : public ::testing::TestWithParam<MatcherKind> {
  protected:
   MatcherOptions Options(bool pad_left) const {
-    MatcherOptions options = GetParam() == MatcherKind::kBlockMatching ? BlockMatching() : SemiGlobal();
+    MatcherOptions options =
+        GetParam() == MatcherKind::kBlockMatching ? BlockMatching() : SemiGlobal();
     options.block_matching.pad_left = pad_left;
     options.semi_global.pad_left = pad_left;
     return options;
@@ -228,7 +234,8 @@ TEST_P(ConstantDisparity, RecoversTheDisparity) {
   ASSERT_TRUE(median.has_value());
   EXPECT_NEAR(*median, kDisparity, 0.1);
   // The seen part of the image (x >= d) is matched and right.
-  const RegionStats seen = Stats(map, cv::Rect(kDisparity + 8, 8, 320 - kDisparity - 16, 224), kDisparity, 0.5);
+  const RegionStats seen =
+      Stats(map, cv::Rect(kDisparity + 8, 8, 320 - kDisparity - 16, 224), kDisparity, 0.5);
   EXPECT_GE(seen.matched, 0.95);
   EXPECT_GE(seen.correct, 0.98);
   // Unmatched pixels are exactly kInvalid.
@@ -288,7 +295,8 @@ TEST_P(ConstantDisparity, RepeatedAndResizedCallsAreConsistent) {
   EXPECT_EQ(cv::norm(first.fixed, again.fixed, cv::NORM_INF), 0.0);
   EXPECT_NE(first.fixed.data, again.fixed.data);  // each map owns its pixels
   EXPECT_EQ(cv::norm(first.fixed, MakeMatcher(Options(true))->Compute(big.left, big.right).fixed,
-                     cv::NORM_INF), 0.0);
+                     cv::NORM_INF),
+            0.0);
 }
 
 TEST_P(ConstantDisparity, ImageSmallerThanTheBlockIsAllUnmatched) {
@@ -421,10 +429,11 @@ TEST(MakeMatcher, SemiGlobalTextureGateRemovesMatchesOnFlatNoise) {
   const RegionError flat_ungated = MedianError(ungated, flat, pair.disparity);
   const RegionError textured_gated = MedianError(gated, textured, pair.disparity);
   const RegionError textured_ungated = MedianError(ungated, textured, pair.disparity);
-  std::printf("flat half matched: %.2f %% gated, %.2f %% ungated; textured half matched %.2f %% "
-              "(median error %.3f px) gated, %.2f %% ungated\n",
-              100 * flat_gated.matched, 100 * flat_ungated.matched, 100 * textured_gated.matched,
-              textured_gated.median_error, 100 * textured_ungated.matched);
+  std::printf(
+      "flat half matched: %.2f %% gated, %.2f %% ungated; textured half matched %.2f %% "
+      "(median error %.3f px) gated, %.2f %% ungated\n",
+      100 * flat_gated.matched, 100 * flat_ungated.matched, 100 * textured_gated.matched,
+      textured_gated.median_error, 100 * textured_ungated.matched);
   EXPECT_LT(flat_gated.matched, 0.02);
   EXPECT_GT(textured_gated.matched, 0.90);
   EXPECT_LT(textured_gated.median_error, 0.25);
@@ -484,11 +493,11 @@ TEST(MakeMatcher, SemiGlobalTextureGateClearsTheSyntheticSky) {
   };
   const SceneStats gated = measure(SemiGlobalOptions().texture_threshold);
   const SceneStats ungated = measure(0);
-  std::printf("open sky matched: %.3f %% gated, %.2f %% ungated; obstacles matched %.2f %% / "
-              "%.2f %%, within 1 px %.2f %% / %.2f %%\n",
-              100 * gated.open_sky_matched, 100 * ungated.open_sky_matched,
-              100 * gated.obstacle_matched, 100 * ungated.obstacle_matched,
-              100 * gated.obstacle_correct, 100 * ungated.obstacle_correct);
+  std::printf(
+      "open sky matched: %.3f %% gated, %.2f %% ungated; obstacles matched %.2f %% / "
+      "%.2f %%, within 1 px %.2f %% / %.2f %%\n",
+      100 * gated.open_sky_matched, 100 * ungated.open_sky_matched, 100 * gated.obstacle_matched,
+      100 * ungated.obstacle_matched, 100 * gated.obstacle_correct, 100 * ungated.obstacle_correct);
   EXPECT_LT(gated.open_sky_matched, 0.001);
   EXPECT_GT(ungated.open_sky_matched, 0.1);
   EXPECT_GT(gated.obstacle_matched, 0.95);
@@ -521,8 +530,8 @@ cv::Mat1b XSobelPrefilter(const cv::Mat1b& image, int cap) {
         out(y, x) = static_cast<uchar>(cap);
         continue;
       }
-      const int d = (image(y0, x + 1) - image(y0, x - 1)) + 2 * (image(y, x + 1) - image(y, x - 1)) +
-                    (image(y2, x + 1) - image(y2, x - 1));
+      const int d = (image(y0, x + 1) - image(y0, x - 1)) +
+                    2 * (image(y, x + 1) - image(y, x - 1)) + (image(y2, x + 1) - image(y2, x - 1));
       out(y, x) = static_cast<uchar>(std::clamp(d, -cap, cap) + cap);
     }
   }
@@ -540,7 +549,8 @@ cv::Mat1i NaiveSad(const cv::Mat1b& left, const cv::Mat1b& right, int block, int
       for (int d = 0; d < num_disparities; ++d) {
         int sad = 0;
         for (int dy = -r; dy <= r; ++dy) {
-          for (int dx = -r; dx <= r; ++dx) sad += std::abs(left(y + dy, x + dx) - right(y + dy, x + dx - d));
+          for (int dx = -r; dx <= r; ++dx)
+            sad += std::abs(left(y + dy, x + dx) - right(y + dy, x + dx - d));
         }
         if (sad < best) {
           best = sad;
@@ -582,7 +592,8 @@ TEST(MakeMatcher, BlockMatchingAgreesWithNaiveSad) {
   bm.pad_left = false;
   ASSERT_THAT(options.Validate(), IsEmpty());
   const DisparityMap map = MakeMatcher(options)->Compute(left, right);
-  const cv::Mat1i naive = NaiveSad(XSobelPrefilter(left, kCap), XSobelPrefilter(right, kCap), kBlock, kNum);
+  const cv::Mat1i naive =
+      NaiveSad(XSobelPrefilter(left, kCap), XSobelPrefilter(right, kCap), kBlock, kNum);
 
   int compared = 0, agree = 0, naive_valid = 0;
   for (int y = 0; y < kHeight; ++y) {
@@ -637,7 +648,8 @@ TEST(MedianDisparityInMask, ExactMedianOfTheLabelAboveTheFloor) {
   }
   map.fixed(0, 0) = 500;  // another label
   int valid = -1;
-  std::optional<double> median = MedianDisparityInMask(map, labels, 3, cv::Rect(0, 0, 6, 4), 1.5, &valid);
+  std::optional<double> median =
+      MedianDisparityInMask(map, labels, 3, cv::Rect(0, 0, 6, 4), 1.5, &valid);
   ASSERT_TRUE(median.has_value());
   EXPECT_EQ(valid, 4);
   EXPECT_DOUBLE_EQ(*median, 4.5);  // even count: mean of 4 and 5
@@ -653,7 +665,8 @@ TEST(MedianDisparityInMask, ExactMedianOfTheLabelAboveTheFloor) {
   median = MedianDisparityInMask(map, labels, 3, cv::Rect(3, 0, 10, 10), 1.5, &valid);
   EXPECT_EQ(valid, 3);  // 5, 7 and 9 px
   EXPECT_DOUBLE_EQ(*median, 7.0);
-  EXPECT_FALSE(MedianDisparityInMask(map, labels, 8, cv::Rect(0, 0, 6, 4), 1.5, &valid).has_value());
+  EXPECT_FALSE(
+      MedianDisparityInMask(map, labels, 8, cv::Rect(0, 0, 6, 4), 1.5, &valid).has_value());
   EXPECT_EQ(valid, 0);
 }
 
@@ -665,7 +678,8 @@ TEST(MedianDisparityInMask, AgreesWithSortingOnRandomMaps) {
     rng.fill(map.fixed, cv::RNG::UNIFORM, -40, 1200);
     cv::Mat1i labels(map.fixed.size());
     rng.fill(labels, cv::RNG::UNIFORM, 0, 3);
-    const cv::Rect box(rng.uniform(0, 20), rng.uniform(0, 15), rng.uniform(1, 40), rng.uniform(1, 30));
+    const cv::Rect box(rng.uniform(0, 20), rng.uniform(0, 15), rng.uniform(1, 40),
+                       rng.uniform(1, 30));
     const double floor_px = rng.uniform(0.0, 10.0);
     std::vector<int> values;
     for (int y = box.y; y < std::min(box.y + box.height, 37); ++y) {
@@ -676,14 +690,16 @@ TEST(MedianDisparityInMask, AgreesWithSortingOnRandomMaps) {
       }
     }
     int valid = -1;
-    const std::optional<double> median = MedianDisparityInMask(map, labels, 1, box, floor_px, &valid);
+    const std::optional<double> median =
+        MedianDisparityInMask(map, labels, 1, box, floor_px, &valid);
     ASSERT_EQ(valid, static_cast<int>(values.size())) << "trial " << trial;
     if (values.empty()) {
       EXPECT_FALSE(median.has_value());
       continue;
     }
     std::sort(values.begin(), values.end());
-    const double expected = 0.5 * (values[(values.size() - 1) / 2] + values[values.size() / 2]) / 16.0;
+    const double expected =
+        0.5 * (values[(values.size() - 1) / 2] + values[values.size() / 2]) / 16.0;
     ASSERT_TRUE(median.has_value());
     EXPECT_DOUBLE_EQ(*median, expected) << "trial " << trial;
   }

@@ -195,7 +195,8 @@ TEST(Tracker, OccludedTargetKeepsItsIdAndCoastsThroughTheGap) {
                                  kCamera.cy + kCamera.f_px * truth.y() / truth.z());
       EXPECT_LT(cv::norm(t.detection.centroid_px - truth_px), 1.5) << "frame " << k;
       // The full size, scaled with the predicted depth (the obstacle closes in).
-      EXPECT_NEAR(t.detection.bbox.width, box_size.width * depth_before_gap / t.position_cam_m[2], 1.5);
+      EXPECT_NEAR(t.detection.bbox.width, box_size.width * depth_before_gap / t.position_cam_m[2],
+                  1.5);
       EXPECT_NEAR(t.detection.bbox.height, box_size.height * depth_before_gap / t.position_cam_m[2],
                   1.5);
       const cv::Point2d box_centre(t.detection.bbox.x + t.detection.bbox.width / 2.0,
@@ -437,10 +438,10 @@ struct CollisionErrors {
   Eigen::Vector2d rms_normalised = Eigen::Vector2d::Zero();    // RMS of error / tolerance
   Eigen::Vector2d last_rms = Eigen::Vector2d::Zero();          // RMS error at the last frame
   Eigen::Vector2d last_tolerance = Eigen::Vector2d::Zero();    // mean tolerance at the last frame
-  double mean_rate_error_mps = 0;  // mean of (range rate - truth) over runs and frames
+  double mean_rate_error_mps = 0;        // mean of (range rate - truth) over runs and frames
   double rate_error_over_sigma_rms = 0;  // RMS of (range rate - truth) / range_rate_sigma_mps
-  double smoothed_over_raw = 0;    // RMS range error, smoothed / raw
-  bool always_closing = true;      // a time to collision at every checked frame
+  double smoothed_over_raw = 0;          // RMS range error, smoothed / raw
+  bool always_closing = true;            // a time to collision at every checked frame
 };
 
 CollisionErrors MeasureCollision(const Target& target, int frames, int first_frame, int runs) {
@@ -489,8 +490,7 @@ CollisionErrors MeasureCollision(const Target& target, int frames, int first_fra
             << e.rms_normalised.transpose() << "; last frame: rms error " << e.last_rms.transpose()
             << ", tolerance " << e.last_tolerance.transpose() << "; mean range-rate error "
             << e.mean_rate_error_mps << " m/s, rms over its sigma " << e.rate_error_over_sigma_rms
-            << "; smoothed/raw range RMS " << e.smoothed_over_raw
-            << "\n";
+            << "; smoothed/raw range RMS " << e.smoothed_over_raw << "\n";
   return e;
 }
 

@@ -93,8 +93,8 @@ std::string DescribeSwitches(const TrackingRun& run) {
       for (const auto& [t, track] : run.frames[k].scored.matches) {
         if (t == truth) {
           if (!out.empty()) out += ",";
-          out += " frame " + std::to_string(k) + ": truth " + std::to_string(truth) +
-                 " -> track " + std::to_string(track);
+          out += " frame " + std::to_string(k) + ": truth " + std::to_string(truth) + " -> track " +
+                 std::to_string(track);
         }
       }
     }
@@ -131,9 +131,8 @@ TEST(TrackingScenarios, EveryObstacleInViewShowsAtLeastEightPixelsOfDisparity) {
     for (const drivers::FrameTruth& truth : r.truths) {
       for (const drivers::ObstacleTruth& o : truth.obstacles) {
         if (o.visible_px == 0) continue;
-        EXPECT_GE(kFB / o.depth_m, 8.0)
-            << s.name << " frame " << truth.index << " obstacle " << o.name << " at " << o.depth_m
-            << " m";
+        EXPECT_GE(kFB / o.depth_m, 8.0) << s.name << " frame " << truth.index << " obstacle "
+                                        << o.name << " at " << o.depth_m << " m";
       }
     }
   }
@@ -202,7 +201,8 @@ TEST(TrackingScenarios, CrossingOcclusionHidesTheDroneForTenToThirteenFramesInVi
   };
   bool before = false, after = false;
   for (int k = 0; k < longest_first; ++k) before = before || expected_at(k);
-  for (int k = last + 1; k < static_cast<int>(r.truths.size()); ++k) after = after || expected_at(k);
+  for (int k = last + 1; k < static_cast<int>(r.truths.size()); ++k)
+    after = after || expected_at(k);
   EXPECT_TRUE(before);
   EXPECT_TRUE(after);
 }
@@ -336,8 +336,8 @@ TEST(TrackerOnScenarios, EntriesExitsTracksEveryTrajectoryWithNeverReusedIds) {
     const int matched = s.matched_frames.count(id) ? s.matched_frames.at(id) : 0;
     // Missing at most 6 frames: the two before confirmation (confirm_hits 3) and the first or
     // last frames of an entry or exit, where the blob is cut by the border.
-    EXPECT_GE(matched, frames - 6) << "truth " << id << " matched " << matched << " of " << frames
-                                   << " frames";
+    EXPECT_GE(matched, frames - 6)
+        << "truth " << id << " matched " << matched << " of " << frames << " frames";
   }
   // Ids strictly increase with creation and never come back once a track is gone.
   std::uint64_t highest = 0;

@@ -12,8 +12,8 @@
 namespace stevi::server {
 namespace {
 
-using ::testing::HasSubstr;
 using test_support::FlakySource;
+using ::testing::HasSubstr;
 
 struct Collector {
   std::mutex mu;
@@ -33,9 +33,8 @@ struct Collector {
   }
   bool WaitForSourceIndex(int64_t index) {
     std::unique_lock lock(mu);
-    return cv.wait_for(lock, std::chrono::seconds(60), [&] {
-      return !results.empty() && results.back()->source_index == index;
-    });
+    return cv.wait_for(lock, std::chrono::seconds(60),
+                       [&] { return !results.empty() && results.back()->source_index == index; });
   }
 };
 
@@ -124,9 +123,9 @@ TEST(Engine, ARigSwappedMidRunRangesEveryLaterFrame) {
   ASSERT_TRUE(engine.ok()) << engine.error().message;
   (*engine)->Start();
   ASSERT_TRUE(collector.WaitForCount(5));
-  const auto doubled = std::make_shared<const geometry::StereoRig>(geometry::StereoRig::Ideal(
-      old_rig->image_size(), old_rig->f_px(), 2 * old_rig->baseline_m(), old_rig->cx(), old_rig->cy(),
-      "doubled"));
+  const auto doubled = std::make_shared<const geometry::StereoRig>(
+      geometry::StereoRig::Ideal(old_rig->image_size(), old_rig->f_px(), 2 * old_rig->baseline_m(),
+                                 old_rig->cx(), old_rig->cy(), "doubled"));
   (*engine)->SetRig(doubled);
   EXPECT_EQ((*engine)->rig(), doubled);
   ASSERT_TRUE(collector.WaitForSourceIndex(kFrames - 1));

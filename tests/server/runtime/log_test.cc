@@ -12,8 +12,7 @@ TEST(FormatLogFields, PlainValuesBareOthersQuotedAndEscaped) {
   EXPECT_EQ(FormatLogFields(LogLevel::kWarning, "source_state",
                             {{"source", "aravis A + B"}, {"error", ""}}),
             "level=warning event=source_state source=\"aravis A + B\" error=\"\"");
-  EXPECT_EQ(FormatLogFields(LogLevel::kError, "start_failed",
-                            {{"error", "a=\"b\"\\c\nnext line"}}),
+  EXPECT_EQ(FormatLogFields(LogLevel::kError, "start_failed", {{"error", "a=\"b\"\\c\nnext line"}}),
             "level=error event=start_failed error=\"a=\\\"b\\\"\\\\c\\nnext line\"");
   // Whatever a value holds, the line stays one line.
   const std::string line =

@@ -98,14 +98,15 @@ TEST(MovedRigPose, MovesAlongTheHeadingAsTheGeodesicSays) {
   const geo::VehicleState start = SyntheticRigPose(10);
   const geo::VehicleState moved = MovedRigPose(start, cv::Vec3d(200, 0, 1000), cv::Vec3d(0, 0, 50));
   double distance = 0, azimuth = 0, azimuth_end = 0;
-  GeographicLib::Geodesic::WGS84().Inverse(start.lat_deg, start.lon_deg, moved.lat_deg, moved.lon_deg,
-                                           distance, azimuth, azimuth_end);
+  GeographicLib::Geodesic::WGS84().Inverse(start.lat_deg, start.lon_deg, moved.lat_deg,
+                                           moved.lon_deg, distance, azimuth, azimuth_end);
   const double expected_distance = std::hypot(200.0, 1000.0);
   // The local tangent plane curves away from the ellipsoid: at 1 km, by well under a millimetre
   // horizontally, and the height rises by d^2 / (2 R) = 8 cm.
   EXPECT_NEAR(distance, expected_distance, 0.01);
   EXPECT_NEAR(azimuth, 43 + std::atan2(200.0, 1000.0) * 180 / M_PI, 1e-3);
-  EXPECT_NEAR(moved.alt_m - start.alt_m, expected_distance * expected_distance / (2 * 6.371e6), 0.01);
+  EXPECT_NEAR(moved.alt_m - start.alt_m, expected_distance * expected_distance / (2 * 6.371e6),
+              0.01);
   EXPECT_NEAR(moved.velocity_ned_mps.x(), 50 * std::cos(43 * M_PI / 180), 1e-9);
   EXPECT_NEAR(moved.velocity_ned_mps.y(), 50 * std::sin(43 * M_PI / 180), 1e-9);
   EXPECT_NEAR(moved.velocity_ned_mps.z(), 0, 1e-12);
