@@ -687,18 +687,20 @@ std::vector<std::string> CalibrationOptions::Validate() const {
 
 namespace {
 
-Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs,
-                                         const CalibrationOptions& options) {
-  const int n = static_cast<int>(pairs.size());
-  DetectedPairs out;
-  out.pairs_given = n;
+// Per-pair rejections so far, by pair index.
+using Rejections = std::vector<std::optional<RejectedPair>>;
 
-  // 1. Sizes from the headers; per-pair problems reject the pair.
-  std::vector<std::optional<RejectedPair>> rejection(n);
+void Reject(const std::vector<ImagePair>& pairs, Rejections& rejection, int i, RejectReason reason,
+            std::string detail) {
+  rejection[i] = RejectedPair{i, pairs[i].name, reason, std::move(detail)};
+}
+
+// Steps 1 and 2: sizes from the headers, then the calibration's image size, the one most pairs
+// share (the earliest on a tie). Pairs that cannot be probed or differ in size are rejected.
+cv::Size CommonImageSize(const std::vector<ImagePair>& pairs, const CalibrationOptions& options,
+                         Rejections& rejection) {
+  const int n = static_cast<int>(pairs.size());
   std::vector<cv::Size> sizes(n);
-  auto reject = [&](int i, RejectReason reason, std::string detail) {
-    rejection[i] = RejectedPair{i, pairs[i].name, reason, std::move(detail)};
-  };
   std::map<std::pair<int, int>, int> size_counts;
   std::vector<std::pair<int, int>> size_order;  // first appearance, for ties
   for (int i = 0; i < n; ++i) {
@@ -709,11 +711,11 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs,
       if (left.reason) detail = "left image: " + left.problem;
       if (right.reason)
         detail += (detail.empty() ? "" : "; ") + std::string("right image: ") + right.problem;
-      reject(i, left.reason ? *left.reason : *right.reason, detail);
+      Reject(pairs, rejection, i, left.reason ? *left.reason : *right.reason, detail);
       continue;
     }
     if (*left.size != *right.size) {
-      reject(i, RejectReason::kSizeMismatch,
+      Reject(pairs, rejection, i, RejectReason::kSizeMismatch,
              "left image is " + SizeText(*left.size) + ", right image is " + SizeText(*right.size));
       continue;
     }
@@ -721,7 +723,6 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs,
     const std::pair<int, int> key(sizes[i].width, sizes[i].height);
     if (size_counts[key]++ == 0) size_order.push_back(key);
   }
-  // 2. The calibration's image size: the one most pairs share (the earliest on a tie).
   std::pair<int, int> common(0, 0);
   int best = 0;
   for (const auto& key : size_order) {
@@ -730,20 +731,28 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs,
       common = key;
     }
   }
-  out.image_size = cv::Size(common.first, common.second);
+  const cv::Size image_size(common.first, common.second);
   for (int i = 0; i < n; ++i) {
-    if (!rejection[i] && sizes[i] != out.image_size) {
-      reject(i, RejectReason::kSizeDiffers,
+    if (!rejection[i] && sizes[i] != image_size) {
+      Reject(pairs, rejection, i, RejectReason::kSizeDiffers,
              "images of " + SizeText(sizes[i]) + ", while " + std::to_string(best) + " pairs are " +
-                 SizeText(out.image_size));
+                 SizeText(image_size));
     }
   }
+  return image_size;
+}
 
-  // 3. Decode and detect, one task per image.
-  struct ImageOutcome {
-    std::optional<Error> decode_error;
-    Result<std::vector<cv::Point2f>> corners = Error{ErrorCode::kInternal, "not run"};
-  };
+struct ImageOutcome {
+  std::optional<Error> decode_error;
+  Result<std::vector<cv::Point2f>> corners = Error{ErrorCode::kInternal, "not run"};
+};
+
+// Step 3: decode and detect, one task per image of every pair not yet rejected. Slot 2i is pair
+// i's left image, 2i+1 its right.
+std::vector<ImageOutcome> DetectCorners(const std::vector<ImagePair>& pairs,
+                                        const CalibrationOptions& options,
+                                        const Rejections& rejection) {
+  const int n = static_cast<int>(pairs.size());
   std::vector<ImageOutcome> outcomes(2 * static_cast<std::size_t>(n));
   std::vector<int> tasks;
   for (int i = 0; i < n; ++i) {
@@ -770,7 +779,15 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs,
       }
     }
   });
+  return outcomes;
+}
 
+// Step 4: a pair is used when both images decoded and showed the board; otherwise it is rejected
+// with the reason.
+void JudgeDetections(const std::vector<ImagePair>& pairs, const CalibrationOptions& options,
+                     const std::vector<ImageOutcome>& outcomes, Rejections& rejection,
+                     DetectedPairs& out) {
+  const int n = static_cast<int>(pairs.size());
   for (int i = 0; i < n; ++i) {
     if (rejection[i]) continue;
     const ImageOutcome& left = outcomes[2 * i];
@@ -785,7 +802,7 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs,
         if (!detail.empty()) detail += "; ";
         detail += (side == &left ? "left image: " : "right image: ") + side->decode_error->message;
       }
-      reject(i, reason, detail);
+      Reject(pairs, rejection, i, reason, detail);
       continue;
     }
     const bool found_left = left.corners.ok(), found_right = right.corners.ok();
@@ -800,15 +817,27 @@ Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs,
                  : " (" + o.corners.error().message + ")";
     };
     if (!found_left && !found_right) {
-      reject(i, RejectReason::kNoBoard, missing + "either image" + why(left));
+      Reject(pairs, rejection, i, RejectReason::kNoBoard, missing + "either image" + why(left));
     } else if (!found_left) {
-      reject(i, RejectReason::kNoBoardLeft, missing + "the left image" + why(left));
+      Reject(pairs, rejection, i, RejectReason::kNoBoardLeft,
+             missing + "the left image" + why(left));
     } else {
-      reject(i, RejectReason::kNoBoardRight, missing + "the right image" + why(right));
+      Reject(pairs, rejection, i, RejectReason::kNoBoardRight,
+             missing + "the right image" + why(right));
     }
   }
-  for (int i = 0; i < n; ++i) {
-    if (rejection[i]) out.rejected.push_back(*rejection[i]);
+}
+
+Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs,
+                                         const CalibrationOptions& options) {
+  DetectedPairs out;
+  out.pairs_given = static_cast<int>(pairs.size());
+  Rejections rejection(pairs.size());
+  out.image_size = CommonImageSize(pairs, options, rejection);
+  const std::vector<ImageOutcome> outcomes = DetectCorners(pairs, options, rejection);
+  JudgeDetections(pairs, options, outcomes, rejection, out);
+  for (const std::optional<RejectedPair>& r : rejection) {
+    if (r) out.rejected.push_back(*r);
   }
   return out;
 }
