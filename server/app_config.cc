@@ -1,5 +1,7 @@
 #include "server/app_config.h"
 
+#include "server/field_mapping.h"
+
 #include "drivers/synthetic/chessboard_source.h"
 
 #include <google/protobuf/io/tokenizer.h>
@@ -268,6 +270,42 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
   return Status::Ok();
 }
 
+drivers::AravisOptions AravisOptionsFrom(const v1::SourceConfig& source,
+                                         std::vector<std::string>& problems) {
+  drivers::AravisOptions options;
+  options.left_id = source.left();
+  options.right_id = source.right();
+  if (source.has_fps()) options.frame_rate_hz = source.fps();
+  AppendPrefixed(problems, "", FieldsFromProto(source.aravis(), options, "source.aravis."));
+  return options;
+}
+
+drivers::SyntheticOptions SyntheticOptionsFrom(const v1::SourceConfig& source,
+                                               std::vector<std::string>& problems) {
+  drivers::SyntheticOptions options;
+  if (std::optional<drivers::Scenario> scenario = FindScenario(source.synthetic().scene())) {
+    options = scenario->options;  // its rig, noise, seed and scene; the loop repeats it
+  }
+  options.fps = source.has_fps() ? source.fps() : kDefaultFps;
+  AppendPrefixed(problems, "", FieldsFromProto(source.synthetic(), options, "source.synthetic."));
+  return options;
+}
+
+drivers::ChessboardSourceOptions ChessboardOptionsFrom(const v1::SourceConfig& source,
+                                                       std::vector<std::string>& problems) {
+  drivers::ChessboardSourceOptions options;
+  options.fps = source.has_fps() ? source.fps() : kDefaultFps;
+  AppendPrefixed(problems, "", FieldsFromProto(source.synthetic(), options, "source.synthetic."));
+  return options;
+}
+
+drivers::ReplayOptions ReplayOptionsFrom(const v1::SourceConfig& source,
+                                         std::vector<std::string>& problems) {
+  drivers::ReplayOptions options;
+  AppendPrefixed(problems, "", FieldsFromProto(source.replay(), options, "source.replay."));
+  return options;
+}
+
 namespace {
 
 // ValidateServerConfig's parts, each appending to `problems`.
@@ -327,45 +365,13 @@ void ValidateAravisSource(const v1::SourceConfig& source, std::vector<std::strin
     problems.push_back("source.right: must be another camera than source.left (both '" +
                        source.left() + "')");
   }
-  const v1::AravisConfig& a = source.aravis();
-  const std::string sides = "must be " + std::to_string(drivers::kMinRoiPx) + ".." +
-                            std::to_string(drivers::kMaxRoiPx) + " pixels";
-  if (a.has_width() && (a.width() < drivers::kMinRoiPx || a.width() > drivers::kMaxRoiPx)) {
-    problems.push_back("source.aravis.width: " + sides + " (got " + std::to_string(a.width()) +
-                       ")");
-  }
-  if (a.has_height() && (a.height() < drivers::kMinRoiPx || a.height() > drivers::kMaxRoiPx)) {
-    problems.push_back("source.aravis.height: " + sides + " (got " + std::to_string(a.height()) +
-                       ")");
-  }
-  if (a.has_frame_rate_hz() && !(a.frame_rate_hz() > 0 && a.frame_rate_hz() <= 1000)) {
-    problems.push_back("source.aravis.frame_rate_hz: must be in (0, 1000] (got " +
-                       std::to_string(a.frame_rate_hz()) + ")");
-  }
-  if (a.has_exposure_us() && !(a.exposure_us() > 0 && a.exposure_us() < 1e8)) {
-    problems.push_back("source.aravis.exposure_us: must be in (0, 1e8) (got " +
-                       std::to_string(a.exposure_us()) + ")");
-  }
-  if (a.has_gain_db() && !std::isfinite(a.gain_db())) {
-    problems.push_back("source.aravis.gain_db: must be finite");
-  }
-  if (a.trigger() == v1::TRIGGER_MODE_HARDWARE && a.trigger_line().empty()) {
+  // The driver's own checks of each field (their ranges live in drivers/aravis), and the trigger
+  // line a hardware trigger needs; the rest (exposure against the frame period, the pixel format)
+  // is checked when the cameras open.
+  drivers::AravisOptions options = AravisOptionsFrom(source, problems);
+  AppendPrefixed(problems, "source.aravis.", fields::Check(options));
+  if (options.trigger.mode == drivers::TriggerMode::kHardware && options.trigger.line.empty()) {
     problems.push_back("source.aravis.trigger_line: required with a hardware trigger (e.g. Line0)");
-  }
-  if (a.trigger() < v1::TRIGGER_MODE_UNSPECIFIED || a.trigger() > v1::TRIGGER_MODE_HARDWARE) {
-    problems.push_back("source.aravis.trigger: unknown value " + std::to_string(a.trigger()));
-  }
-  if (a.has_pair_tolerance_ms() && !(a.pair_tolerance_ms() > 0 && a.pair_tolerance_ms() <= 1000)) {
-    problems.push_back("source.aravis.pair_tolerance_ms: must be in (0, 1000] (got " +
-                       std::to_string(a.pair_tolerance_ms()) + ")");
-  }
-  if (a.has_buffers() && (a.buffers() < 2 || a.buffers() > 64)) {
-    problems.push_back("source.aravis.buffers: must be 2..64 (got " + std::to_string(a.buffers()) +
-                       ")");
-  }
-  if (a.timestamps() < v1::TIMESTAMP_SOURCE_UNSPECIFIED ||
-      a.timestamps() > v1::TIMESTAMP_SOURCE_HOST) {
-    problems.push_back("source.aravis.timestamps: unknown value " + std::to_string(a.timestamps()));
   }
 }
 
@@ -378,11 +384,7 @@ void ValidateReplaySource(const v1::SourceConfig& source, std::vector<std::strin
         "source: left, right and calibration do not apply to a replay (the "
         "recording holds its frames and calibration)");
   }
-  const v1::ReplayConfig& r = source.replay();
-  if (r.has_rate() && !(r.rate() >= 0 && r.rate() <= 1000)) {
-    problems.push_back("source.replay.rate: must be in [0, 1000], 0 = as fast as possible (got " +
-                       std::to_string(r.rate()) + ")");
-  }
+  AppendPrefixed(problems, "source.replay.", ReplayOptionsFrom(source, problems).Validate());
 }
 
 void ValidateSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
@@ -492,33 +494,9 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig
                                                           bool loop_images) {
   const double fps = config.has_fps() ? config.fps() : kDefaultFps;
   if (config.kind() == v1::SOURCE_KIND_ARAVIS) {
-    const v1::AravisConfig& a = config.aravis();
-    drivers::AravisOptions options;
-    options.left_id = config.left();
-    options.right_id = config.right();
-    if (a.has_width()) options.roi_width = static_cast<int>(a.width());
-    if (a.has_height()) options.roi_height = static_cast<int>(a.height());
-    options.frame_rate_hz = a.has_frame_rate_hz() ? a.frame_rate_hz()
-                            : config.has_fps()    ? config.fps()
-                                                  : 30.0;
-    if (a.has_exposure_us()) options.exposure_us = a.exposure_us();
-    if (a.has_gain_db()) options.gain_db = a.gain_db();
-    switch (a.trigger()) {
-      case v1::TRIGGER_MODE_SOFTWARE: options.trigger.mode = drivers::TriggerMode::kSoftware; break;
-      case v1::TRIGGER_MODE_HARDWARE:
-        options.trigger.mode = drivers::TriggerMode::kHardware;
-        options.trigger.line = a.trigger_line();
-        break;
-      default: options.trigger.mode = drivers::TriggerMode::kFreeRun; break;
-    }
-    if (a.has_pair_tolerance_ms()) {
-      options.pair_tolerance_ns = static_cast<int64_t>(a.pair_tolerance_ms() * 1e6);
-    }
-    if (a.has_buffers()) options.buffers = static_cast<int>(a.buffers());
-    if (a.has_pixel_format()) options.pixel_format = a.pixel_format();
-    options.timestamps = a.timestamps() == v1::TIMESTAMP_SOURCE_HOST
-                             ? drivers::TimestampSource::kHost
-                             : drivers::TimestampSource::kCamera;
+    std::vector<std::string> problems;
+    drivers::AravisOptions options = AravisOptionsFrom(config, problems);
+    if (!problems.empty()) return Error::Invalid(problems);
     std::shared_ptr<const geometry::StereoRig> rig;
     if (!config.calibration().empty()) {
       Result<geometry::StereoRig> loaded = geometry::StereoRig::FromFile(config.calibration());
@@ -539,9 +517,9 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig
     return std::unique_ptr<drivers::StereoSource>(std::move(source).value());
   }
   if (config.kind() == v1::SOURCE_KIND_REPLAY) {
-    drivers::ReplayOptions options;
-    if (config.replay().has_rate()) options.rate = config.replay().rate();
-    options.loop = config.replay().loop();
+    std::vector<std::string> problems;
+    drivers::ReplayOptions options = ReplayOptionsFrom(config, problems);
+    if (!problems.empty()) return Error::Invalid(problems);
     Result<std::unique_ptr<drivers::ReplaySource>> source =
         drivers::ReplaySource::Open(config.replay().dir(), options);
     if (!source.ok()) {
@@ -562,14 +540,9 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig
   }
   const v1::SyntheticConfig& s = config.synthetic();
   if (s.scene() == "chessboard") {
-    drivers::ChessboardSourceOptions board;
-    if (s.has_width()) board.width = s.width();
-    if (s.has_height()) board.height = s.height();
-    if (s.has_f_px()) board.f_px = s.f_px();
-    if (s.has_baseline_m()) board.baseline_m = s.baseline_m();
-    if (s.has_noise_sigma()) board.noise_sigma = s.noise_sigma();
-    if (s.has_seed()) board.seed = s.seed();
-    board.fps = fps;
+    std::vector<std::string> problems;
+    drivers::ChessboardSourceOptions board = ChessboardOptionsFrom(config, problems);
+    if (!problems.empty()) return Error::Invalid(problems);
     Result<std::unique_ptr<drivers::ChessboardSource>> source =
         drivers::ChessboardSource::Open(std::move(board));
     if (!source.ok()) {
@@ -579,18 +552,9 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig
     }
     return std::unique_ptr<drivers::StereoSource>(std::move(source).value());
   }
-  drivers::SyntheticOptions options;
-  if (std::optional<drivers::Scenario> scenario = FindScenario(s.scene())) {
-    options = scenario->options;  // its rig, noise, seed and scene; the loop repeats it
-  }
-  if (s.has_width()) options.width = s.width();
-  if (s.has_height()) options.height = s.height();
-  if (s.has_f_px()) options.f_px = s.f_px();
-  if (s.has_baseline_m()) options.baseline_m = s.baseline_m();
-  if (s.has_noise_sigma()) options.noise_sigma = s.noise_sigma();
-  if (s.has_seed()) options.seed = s.seed();
-  if (s.has_loop_frames()) options.loop_frames = s.loop_frames();
-  options.fps = fps;
+  std::vector<std::string> problems;
+  drivers::SyntheticOptions options = SyntheticOptionsFrom(config, problems);
+  if (!problems.empty()) return Error::Invalid(problems);
   Result<std::unique_ptr<drivers::SyntheticSource>> source =
       drivers::OpenSyntheticSource(std::move(options));
   if (!source.ok()) {

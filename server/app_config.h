@@ -13,6 +13,9 @@
 #include "core/common/error.h"
 #include "core/pipeline/config.h"
 #include "drivers/stereo_source.h"
+#include "drivers/aravis/aravis_source.h"
+#include "drivers/recording/replay_source.h"
+#include "drivers/synthetic/chessboard_source.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/runtime/pose_source.h"
 #include "stevi/v1/config.pb.h"
@@ -64,6 +67,19 @@ Result<std::unique_ptr<PoseSource>> MakePoseSource(
 
 // A named evaluation or tracking scenario (drivers/synthetic), to play live with --scene NAME.
 std::optional<drivers::Scenario> FindScenario(const std::string& name);
+
+// The drivers' options of a source config: its fields over the drivers' defaults (the synthetic
+// ones over the named scenario's, the frame rates from source.fps), mapped by name through the
+// drivers' field lists. Problems of the proto itself (an unknown enum value) are appended, named
+// "source.KIND.FIELD"; ranges are the options' Validate().
+drivers::AravisOptions AravisOptionsFrom(const v1::SourceConfig& source,
+                                         std::vector<std::string>& problems);
+drivers::SyntheticOptions SyntheticOptionsFrom(const v1::SourceConfig& source,
+                                               std::vector<std::string>& problems);
+drivers::ChessboardSourceOptions ChessboardOptionsFrom(const v1::SourceConfig& source,
+                                                       std::vector<std::string>& problems);
+drivers::ReplayOptions ReplayOptionsFrom(const v1::SourceConfig& source,
+                                         std::vector<std::string>& problems);
 
 // Opens the configured source. `loop_images` is what an image source does at its end when the
 // config does not say (the server loops; stevi-process does not).

@@ -1,7 +1,5 @@
 #include "core/detection/canonical.h"
 
-#include "core/common/error.h"
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -37,18 +35,7 @@ int16_t CandidateFloorFixed(const geometry::StereoRig& rig, const geometry::Rang
 
 }  // namespace
 
-std::vector<std::string> CanonicalOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (!(threshold_range_m >= 0) || !std::isfinite(threshold_range_m)) {
-    problems.push_back("threshold_range_m: must be >= 0 metres (0 = auto)" +
-                       Got(threshold_range_m));
-  }
-  if (open_size_px < 1 || open_size_px % 2 == 0) {
-    problems.push_back("open_size_px: must be odd and >= 1" + Got(open_size_px));
-  }
-  for (const std::string& p : blobs.Validate()) problems.push_back("blobs." + p);
-  return problems;
-}
+std::vector<std::string> CanonicalOptions::Validate() const { return fields::Check(*this); }
 
 std::vector<Detection> DetectCanonical(const stereo::DisparityMap& disparity,
                                        const geometry::StereoRig& rig,

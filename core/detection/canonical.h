@@ -4,6 +4,7 @@
 #include <string>
 #include <vector>
 
+#include "core/common/fields.h"
 #include "core/detection/detection.h"
 #include "core/detection/regions.h"
 #include "core/detection/stereo_blobs.h"
@@ -25,6 +26,19 @@ struct CanonicalOptions {
   StereoBlobOptions blobs;
 
   std::vector<std::string> Validate() const;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.threshold_range_m,
+             Field("threshold_range_m", "m",
+                   "nearer pixels are candidates; 0 = 20 disparity sigmas (5 % of depth)")
+                 .AtLeast(0));
+    v.Number(
+        s.open_size_px,
+        Field("open_size_px", "pixels", "opening at 640 px wide; 1 disables").Odd().AtLeast(1));
+    v.Nested(s.blobs, Field("blobs"));
+  }
 };
 
 // Detects obstacles in a disparity map of the rig's rectified left image.

@@ -1,7 +1,5 @@
 #include "core/detection/ground.h"
 
-#include "core/common/error.h"
-
 #include <algorithm>
 #include <cstdint>
 #include <cmath>
@@ -26,30 +24,7 @@ struct RowMode {
 
 }  // namespace
 
-std::vector<std::string> GroundOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (!(min_row_fraction > 0 && min_row_fraction <= 1)) {
-    problems.push_back("min_row_fraction: must be in (0, 1]" + Got(min_row_fraction));
-  }
-  if (!(min_row_spread >= 0 && min_row_spread <= 1))
-    problems.push_back("min_row_spread: must be in [0, 1]" + Got(min_row_spread));
-  if (min_row_pixels < 1) problems.push_back("min_row_pixels: must be >= 1" + Got(min_row_pixels));
-  if (min_support_rows < 2)
-    problems.push_back("min_support_rows: must be >= 2" + Got(min_support_rows));
-  if (!(min_mode_px >= 0 && min_mode_px <= 64))
-    problems.push_back("min_mode_px: must be in [0, 64]" + Got(min_mode_px));
-  if (!(inlier_px > 0 && inlier_px <= 16))
-    problems.push_back("inlier_px: must be in (0, 16]" + Got(inlier_px));
-  if (!(min_span_px >= 0 && min_span_px <= 256)) {
-    problems.push_back("min_span_px: must be in [0, 256]" + Got(min_span_px));
-  }
-  if (!(margin_px >= 0 && margin_px <= 64))
-    problems.push_back("margin_px: must be in [0, 64]" + Got(margin_px));
-  if (!(margin_fraction >= 0 && margin_fraction <= 1)) {
-    problems.push_back("margin_fraction: must be in [0, 1]" + Got(margin_fraction));
-  }
-  return problems;
-}
+std::vector<std::string> GroundOptions::Validate() const { return fields::Check(*this); }
 
 namespace {
 

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "core/common/fields.h"
 #include "core/stereo/disparity.h"
 
 namespace stevi::detection {
@@ -40,6 +41,39 @@ struct GroundOptions {
   double margin_fraction = 0.15;
 
   std::vector<std::string> Validate() const;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Flag(s.enabled, Field("enabled", "", "model the ground and drop what lies on it"));
+    v.Number(s.min_row_fraction,
+             Field("min_row_fraction", "", "fraction of a row's matched pixels its mode must hold")
+                 .Above(0)
+                 .AtMost(1));
+    v.Number(s.min_row_pixels,
+             Field("min_row_pixels", "pixels", "matched pixels a row's mode must hold").AtLeast(1));
+    v.Number(
+        s.min_row_spread,
+        Field("min_row_spread", "", "fraction of the image width a row's mode must span").In(0, 1));
+    v.Number(
+        s.min_mode_px,
+        Field("min_mode_px", "pixels", "rows whose mode lies below this do not vote").In(0, 64));
+    v.Number(s.min_support_rows,
+             Field("min_support_rows", "", "rows that must support the line").AtLeast(2));
+    v.Number(s.inlier_px,
+             Field("inlier_px", "pixels", "a row's mode this near the line supports it")
+                 .Above(0)
+                 .AtMost(16));
+    v.Number(s.min_span_px,
+             Field("min_span_px", "pixels", "disparity the supporting rows must span").In(0, 256));
+    v.Number(
+        s.margin_px,
+        Field("margin_px", "pixels", "stand-out margin over the ground's disparity").In(0, 64));
+    v.Number(s.margin_fraction,
+             Field("margin_fraction", "",
+                   "stand-out margin as a fraction of the ground's disparity (the larger applies)")
+                 .In(0, 1));
+  }
 };
 
 // d(v) = slope * (v - horizon_row) for v > horizon_row, else 0 (above the horizon there is no

@@ -9,6 +9,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/fields.h"
 #include "core/detection/detection.h"
 #include "core/detection/ground.h"
 #include "core/geometry/range.h"
@@ -68,6 +69,50 @@ struct StereoBlobOptions {
   double max_attached_fraction = 0.5;
 
   std::vector<std::string> Validate() const;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.min_area_px,
+             Field("min_area_px", "pixels", "smaller hypotheses are dropped (processed pixels)")
+                 .AtLeast(1));
+    v.Number(s.max_width_fraction,
+             Field("max_width_fraction", "", "wider blobs (skyline, ground) are dropped")
+                 .Above(0)
+                 .AtMost(1));
+    v.Number(s.min_valid_fraction,
+             Field("min_valid_fraction", "",
+                   "fraction of the mask that needs a trusted disparity at its range")
+                 .In(0, 1));
+    v.Number(
+        s.min_valid_px,
+        Field("min_valid_px", "pixels", "trusted disparities needed at the range").In(0, 100000));
+    v.Number(s.max_disparity_step_px, Field("max_disparity_step_px", "pixels",
+                                            "a wider empty gap splits depth modes; 0 never")
+                                          .In(0, 1000));
+    v.Number(s.join_gap_fraction,
+             Field("join_gap_fraction", "", "pieces this near (of the larger box) join; 0 never")
+                 .In(0, 10));
+    v.Flag(s.join_within_region,
+           Field("join_within_region", "", "pieces in one appearance region join across gaps"));
+    v.Number(s.region_gap_fraction, Field("region_gap_fraction", "",
+                                          "largest gap within a region (of the smaller box); 0 any")
+                                        .In(0, 100));
+    v.Number(s.interior_erode_px,
+             Field("interior_erode_px", "pixels", "mask erosion for the median disparity; 0 none")
+                 .In(0, 50));
+    v.Number(s.max_depth_per_height, Field("max_depth_per_height", "m/m",
+                                           "terrain: steeper depth over height is dropped; 0 off")
+                                         .In(0, 100));
+    v.Number(s.min_terrain_height_m,
+             Field("min_terrain_height_m", "m", "shorter blobs are never judged as terrain")
+                 .In(0, 1000));
+    v.Number(s.max_attached_fraction,
+             Field("max_attached_fraction", "",
+                   "short blobs with more of their ring at their range are dropped; 1 off")
+                 .In(0, 1));
+  }
+
   // The defaults, with join_within_region on and the given region_gap_fraction.
   static StereoBlobOptions JoiningWithinRegions(double gap_fraction) {
     StereoBlobOptions o;

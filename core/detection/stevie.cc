@@ -1,7 +1,5 @@
 #include "core/detection/stevie.h"
 
-#include "core/common/error.h"
-
 #include <algorithm>
 
 #include "core/stereo/matcher.h"
@@ -10,14 +8,7 @@ namespace stevi::detection {
 namespace {
 constexpr double kEdgeReferenceNoise = 2.0;
 }  // namespace
-std::vector<std::string> SteViEOptions::Validate() const {
-  std::vector<std::string> problems;
-  AppendPrefixed(problems, "edges.", edges.Validate());
-  AppendPrefixed(problems, "morphology.", morphology.Validate());
-  AppendPrefixed(problems, "ground.", ground.Validate());
-  AppendPrefixed(problems, "blobs.", blobs.Validate());
-  return problems;
-}
+std::vector<std::string> SteViEOptions::Validate() const { return fields::Check(*this); }
 
 std::vector<Detection> DetectSteViE(const cv::Mat1b& left, const stereo::DisparityMap& disparity,
                                     const geometry::StereoRig& rig,

@@ -8,6 +8,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/fields.h"
 #include "core/detection/detection.h"
 #include "core/detection/ground.h"
 #include "core/detection/regions.h"
@@ -28,6 +29,15 @@ struct SteViEOptions {
 
   // Every problem, prefixed with the sub-struct ("edges.canny_low: ...").
   std::vector<std::string> Validate() const;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Nested(s.edges, Field("edges"));
+    v.Nested(s.morphology, Field("morphology"));
+    v.Nested(s.ground, Field("ground"));
+    v.Nested(s.blobs, Field("blobs"));
+  }
 };
 
 // `left` is the rectified left image (8-bit grey) that `disparity` belongs to.

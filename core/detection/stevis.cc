@@ -1,28 +1,17 @@
 #include "core/detection/stevis.h"
 
-#include "core/common/error.h"
-
-#include <cstdio>
+#include <string>
+#include <vector>
 
 #include <opencv2/imgproc.hpp>
 
 namespace stevi::detection {
 std::vector<std::string> SteViSOptions::Validate() const {
-  std::vector<std::string> problems;
-  AppendPrefixed(problems, "saliency.", saliency.Validate());
-  if (!(saliency_threshold > 0 && saliency_threshold <= 1)) {
-    char buf[96];
-    std::snprintf(buf, sizeof buf, "saliency_threshold: must be in (0, 1] (got %g)",
-                  saliency_threshold);
-    problems.push_back(buf);
+  std::vector<std::string> problems = fields::Check(*this);
+  // The graph's options matter in graph mode only.
+  if (segmentation != Segmentation::kGraph) {
+    std::erase_if(problems, [](const std::string& p) { return p.starts_with("graph."); });
   }
-  if (segmentation == Segmentation::kGraph) AppendPrefixed(problems, "graph.", graph.Validate());
-  AppendPrefixed(problems, "morphology.", morphology.Validate());
-  if (graph_level < 0 || graph_level > 3) {
-    problems.push_back("graph_level: must be in 0..3 (got " + std::to_string(graph_level) + ")");
-  }
-  AppendPrefixed(problems, "ground.", ground.Validate());
-  AppendPrefixed(problems, "blobs.", blobs.Validate());
   return problems;
 }
 

@@ -11,23 +11,9 @@
 
 namespace stevi::extraction {
 std::vector<std::string> EdgeOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (blur_size < 1 || blur_size % 2 == 0 || blur_size > 31) {
-    problems.push_back("blur_size: must be odd and in 1..31 pixels" + Got(blur_size));
-  }
-  if (!(blur_sigma >= 0) || !std::isfinite(blur_sigma)) {
-    problems.push_back("blur_sigma: must be >= 0 pixels" + Got(blur_sigma));
-  }
-  if (!(canny_low >= 0) || !std::isfinite(canny_low)) {
-    problems.push_back("canny_low: must be >= 0" + Got(canny_low));
-  }
-  if (!(canny_high >= 0) || !std::isfinite(canny_high)) {
-    problems.push_back("canny_high: must be >= 0" + Got(canny_high));
-  } else if (canny_high < canny_low) {
+  std::vector<std::string> problems = fields::Check(*this);
+  if (canny_high >= 0 && std::isfinite(canny_high) && canny_high < canny_low) {
     problems.push_back("canny_high: must be >= canny_low" + Got(canny_high));
-  }
-  if (canny_aperture != 3 && canny_aperture != 5 && canny_aperture != 7) {
-    problems.push_back("canny_aperture: must be 3, 5 or 7" + Got(canny_aperture));
   }
   return problems;
 }

@@ -1,7 +1,5 @@
 #include "core/extraction/morphology.h"
 
-#include "core/common/error.h"
-
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -10,9 +8,6 @@
 
 namespace stevi::extraction {
 namespace {
-
-// Largest accepted element size (pixels).
-constexpr int kMaxElementSize = 101;
 
 bool ValidSize(int size) { return size >= 1 && size % 2 == 1 && size <= kMaxElementSize; }
 
@@ -45,20 +40,7 @@ cv::Mat1b Apply(const cv::Mat1b& mask, StructuringShape shape, int size, int op)
 
 }  // namespace
 
-std::vector<std::string> MorphologyOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (shape != StructuringShape::kRect && shape != StructuringShape::kEllipse &&
-      shape != StructuringShape::kCross) {
-    problems.push_back("shape: must be kRect, kEllipse or kCross" + Got(static_cast<int>(shape)));
-  }
-  if (!ValidSize(close_size)) {
-    problems.push_back("close_size: must be odd and in 1..101 pixels" + Got(close_size));
-  }
-  if (!ValidSize(open_size)) {
-    problems.push_back("open_size: must be odd and in 1..101 pixels" + Got(open_size));
-  }
-  return problems;
-}
+std::vector<std::string> MorphologyOptions::Validate() const { return fields::Check(*this); }
 
 cv::Mat1b Dilate(const cv::Mat1b& mask, StructuringShape shape, int size) {
   return Apply(mask, shape, size, cv::MORPH_DILATE);

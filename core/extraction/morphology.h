@@ -7,7 +7,12 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/fields.h"
+
 namespace stevi::extraction {
+
+// Largest accepted structuring element size (pixels).
+inline constexpr int kMaxElementSize = 101;
 
 // Shape of the structuring element (OpenCV's MORPH_RECT, MORPH_ELLIPSE, MORPH_CROSS).
 enum class StructuringShape { kRect, kEllipse, kCross };
@@ -23,6 +28,22 @@ struct MorphologyOptions {
   bool fill_holes = true;
 
   std::vector<std::string> Validate() const;
+
+  static constexpr fields::ChoiceName<StructuringShape> kShapeNames[] = {
+      {StructuringShape::kRect, "rect"},
+      {StructuringShape::kEllipse, "ellipse"},
+      {StructuringShape::kCross, "cross"}};
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Choice(s.shape, Field("shape", "", "shape of the structuring elements"), kShapeNames);
+    v.Number(
+        s.close_size,
+        Field("close_size", "pixels", "closing element; 1 = off").Odd().In(1, kMaxElementSize));
+    v.Number(s.open_size,
+             Field("open_size", "pixels", "opening element; 1 = off").Odd().In(1, kMaxElementSize));
+    v.Flag(s.fill_holes, Field("fill_holes", "", "fill the regions the closed contours enclose"));
+  }
 };
 
 // Single operations on a binary mask (non-zero = foreground) with a size x size element (pixels,

@@ -14,24 +14,14 @@
 namespace stevi::extraction {
 namespace {
 
-constexpr int kMaxLevel = 8;
-constexpr int kMaxRadius = 64;
-
-// Problems of a list of integers that must be non-empty, distinct and within [lo, hi].
-void CheckList(const char* name, const std::vector<int>& values, int lo, int hi,
-               std::vector<std::string>& problems) {
-  if (values.empty()) {
-    problems.push_back(std::string(name) + ": must not be empty");
-    return;
-  }
+// Problems of a list's repeated entries, each named by its index ("scales[1]").
+void CheckDistinct(const char* name, const std::vector<int>& values,
+                   std::vector<std::string>& problems) {
   std::set<int> seen;
   for (size_t i = 0; i < values.size(); ++i) {
-    const std::string field = std::string(name) + "[" + std::to_string(i) + "]";
-    if (values[i] < lo || values[i] > hi) {
-      problems.push_back(field + ": must be in " + std::to_string(lo) + ".." + std::to_string(hi) +
-                         Got(values[i]));
-    } else if (!seen.insert(values[i]).second) {
-      problems.push_back(field + ": repeats an earlier value" + Got(values[i]));
+    if (!seen.insert(values[i]).second) {
+      problems.push_back(std::string(name) + "[" + std::to_string(i) +
+                         "]: repeats an earlier value" + Got(values[i]));
     }
   }
 }
@@ -182,18 +172,9 @@ cv::Mat1f Fuse(const cv::Mat1f& on, const cv::Mat1f& off, int on_peaks, int off_
 }  // namespace
 
 std::vector<std::string> SaliencyOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (centre_level < 0 || centre_level > kMaxLevel) {
-    problems.push_back("centre_level: must be in 0..8" + Got(centre_level));
-  }
-  CheckList("scales", scales, 0, kMaxLevel, problems);
-  CheckList("surround_radii", surround_radii, 1, kMaxRadius, problems);
-  if (!(peak_fraction > 0 && peak_fraction <= 1)) {
-    problems.push_back("peak_fraction: must be in (0, 1]" + Got(peak_fraction));
-  }
-  if (!(min_contrast >= 0) || !std::isfinite(min_contrast)) {
-    problems.push_back("min_contrast: must be >= 0 grey levels" + Got(min_contrast));
-  }
+  std::vector<std::string> problems = fields::Check(*this);
+  CheckDistinct("scales", scales, problems);
+  CheckDistinct("surround_radii", surround_radii, problems);
   return problems;
 }
 

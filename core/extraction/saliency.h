@@ -12,27 +12,58 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/fields.h"
+
 namespace stevi::extraction {
+
+// Bounds of the saliency options: the deepest pyramid level and the largest surround radius
+// (pixels).
+inline constexpr int kMaxSaliencyLevel = 8;
+inline constexpr int kMaxSurroundRadius = 64;
 
 struct SaliencyOptions {
   // Pyramid level (0 = the input; each level halves the size) at whose resolution the on/off maps
-  // are summed and the saliency map is returned. 0..8.
+  // are summed and the saliency map is returned.
   int centre_level = 2;
-  // Pyramid levels whose pixels are the centres. Each in 0..8, distinct, at least one.
+  // Pyramid levels whose pixels are the centres: distinct, at least one.
   std::vector<int> scales = {2, 3, 4};
-  // Surround box radii (pixels of the centre's level). Each in 1..64, distinct, at least one.
+  // Surround box radii (pixels of the centre's level): distinct, at least one.
   std::vector<int> surround_radii = {3, 7};
   // Divide ON and OFF by sqrt(number of local maxima) before summing them (VOCUS).
   bool uniqueness_weight = true;
   // Local maxima count towards the uniqueness weight when at or above this fraction of the map's
-  // global maximum. In (0, 1].
+  // global maximum.
   double peak_fraction = 0.5;
   // The fused map is divided by max(its maximum, min_contrast) (grey levels of weighted
-  // centre-surround contrast; >= 0). 0 always scales the maximum to 1; a positive value keeps a
+  // centre-surround contrast). 0 always scales the maximum to 1; a positive value keeps a
   // nearly flat scene (noise only) from being stretched to full saliency.
   double min_contrast = 0.0;
 
+  // The field checks, and the entries of each list distinct.
   std::vector<std::string> Validate() const;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.centre_level,
+             Field("centre_level", "", "pyramid level of the map (0 = full size, each halves it)")
+                 .In(0, kMaxSaliencyLevel));
+    v.List(s.scales,
+           Field("scales", "", "centre pyramid levels, distinct").In(0, kMaxSaliencyLevel));
+    v.List(s.surround_radii,
+           Field("surround_radii", "pixels", "surround box radii at the centre level, distinct")
+               .In(1, kMaxSurroundRadius));
+    v.Flag(s.uniqueness_weight,
+           Field("uniqueness_weight", "", "divide ON and OFF by sqrt(their peaks)"));
+    v.Number(s.peak_fraction,
+             Field("peak_fraction", "", "local maxima at this fraction of the maximum are peaks")
+                 .Above(0)
+                 .AtMost(1));
+    v.Number(s.min_contrast,
+             Field("min_contrast", "grey levels",
+                   "the map is divided by max(its maximum, this); 0 = by its maximum")
+                 .AtLeast(0));
+  }
 };
 
 // Levels 0..top_level of the grey pyramid (stage 1), float grey levels: level 0 is the input,

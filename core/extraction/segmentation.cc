@@ -106,13 +106,7 @@ cv::Mat1b SegmentByColour(const cv::Mat3b& bgr, const std::vector<HsvRange>& ran
   return mask;
 }
 
-std::vector<std::string> GraphSegmentationOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (!(k > 0) || !std::isfinite(k)) problems.push_back("k: must be > 0" + Got(k));
-  if (!InRange(sigma, 0, 20)) problems.push_back("sigma: must be in [0, 20] pixels" + Got(sigma));
-  if (min_size < 0) problems.push_back("min_size: must be >= 0 pixels" + Got(min_size));
-  return problems;
-}
+std::vector<std::string> GraphSegmentationOptions::Validate() const { return fields::Check(*this); }
 
 cv::Mat1i SegmentGraph(const cv::Mat& image, const GraphSegmentationOptions& options) {
   cv::Mat1i labels;

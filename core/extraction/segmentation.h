@@ -7,6 +7,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/fields.h"
+
 namespace stevi::extraction {
 
 struct IntensityOptions {
@@ -54,6 +56,15 @@ struct GraphSegmentationOptions {
   int min_size = 50;
 
   std::vector<std::string> Validate() const;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.k, Field("k", "grey levels", "scale: larger values give larger segments").Above(0));
+    v.Number(s.sigma, Field("sigma", "pixels", "Gaussian smoothing first; 0 = none").In(0, 20));
+    v.Number(s.min_size,
+             Field("min_size", "pixels", "smaller segments join a neighbour").AtLeast(0));
+  }
 };
 
 // Felzenszwalb-Huttenlocher graph segmentation (OpenCV ximgproc) of an 8-bit image with 1 to 4

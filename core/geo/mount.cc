@@ -1,38 +1,10 @@
 #include "core/geo/mount.h"
 
-#include <cmath>
-#include <cstdio>
-
-#include "core/common/error.h"
 #include "core/geo/vehicle_state.h"
 
 namespace stevi::geo {
-namespace {
 
-void CheckRange(std::vector<std::string>& problems, const char* name, double value, double lo,
-                double hi, const char* unit) {
-  if (!(value >= lo && value <= hi)) {  // NaN fails
-    char buf[160];
-    std::snprintf(buf, sizeof buf, "%s: must be in [%g, %g] %s", name, lo, hi, unit);
-    std::string p = buf;
-    p += Got(value);
-    problems.push_back(std::move(p));
-  }
-}
-
-}  // namespace
-
-std::vector<std::string> MountOptions::Validate() const {
-  std::vector<std::string> problems;
-  CheckRange(problems, "roll_deg", roll_deg, -180, 180, "degrees");
-  CheckRange(problems, "pitch_deg", pitch_deg, -90, 90, "degrees");
-  CheckRange(problems, "yaw_deg", yaw_deg, -180, 180, "degrees");
-  static constexpr const char* kNames[3] = {"lever_arm_x_m", "lever_arm_y_m", "lever_arm_z_m"};
-  for (int i = 0; i < 3; ++i) {
-    CheckRange(problems, kNames[i], lever_arm_m[i], -100, 100, "metres (body frame)");
-  }
-  return problems;
-}
+std::vector<std::string> MountOptions::Validate() const { return fields::Check(*this); }
 
 Eigen::Matrix3d BodyFromCamRotation(const MountOptions& mount) {
   // The camera's forward-right-down axes (cam z, x, y) relative to the body: columns are the cam

@@ -8,6 +8,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "core/common/fields.h"
+
 namespace stevi::geo {
 
 // The camera's orientation relative to the body, as Z-Y-X Euler angles in degrees (the
@@ -29,6 +31,28 @@ struct MountOptions {
   // Every problem, as "field: problem (got X)".
   std::vector<std::string> Validate() const;
   bool operator==(const MountOptions&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.roll_deg,
+             Field("roll_deg", "degrees", "about the optical axis; right side down positive")
+                 .In(-180, 180));
+    v.Number(s.pitch_deg,
+             Field("pitch_deg", "degrees", "optical axis up positive; -90 looks straight down")
+                 .In(-90, 90));
+    v.Number(s.yaw_deg,
+             Field("yaw_deg", "degrees", "optical axis to the right positive").In(-180, 180));
+    v.Number(s.lever_arm_m.x(),
+             Field("lever_arm_x_m", "m", "left camera's optical centre, body x (forward)")
+                 .In(-100, 100));
+    v.Number(
+        s.lever_arm_m.y(),
+        Field("lever_arm_y_m", "m", "left camera's optical centre, body y (right)").In(-100, 100));
+    v.Number(
+        s.lever_arm_m.z(),
+        Field("lever_arm_z_m", "m", "left camera's optical centre, body z (down)").In(-100, 100));
+  }
 };
 
 // The rotation body_from_cam of a mounting (the options need not be validated; angles are used as

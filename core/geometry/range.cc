@@ -1,24 +1,8 @@
 #include "core/geometry/range.h"
 
-#include "core/common/error.h"
-
-#include <cmath>
-
 namespace stevi::geometry {
 
-std::vector<std::string> RangeOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (!(min_disparity_px > 0) || !std::isfinite(min_disparity_px)) {
-    problems.push_back("min_disparity_px: must be > 0" + Got(min_disparity_px));
-  }
-  if (!(max_range_m >= 0) || !std::isfinite(max_range_m)) {
-    problems.push_back("max_range_m: must be >= 0 (0 means no limit)" + Got(max_range_m));
-  }
-  if (!(disparity_sigma_px > 0) || !std::isfinite(disparity_sigma_px)) {
-    problems.push_back("disparity_sigma_px: must be > 0 and finite" + Got(disparity_sigma_px));
-  }
-  return problems;
-}
+std::vector<std::string> RangeOptions::Validate() const { return fields::Check(*this); }
 
 double DepthFromDisparity(double disparity_px, double f_px, double baseline_m) {
   return f_px * baseline_m / disparity_px;

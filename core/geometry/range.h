@@ -7,6 +7,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/fields.h"
+
 namespace stevi::geometry {
 
 // Which disparities and ranges are trusted.
@@ -21,8 +23,22 @@ struct RangeOptions {
   // interpolation is good to about a quarter pixel on textured surfaces.
   double disparity_sigma_px = 0.25;
 
-  // Lists every problem ("min_disparity_px: must be > 0", ...).
+  // Lists every problem ("min_disparity_px: must be > 0 pixels (got -1)", ...).
   std::vector<std::string> Validate() const;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.min_disparity_px,
+             Field("min_disparity_px", "pixels", "disparity floor, camera pixels before binning")
+                 .Above(0));
+    v.Number(s.max_range_m,
+             Field("max_range_m", "m", "farthest trusted range; 0 = no limit beyond the floor")
+                 .AtLeast(0));
+    v.Number(s.disparity_sigma_px,
+             Field("disparity_sigma_px", "pixels", "1-sigma disparity error behind range_sigma_m")
+                 .Above(0));
+  }
 };
 
 // Depth along the optical axis, Z = f B / d (metres). d must be > 0.

@@ -20,48 +20,24 @@ bool EqualsIgnoreCase(std::string_view a, std::string_view b) {
   return true;
 }
 
-constexpr Algorithm kAlgorithms[] = {Algorithm::kCanonical, Algorithm::kSteViE, Algorithm::kSteViS};
-
 }  // namespace
 
 std::string_view AlgorithmName(Algorithm algorithm) {
-  switch (algorithm) {
-    case Algorithm::kCanonical: return "canonical";
-    case Algorithm::kSteViE: return "stevie";
-    case Algorithm::kSteViS: return "stevis";
-  }
-  return "unknown";
+  return fields::NameOf(algorithm, std::span<const fields::ChoiceName<Algorithm>>(
+                                       PipelineConfig::kAlgorithmNames))
+      .value_or("unknown");
 }
 
 std::optional<Algorithm> AlgorithmFromName(std::string_view name) {
-  for (Algorithm a : kAlgorithms) {
-    if (EqualsIgnoreCase(name, AlgorithmName(a))) return a;
+  for (const fields::ChoiceName<Algorithm>& n : PipelineConfig::kAlgorithmNames) {
+    if (EqualsIgnoreCase(name, n.name)) return n.value;
   }
   return std::nullopt;
 }
 
-std::vector<std::string> PipelineConfig::Validate() const {
-  std::vector<std::string> problems;
-  switch (algorithm) {
-    case Algorithm::kCanonical:
-    case Algorithm::kSteViE:
-    case Algorithm::kSteViS: break;
-    default:
-      problems.push_back("algorithm: unknown value " + std::to_string(static_cast<int>(algorithm)));
-  }
-  if (max_width_px != 0 && (max_width_px < 64 || max_width_px > 16384)) {
-    problems.push_back("max_width_px: must be 0 (never bin) or in 64..16384, got " +
-                       std::to_string(max_width_px));
-  }
-  AppendPrefixed(problems, "matcher.", matcher.Validate());
-  AppendPrefixed(problems, "range.", range.Validate());
-  AppendPrefixed(problems, "canonical.", canonical.Validate());
-  AppendPrefixed(problems, "stevie.", stevie.Validate());
-  AppendPrefixed(problems, "stevis.", stevis.Validate());
-  AppendPrefixed(problems, "tracking.", tracking.Validate());
-  AppendPrefixed(problems, "mount.", mount.Validate());
-  return problems;
-}
+// Every stage's options are validated, whichever algorithm runs (the matcher's: the selected
+// kind's only, MatcherOptions::Validate()).
+std::vector<std::string> PipelineConfig::Validate() const { return fields::Check(*this); }
 
 ConfigStore::ConfigStore(PipelineConfig initial)
     : active_(std::make_shared<const PipelineConfig>(std::move(initial))) {}

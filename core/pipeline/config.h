@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/common/error.h"
+#include "core/common/fields.h"
 #include "core/detection/canonical.h"
 #include "core/detection/stevie.h"
 #include "core/detection/stevis.h"
@@ -49,6 +50,26 @@ struct PipelineConfig {
 
   // Every problem of every stage, each as "field.path: problem".
   std::vector<std::string> Validate() const;
+
+  static constexpr fields::ChoiceName<Algorithm> kAlgorithmNames[] = {
+      {Algorithm::kCanonical, "canonical"},
+      {Algorithm::kSteViE, "stevie"},
+      {Algorithm::kSteViS, "stevis"}};
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Choice(s.algorithm, Field("algorithm", "", "which detector runs"), kAlgorithmNames);
+    v.Number(s.max_width_px, Field("max_width_px", "pixels", "wider frames are binned")
+                                 .In(64, 16384)
+                                 .Or(0, "never bin"));
+    v.Nested(s.matcher, Field("matcher"));
+    v.Nested(s.range, Field("range"));
+    v.Nested(s.canonical, Field("canonical"));
+    v.Nested(s.stevie, Field("stevie"));
+    v.Nested(s.stevis, Field("stevis"));
+    v.Nested(s.tracking, Field("tracking"));
+    v.Nested(s.mount, Field("mount"));
+  }
 };
 
 // Holds the active configuration. Thread-safe. Readers take an immutable snapshot per frame;

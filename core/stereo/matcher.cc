@@ -15,45 +15,13 @@
 namespace stevi::stereo {
 namespace {
 
-// Sane upper bounds: far beyond any rig we fly, small enough that buffers stay bounded.
-constexpr int kMaxNumDisparities = 512;
-constexpr int kMaxMinDisparity = 512;
-constexpr int kMaxSpeckleRange = 1024;
-
-// Appends the problems of an int field that must lie in [lo, hi] and, when `odd`, be odd.
-void CheckRange(std::vector<std::string>& problems, const char* field, int v, int lo, int hi,
-                bool odd = false) {
-  if (odd && v % 2 == 0) problems.push_back(std::string(field) + ": must be odd" + Got(v));
-  if (v < lo || v > hi) {
-    problems.push_back(std::string(field) + ": must be in " + std::to_string(lo) + ".." +
-                       std::to_string(hi) + Got(v));
-  }
-}
-
-void CheckAtLeast(std::vector<std::string>& problems, const char* field, int v, int lo) {
-  if (v < lo) {
-    problems.push_back(std::string(field) + ": must be >= " + std::to_string(lo) + Got(v));
-  }
-}
-
-void CheckDisparityRange(std::vector<std::string>& problems, int num_disparities,
-                         int min_disparity) {
-  if (num_disparities <= 0 || num_disparities % 16 != 0) {
-    problems.push_back("num_disparities: must be a positive multiple of 16" + Got(num_disparities));
-  } else if (num_disparities > kMaxNumDisparities) {
-    problems.push_back("num_disparities: must be at most " + std::to_string(kMaxNumDisparities) +
-                       Got(num_disparities));
-  }
-  CheckRange(problems, "min_disparity", min_disparity, 0, kMaxMinDisparity);
-}
-
-int AutoP1(int block_size) { return 8 * block_size * block_size; }
-int AutoP2(int block_size) { return 32 * block_size * block_size; }
-
 std::vector<std::string> Prefixed(std::vector<std::string> problems, const std::string& prefix) {
   for (std::string& p : problems) p = prefix + p;
   return problems;
 }
+
+int AutoP1(int block_size) { return 8 * block_size * block_size; }
+int AutoP2(int block_size) { return 32 * block_size * block_size; }
 
 int ToOpenCvMode(SemiGlobalOptions::Mode mode) {
   switch (mode) {
@@ -203,29 +171,10 @@ class OpenCvMatcher final : public DisparityMatcher {
 
 }  // namespace
 
-std::vector<std::string> BlockMatchingOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (prefilter_type != PreFilter::kXSobel && prefilter_type != PreFilter::kNormalizedResponse) {
-    problems.push_back("prefilter_type: unknown value" + Got(static_cast<int>(prefilter_type)));
-  }
-  CheckRange(problems, "prefilter_size", prefilter_size, 5, 255, /*odd=*/true);
-  CheckRange(problems, "prefilter_cap", prefilter_cap, 1, 63);
-  CheckRange(problems, "block_size", block_size, 5, 255, /*odd=*/true);
-  CheckDisparityRange(problems, num_disparities, min_disparity);
-  CheckAtLeast(problems, "local_texture_threshold", local_texture_threshold, 0);
-  CheckAtLeast(problems, "texture_threshold", texture_threshold, 0);
-  CheckRange(problems, "uniqueness_ratio", uniqueness_ratio, 0, 100);
-  CheckAtLeast(problems, "speckle_window_size", speckle_window_size, 0);
-  CheckRange(problems, "speckle_range", speckle_range, 0, kMaxSpeckleRange);
-  return problems;
-}
+std::vector<std::string> BlockMatchingOptions::Validate() const { return fields::Check(*this); }
 
 std::vector<std::string> SemiGlobalOptions::Validate() const {
-  std::vector<std::string> problems;
-  CheckRange(problems, "block_size", block_size, 1, 11, /*odd=*/true);
-  CheckDisparityRange(problems, num_disparities, min_disparity);
-  CheckAtLeast(problems, "p1", p1, 0);
-  CheckAtLeast(problems, "p2", p2, 0);
+  std::vector<std::string> problems = fields::Check(*this);
   if (p1 >= 0 && p2 >= 0 && (p1 != 0 || p2 != 0)) {
     // Compare the penalties actually used: 0 stands for the automatic value.
     const int used_p1 = p1 != 0 ? p1 : AutoP1(block_size);
@@ -243,19 +192,8 @@ std::vector<std::string> SemiGlobalOptions::Validate() const {
       }
     }
   }
-  CheckAtLeast(problems, "disp12_max_diff", disp12_max_diff, -1);
-  CheckRange(problems, "prefilter_cap", prefilter_cap, 1, 63);
-  CheckRange(problems, "uniqueness_ratio", uniqueness_ratio, 0, 100);
-  CheckAtLeast(problems, "speckle_window_size", speckle_window_size, 0);
-  CheckRange(problems, "speckle_range", speckle_range, 0, kMaxSpeckleRange);
-  CheckAtLeast(problems, "texture_threshold", texture_threshold, 0);
-  if (mode != Mode::kSgbm5Path && mode != Mode::kFull8Path && mode != Mode::kThreeWay &&
-      mode != Mode::kHH4) {
-    problems.push_back("mode: unknown value" + Got(static_cast<int>(mode)));
-  }
   return problems;
 }
-
 std::string_view MatcherKindName(MatcherKind kind) {
   switch (kind) {
     case MatcherKind::kBlockMatching: return "block_matching";

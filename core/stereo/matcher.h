@@ -8,10 +8,17 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/fields.h"
 #include "core/stereo/block_matcher.h"
 #include "core/stereo/disparity.h"
 
 namespace stevi::stereo {
+
+// Sane upper bounds of the options: far beyond any rig we fly, small enough that buffers stay
+// bounded.
+inline constexpr int kMaxNumDisparities = 512;
+inline constexpr int kMaxMinDisparity = 512;
+inline constexpr int kMaxSpeckleRange = 1024;
 
 // SAD block matching with every parameter the thesis tunes: cv::StereoBM's output, computed by
 // SadBlockMatcher (block_matcher.h) for the x-Sobel pre-filter and by cv::StereoBM otherwise.
@@ -54,6 +61,42 @@ struct BlockMatchingOptions {
 
   std::vector<std::string> Validate() const;
   friend bool operator==(const BlockMatchingOptions&, const BlockMatchingOptions&) = default;
+
+  static constexpr fields::ChoiceName<PreFilter> kPreFilterNames[] = {
+      {PreFilter::kXSobel, "x_sobel"}, {PreFilter::kNormalizedResponse, "normalized_response"}};
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Choice(s.prefilter_type, Field("prefilter_type", "", "pre-filter of both images"),
+             kPreFilterNames);
+    v.Number(s.prefilter_size,
+             Field("prefilter_size", "pixels", "normalized-response window").Odd().In(5, 255));
+    v.Number(s.prefilter_cap, Field("prefilter_cap", "", "pre-filter output cap").In(1, 63));
+    v.Number(s.block_size, Field("block_size", "pixels", "SAD window").Odd().In(5, 255));
+    v.Number(s.num_disparities, Field("num_disparities", "pixels", "disparities searched")
+                                    .MultipleOf(16)
+                                    .AtMost(kMaxNumDisparities));
+    v.Number(
+        s.min_disparity,
+        Field("min_disparity", "pixels", "smallest disparity searched").In(0, kMaxMinDisparity));
+    v.Number(s.texture_threshold,
+             Field("texture_threshold", "", "minimum window sum of the pre-filtered left image")
+                 .AtLeast(0));
+    v.Number(s.uniqueness_ratio,
+             Field("uniqueness_ratio", "percent", "margin of the best cost over the second best")
+                 .In(0, 100));
+    v.Number(s.speckle_window_size,
+             Field("speckle_window_size", "pixels", "largest speckle region; 0 disables the filter")
+                 .AtLeast(0));
+    v.Number(s.speckle_range,
+             Field("speckle_range", "pixels", "largest disparity variation within a speckle")
+                 .In(0, kMaxSpeckleRange));
+    v.Flag(s.pad_left, Field("pad_left", "", "pad on the left so the leftmost columns match"));
+    v.Number(s.local_texture_threshold,
+             Field("local_texture_threshold", "",
+                   "halo gate: mean |x-Sobel| over 5x5 that keeps a disparity; 0 disables")
+                 .AtLeast(0));
+  }
 };
 
 // Semi-global matching (cv::StereoSGBM).
@@ -91,6 +134,42 @@ struct SemiGlobalOptions {
 
   std::vector<std::string> Validate() const;
   friend bool operator==(const SemiGlobalOptions&, const SemiGlobalOptions&) = default;
+
+  static constexpr fields::ChoiceName<Mode> kModeNames[] = {{Mode::kSgbm5Path, "sgbm_5_path"},
+                                                            {Mode::kFull8Path, "full_8_path"},
+                                                            {Mode::kThreeWay, "three_way"},
+                                                            {Mode::kHH4, "hh4"}};
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.block_size, Field("block_size", "pixels", "matched block").Odd().In(1, 11));
+    v.Number(s.num_disparities, Field("num_disparities", "pixels", "disparities searched")
+                                    .MultipleOf(16)
+                                    .AtMost(kMaxNumDisparities));
+    v.Number(
+        s.min_disparity,
+        Field("min_disparity", "pixels", "smallest disparity searched").In(0, kMaxMinDisparity));
+    v.Number(s.p1, Field("p1", "", "smoothness penalty; 0 = 8 * block_size^2").AtLeast(0));
+    v.Number(s.p2, Field("p2", "", "> p1 when set; 0 = 32 * block_size^2").AtLeast(0));
+    v.Number(s.disp12_max_diff,
+             Field("disp12_max_diff", "pixels", "left-right check; -1 disables").AtLeast(-1));
+    v.Number(s.prefilter_cap, Field("prefilter_cap", "", "pre-filter output cap").In(1, 63));
+    v.Number(s.uniqueness_ratio,
+             Field("uniqueness_ratio", "percent", "margin of the best cost over the second best")
+                 .In(0, 100));
+    v.Number(s.speckle_window_size,
+             Field("speckle_window_size", "pixels", "largest speckle region; 0 disables the filter")
+                 .AtLeast(0));
+    v.Number(s.speckle_range,
+             Field("speckle_range", "pixels", "largest disparity variation within a speckle")
+                 .In(0, kMaxSpeckleRange));
+    v.Choice(s.mode, Field("mode", "", "cv::StereoSGBM's mode"), kModeNames);
+    v.Flag(s.pad_left, Field("pad_left", "", "pad on the left so the leftmost columns match"));
+    v.Number(s.texture_threshold,
+             Field("texture_threshold", "",
+                   "texture gate: mean |x-Sobel| over the block that keeps a disparity; 0 disables")
+                 .AtLeast(0));
+  }
 };
 
 enum class MatcherKind { kBlockMatching, kSemiGlobal };
@@ -106,6 +185,16 @@ struct MatcherOptions {
   // ("block_matching.num_disparities: ...").
   std::vector<std::string> Validate() const;
   friend bool operator==(const MatcherOptions&, const MatcherOptions&) = default;
+
+  static constexpr fields::ChoiceName<MatcherKind> kKindNames[] = {
+      {MatcherKind::kBlockMatching, "block_matching"}, {MatcherKind::kSemiGlobal, "semi_global"}};
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Choice(s.kind, Field("kind", "", "which matcher runs"), kKindNames);
+    v.Nested(s.block_matching, Field("block_matching"));
+    v.Nested(s.semi_global, Field("semi_global"));
+  }
   int num_disparities() const;
   int min_disparity() const;
 };

@@ -53,29 +53,7 @@ Eigen::Vector3d PointFromAngleDepth(const Eigen::Vector3d& s) {
   return {s.x() * s.z(), s.y() * s.z(), s.z()};
 }
 
-std::vector<std::string> KalmanOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (!(std::isfinite(process_noise) && process_noise >= 0)) {
-    problems.push_back("process_noise: must be >= 0 m^2/s^3 and finite" + Got(process_noise));
-  }
-  if (!PositiveFinite(measurement_noise)) {
-    problems.push_back("measurement_noise: must be > 0 pixel^2 and finite" +
-                       Got(measurement_noise));
-  }
-  if (!(std::isfinite(occluded_process_noise) && occluded_process_noise >= 0)) {
-    problems.push_back("occluded_process_noise: must be >= 0 m^2/s^3 and finite" +
-                       Got(occluded_process_noise));
-  }
-  if (!PositiveFinite(occluded_measurement_noise)) {
-    problems.push_back("occluded_measurement_noise: must be > 0 pixel^2 and finite" +
-                       Got(occluded_measurement_noise));
-  }
-  if (!PositiveFinite(initial_velocity_sigma_mps)) {
-    problems.push_back("initial_velocity_sigma_mps: must be > 0 m/s and finite" +
-                       Got(initial_velocity_sigma_mps));
-  }
-  return problems;
-}
+std::vector<std::string> KalmanOptions::Validate() const { return fields::Check(*this); }
 
 void ConstantVelocityKalman::Initialize(const Eigen::Vector3d& position_m,
                                         const Eigen::Matrix3d& position_cov_m2,

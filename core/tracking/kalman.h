@@ -8,6 +8,8 @@
 
 #include <Eigen/Core>
 
+#include "core/common/fields.h"
+
 namespace stevi::tracking {
 
 // The rectified left camera and the baseline: all the tracker needs to go between pixels and the
@@ -70,6 +72,27 @@ struct KalmanOptions {
 
   std::vector<std::string> Validate() const;
   bool operator==(const KalmanOptions&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.process_noise, Field("process_noise", "m^2/s^3",
+                                    "white-acceleration density on each camera axis while detected")
+                                  .AtLeast(0));
+    v.Number(s.measurement_noise,
+             Field("measurement_noise", "pixels^2", "variance of a detection's centroid on u and v")
+                 .Above(0));
+    v.Number(s.occluded_process_noise,
+             Field("occluded_process_noise", "m^2/s^3", "process noise while occluded").AtLeast(0));
+    v.Number(s.occluded_measurement_noise,
+             Field("occluded_measurement_noise", "pixels^2",
+                   "pseudo-measurement variance while occluded; 1e7 = free prediction")
+                 .Above(0));
+    v.Number(s.initial_velocity_sigma_mps,
+             Field("initial_velocity_sigma_mps", "m/s",
+                   "1-sigma of a new track's unknown velocity per axis")
+                 .Above(0));
+  }
 };
 
 // State [x y z vx vy vz] in the cam frame (metres, m/s); measurement: the position.

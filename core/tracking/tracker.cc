@@ -51,54 +51,14 @@ std::string_view TrackStateName(TrackState state) {
   return "unknown";
 }
 
-std::vector<std::string> GateOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (!(max_depth_ratio >= 1)) {
-    problems.push_back("max_depth_ratio: must be >= 1" + Got(max_depth_ratio));
-  }
-  if (!(max_area_ratio >= 1)) {
-    problems.push_back("max_area_ratio: must be >= 1" + Got(max_area_ratio));
-  }
-  if (!(max_perimeter_ratio >= 1)) {
-    problems.push_back("max_perimeter_ratio: must be >= 1" + Got(max_perimeter_ratio));
-  }
-  if (!(max_distance_px > 0)) {
-    problems.push_back("max_distance_px: must be > 0 pixels" + Got(max_distance_px));
-  }
-  if (!(depth_sigmas > 0 && depth_sigmas <= 100)) {
-    problems.push_back("depth_sigmas: must be in (0, 100]" + Got(depth_sigmas));
-  }
-  if (!(min_depth_sigma_fraction >= 0 && min_depth_sigma_fraction <= 1)) {
-    problems.push_back("min_depth_sigma_fraction: must be in [0, 1]" +
-                       Got(min_depth_sigma_fraction));
-  }
-  if (!(position_sigmas > 0 && position_sigmas <= 100)) {
-    problems.push_back("position_sigmas: must be in (0, 100]" + Got(position_sigmas));
-  }
-  return problems;
-}
+std::vector<std::string> GateOptions::Validate() const { return fields::Check(*this); }
 
 std::vector<std::string> TrackerOptions::Validate() const {
-  std::vector<std::string> problems;
-  AppendPrefixed(problems, "kalman.", kalman.Validate());
-  AppendPrefixed(problems, "gates.", gates.Validate());
-  if (confirm_hits < 1) problems.push_back("confirm_hits: must be >= 1" + Got(confirm_hits));
-  if (delete_misses < 1) problems.push_back("delete_misses: must be >= 1" + Got(delete_misses));
-  if (tentative_delete_misses < 1 || tentative_delete_misses > std::max(delete_misses, 1)) {
-    problems.push_back("tentative_delete_misses: must be in 1..delete_misses" +
-                       Got(tentative_delete_misses));
-  }
-  if (!(fading_beta > 0 && fading_beta <= 1)) {
-    problems.push_back("fading_beta: must be in (0, 1]" + Got(fading_beta));
-  }
-  if (!(min_score >= 0 && min_score <= 1)) {
-    problems.push_back("min_score: must be in [0, 1]" + Got(min_score));
-  }
-  if (!(std::isfinite(max_dt_s) && max_dt_s > 0)) {
-    problems.push_back("max_dt_s: must be > 0 seconds and finite" + Got(max_dt_s));
-  }
-  if (!(merge_iou > 0 && merge_iou <= 1)) {
-    problems.push_back("merge_iou: must be in (0, 1]" + Got(merge_iou));
+  std::vector<std::string> problems = fields::Check(*this);
+  // Below 1, delete_misses is a problem of its own; the bound is then 1.
+  if (tentative_delete_misses > std::max(delete_misses, 1)) {
+    problems.push_back("tentative_delete_misses: must be <= delete_misses = " +
+                       std::to_string(delete_misses) + Got(tentative_delete_misses));
   }
   return problems;
 }

@@ -13,6 +13,7 @@
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
 
+#include "core/common/fields.h"
 #include "core/detection/detection.h"
 #include "core/tracking/fading_filter.h"
 #include "core/tracking/hungarian.h"
@@ -22,7 +23,7 @@ namespace stevi::tracking {
 
 // A detection and a track are paired only when every gate passes (README.md, "Assignment and
 // gates"). A ratio gate compares the larger of two values with the smaller; a value <= 0 on either
-// side (unknown) passes it. To disable a gate, make it very large.
+// side (unknown) passes it. To disable a gate, make it very large (but finite).
 struct GateOptions {
   // Hard cap on the detection depth against the track's predicted depth (depth ratio = disparity
   // ratio), >= 1. The depth gate proper is depth_sigmas below.
@@ -51,6 +52,34 @@ struct GateOptions {
 
   std::vector<std::string> Validate() const;
   bool operator==(const GateOptions&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(
+        s.max_depth_ratio,
+        Field("max_depth_ratio", "", "hard cap on the depth ratio to the prediction").AtLeast(1));
+    v.Number(s.max_area_ratio,
+             Field("max_area_ratio", "", "area ratio to the last; larger blobs only, unless cut")
+                 .AtLeast(1));
+    v.Number(s.max_perimeter_ratio,
+             Field("max_perimeter_ratio", "",
+                   "perimeter ratio to the last; larger blobs only, unless cut")
+                 .AtLeast(1));
+    v.Number(s.max_distance_px,
+             Field("max_distance_px", "pixels", "predicted centre to detection centre").Above(0));
+    v.Number(s.depth_sigmas,
+             Field("depth_sigmas", "", "depth gate in sigmas of detection and prediction")
+                 .Above(0)
+                 .AtMost(100));
+    v.Number(s.min_depth_sigma_fraction, Field("min_depth_sigma_fraction", "",
+                                               "floor of a detection's depth sigma over its depth")
+                                             .In(0, 1));
+    v.Number(s.position_sigmas,
+             Field("position_sigmas", "", "predicted box grown by this many sigmas of its centre")
+                 .Above(0)
+                 .AtMost(100));
+  }
 };
 
 struct TrackerOptions {
@@ -80,6 +109,29 @@ struct TrackerOptions {
   // Every problem, as "field: problem" ("gates.max_depth_ratio: must be >= 1 (got 0.5)").
   std::vector<std::string> Validate() const;
   bool operator==(const TrackerOptions&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Nested(s.kalman, Field("kalman"));
+    v.Nested(s.gates, Field("gates"));
+    v.Number(s.confirm_hits, Field("confirm_hits", "", "hits to confirm a track").AtLeast(1));
+    // At most delete_misses: checked in Validate().
+    v.Number(s.tentative_delete_misses,
+             Field("tentative_delete_misses", "",
+                   "misses that delete a tentative track; <= delete_misses")
+                 .AtLeast(1));
+    v.Number(s.delete_misses,
+             Field("delete_misses", "", "misses that delete a confirmed track").AtLeast(1));
+    v.Number(s.fading_beta, Field("fading_beta", "", "range smoothing memory").Above(0).AtMost(1));
+    v.Number(
+        s.min_score,
+        Field("min_score", "", "detections scoring below this are ignored; 0 takes all").In(0, 1));
+    v.Number(s.max_dt_s, Field("max_dt_s", "s", "longest prediction step").Above(0));
+    v.Number(
+        s.merge_iou,
+        Field("merge_iou", "", "box overlap (IoU) at which two tracks merge").Above(0).AtMost(1));
+  }
 };
 
 enum class TrackState {

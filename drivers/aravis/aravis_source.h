@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/common/fields.h"
 #include "drivers/aravis/aravis_camera.h"
 #include "drivers/aravis/stereo_pairer.h"
 #include "drivers/stereo_source.h"
@@ -41,8 +42,8 @@ struct AravisOptions {
   // Gain, dB; negative = automatic where the camera has it.
   double gain_db = -1;
   AravisTrigger trigger;
-  // Largest |right - left| capture-time difference of a pair, ns; 0 = half the frame period.
-  int64_t pair_tolerance_ns = 0;
+  // Largest |right - left| capture-time difference of a pair, ms; 0 = half the frame period.
+  double pair_tolerance_ms = 0;
   // Stream buffers per camera (2..64).
   int buffers = 8;
   // How long Next() waits for a pair before kUnavailable. A camera that delivers nothing for
@@ -53,10 +54,41 @@ struct AravisOptions {
 
   // Frame period, ns.
   int64_t FramePeriodNs() const;
-  // pair_tolerance_ns, or half the frame period when it is 0.
+  // pair_tolerance_ms in ns, or half the frame period when it is 0.
   int64_t PairToleranceNs() const;
   // Every problem, as "field: problem (got X)".
   std::vector<std::string> Validate() const;
+
+  // The fields of stevi.v1.AravisConfig (the cameras' ids and the timeout are not among them).
+  static constexpr fields::ChoiceName<TriggerMode> kTriggerNames[] = {
+      {TriggerMode::kFreeRun, "free_run"},
+      {TriggerMode::kSoftware, "software"},
+      {TriggerMode::kHardware, "hardware"}};
+  static constexpr fields::ChoiceName<TimestampSource> kTimestampNames[] = {
+      {TimestampSource::kCamera, "camera"}, {TimestampSource::kHost, "host"}};
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.roi_width,
+             Field("width", "pixels", "region of interest, centred").In(kMinRoiPx, kMaxRoiPx));
+    v.Number(s.roi_height,
+             Field("height", "pixels", "region of interest, centred").In(kMinRoiPx, kMaxRoiPx));
+    v.Number(s.frame_rate_hz, Field("frame_rate_hz", "Hz", "both cameras").Above(0).AtMost(1000));
+    v.Number(s.exposure_us,
+             Field("exposure_us", "us", "fixed exposure; 0 = automatic").AtLeast(0).Below(1e8));
+    v.Number(s.gain_db, Field("gain_db", "dB", "fixed gain; negative = automatic"));
+    v.Choice(s.trigger.mode, Field("trigger", "", "what starts an exposure"), kTriggerNames);
+    v.Text(s.trigger.line, Field("trigger_line", "", "the hardware trigger's line, e.g. Line0"));
+    v.Number(s.pair_tolerance_ms, Field("pair_tolerance_ms", "ms",
+                                        "largest capture-time difference of a pair; 0 = "
+                                        "half the frame period")
+                                      .AtLeast(0)
+                                      .AtMost(1000));
+    v.Number(s.buffers, Field("buffers", "", "stream buffers per camera").In(2, 64));
+    v.Text(s.pixel_format, Field("pixel_format", "", "Mono8 or Bayer*8; empty = automatic"));
+    v.Choice(s.timestamps, Field("timestamps", "", "which clock pairs the frames"),
+             kTimestampNames);
+  }
 };
 
 // Thread-compatible like every StereoSource: one thread calls Next(). Counters(), Describe(),

@@ -26,14 +26,6 @@ constexpr size_t kRecentSkews = 100;
 
 }  // namespace
 
-std::vector<std::string> ReplayOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (!std::isfinite(rate) || rate < 0) {
-    problems.push_back("rate: must be >= 0 and finite (0 = as fast as possible)" + Got(rate));
-  }
-  return problems;
-}
-
 Result<std::unique_ptr<ReplaySource>> ReplaySource::Open(const std::string& dir,
                                                          ReplayOptions options) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {

@@ -12,6 +12,7 @@
 
 #include "core/geo/vehicle_state.h"
 #include "drivers/recording/recording_reader.h"
+#include "core/common/fields.h"
 #include "drivers/stereo_source.h"
 
 namespace stevi::drivers {
@@ -25,7 +26,18 @@ struct ReplayOptions {
   bool loop = false;
 
   // Every problem, as "field: problem (got X)".
-  std::vector<std::string> Validate() const;
+  std::vector<std::string> Validate() const { return fields::Check(*this); }
+
+  // The fields of stevi.v1.ReplayConfig but its directory.
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.rate, Field("rate", "",
+                           "speed against the recording; 0 = as fast as the pipeline "
+                           "takes frames")
+                         .In(0, 1000));
+    v.Flag(s.loop, Field("loop", "", "start again at the end"));
+  }
 };
 
 // A calibration change, where it happened in the recording.

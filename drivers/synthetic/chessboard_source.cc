@@ -11,21 +11,12 @@
 namespace stevi::drivers {
 
 std::vector<std::string> ChessboardSourceOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (width < 64 || width > 4096) problems.push_back("width: must be in 64..4096" + Got(width));
-  if (height < 64 || height > 4096) problems.push_back("height: must be in 64..4096" + Got(height));
-  if (!(f_px > 0 && f_px < 1e5)) problems.push_back("f_px: must be in (0, 1e5)" + Got(f_px));
-  if (!(baseline_m > 0 && baseline_m < 100)) {
-    problems.push_back("baseline_m: must be in (0, 100) metres" + Got(baseline_m));
-  }
+  std::vector<std::string> problems = fields::Check(*this);
   if (!(fps > 0 && fps <= 1000)) problems.push_back("fps: must be in (0, 1000]" + Got(fps));
   if (hold_frames < 1 || hold_frames > 10000) {
     problems.push_back("hold_frames: must be in 1..10000" + Got(hold_frames));
   }
   if (poses < 1 || poses > 1000) problems.push_back("poses: must be in 1..1000" + Got(poses));
-  if (!(noise_sigma >= 0 && noise_sigma <= 100)) {
-    problems.push_back("noise_sigma: must be in [0, 100]" + Got(noise_sigma));
-  }
   AppendPrefixed(problems, "board.", board.Validate());
   return problems;
 }

@@ -11,6 +11,7 @@
 
 #include "core/calibration/chessboard.h"
 #include "core/calibration/chessboard_render.h"
+#include "core/common/fields.h"
 #include "drivers/stereo_source.h"
 
 namespace stevi::drivers {
@@ -31,6 +32,18 @@ struct ChessboardSourceOptions {
   uint64_t seed = 1;
 
   std::vector<std::string> Validate() const;
+
+  // The fields of stevi.v1.SyntheticConfig that the chessboard scene takes.
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.width, Field("width", "pixels").In(64, 4096));
+    v.Number(s.height, Field("height", "pixels").In(64, 4096));
+    v.Number(s.f_px, Field("f_px", "pixels", "the ideal rig's focal length").Above(0).Below(1e5));
+    v.Number(s.baseline_m, Field("baseline_m", "m").Above(0).Below(100));
+    v.Number(s.noise_sigma, Field("noise_sigma", "grey levels", "pixel noise").In(0, 100));
+    v.Number(s.seed, Field("seed"));
+  }
 };
 
 // Endless frames of the board (rectified: the rig is ideal, so a calibration from them recovers

@@ -1072,17 +1072,8 @@ struct SyntheticRenderer::Impl {
 };
 
 std::vector<std::string> SyntheticOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (width < 16 || width > 8192) problems.push_back("width: must be in 16..8192");
-  if (height < 16 || height > 8192) problems.push_back("height: must be in 16..8192");
-  if (!(f_px > 0.0) || !std::isfinite(f_px)) problems.push_back("f_px: must be > 0");
-  if (!(baseline_m > 0.0) || !std::isfinite(baseline_m)) {
-    problems.push_back("baseline_m: must be > 0");
-  }
+  std::vector<std::string> problems = fields::Check(*this);
   if (!(fps > 0.0) || !std::isfinite(fps)) problems.push_back("fps: must be > 0");
-  if (!(noise_sigma >= 0.0) || !std::isfinite(noise_sigma)) {
-    problems.push_back("noise_sigma: must be >= 0");
-  }
   if (!(blur_sigma_px >= 0.0 && blur_sigma_px <= 10.0)) {
     problems.push_back("blur_sigma_px: must be in 0..10" + Got(blur_sigma_px));
   }
@@ -1094,10 +1085,6 @@ std::vector<std::string> SyntheticOptions::Validate() const {
   }
   if (!(std::abs(right_vertical_shift_px) <= 2.0)) {
     problems.push_back("right_vertical_shift_px: must be in -2..2" + Got(right_vertical_shift_px));
-  }
-  if (loop_frames < 0 || loop_frames > kMaxLoopFrames) {
-    problems.push_back("loop_frames: must be in 0.." + std::to_string(kMaxLoopFrames) +
-                       Got(loop_frames));
   }
   for (const std::string& p : scene.Validate()) problems.push_back("scene." + p);
   return problems;

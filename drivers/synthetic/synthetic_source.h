@@ -8,6 +8,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/common/fields.h"
 #include "drivers/stereo_source.h"
 #include "drivers/truth.h"
 #include "drivers/synthetic/scene.h"
@@ -42,6 +43,23 @@ struct SyntheticOptions {
   int loop_frames = 0;
 
   std::vector<std::string> Validate() const;
+
+  // The fields of stevi.v1.SyntheticConfig (the scene is chosen by name, the rest is not
+  // configurable over the wire).
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.width, Field("width", "pixels").In(16, 8192));
+    v.Number(s.height, Field("height", "pixels").In(16, 8192));
+    v.Number(s.f_px, Field("f_px", "pixels", "rectified focal length").Above(0));
+    v.Number(s.baseline_m, Field("baseline_m", "m").Above(0));
+    v.Number(s.noise_sigma, Field("noise_sigma", "grey levels", "pixel noise").AtLeast(0));
+    v.Number(s.seed, Field("seed", "", "seeds the noise and the textures"));
+    v.Number(s.loop_frames, Field("loop_frames", "frames",
+                                  "render once and loop; 0 = render "
+                                  "every frame")
+                                .In(0, kMaxLoopFrames));
+  }
 };
 
 // Renders frames of the scene. Pure function of (options, index): deterministic.

@@ -302,13 +302,14 @@ TEST(Validate, ListsEveryProblem) {
   o.scene.obstacles[3].id = o.scene.obstacles[1].id;
   o.scene.obstacles[4].id = 0;
   const std::vector<std::string> problems = o.Validate();
-  EXPECT_THAT(problems,
-              ::testing::UnorderedElementsAre(
-                  "width: must be in 16..8192", "baseline_m: must be > 0", "fps: must be > 0",
-                  "noise_sigma: must be >= 0", "scene.camera_height_m: must be > 0",
-                  "scene.obstacles[2].size_m: every side must be > 0",
-                  HasSubstr("scene.obstacles[3].id: duplicate id"),
-                  HasSubstr("scene.obstacles[4].id: must be > 0")));
+  EXPECT_THAT(
+      problems,
+      ::testing::UnorderedElementsAre(
+          "width: must be in [16, 8192] pixels (got 8)", "baseline_m: must be > 0 m (got -0.6)",
+          "fps: must be > 0", "noise_sigma: must be >= 0 grey levels (got -1)",
+          "scene.camera_height_m: must be > 0", "scene.obstacles[2].size_m: every side must be > 0",
+          HasSubstr("scene.obstacles[3].id: duplicate id"),
+          HasSubstr("scene.obstacles[4].id: must be > 0")));
 
   const auto source = OpenSyntheticSource(o);
   ASSERT_FALSE(source.ok());
@@ -450,7 +451,7 @@ TEST(SyntheticSource, LoopFramesReplaysTheFirstLapExactlyWithTimeGoingOn) {
     options.loop_frames = bad;
     const std::vector<std::string> problems = options.Validate();
     ASSERT_EQ(problems.size(), 1u);
-    EXPECT_THAT(problems[0], ::testing::HasSubstr("loop_frames: must be in 0..600"));
+    EXPECT_THAT(problems[0], ::testing::HasSubstr("loop_frames: must be in [0, 600] frames"));
   }
 }
 

@@ -5,7 +5,11 @@
 
 #include <cmath>
 #include <fstream>
+#include <optional>
+#include <set>
 
+#include "server/field_mapping.h"
+#include "tests/server/proto_fields.h"
 #include "tests/testing/data.h"
 
 namespace stevi::server {
@@ -79,12 +83,13 @@ TEST(BuildPipelineConfig, NamesEveryBadField) {
   config.set_max_width_px(-640);
   Result<pipeline::PipelineConfig> built = BuildPipelineConfig(config);
   ASSERT_FALSE(built.ok());
-  EXPECT_THAT(built.error().message,
-              AllOf(HasSubstr("pipeline.matcher.block_matching.num_disparities"),
-                    HasSubstr("pipeline.canonical.threshold_range_m"),
-                    HasSubstr("pipeline.range.min_disparity_px"),
-                    HasSubstr("pipeline.max_width_px: must be 0 (never bin) or in 64..16384, "
-                              "got -640")));
+  EXPECT_THAT(
+      built.error().message,
+      AllOf(HasSubstr("pipeline.matcher.block_matching.num_disparities"),
+            HasSubstr("pipeline.canonical.threshold_range_m"),
+            HasSubstr("pipeline.range.min_disparity_px"),
+            HasSubstr("pipeline.max_width_px: must be 0 (never bin) or in [64, 16384] pixels "
+                      "(got -640)")));
 }
 
 TEST(BuildPipelineConfig, ReadsStevieAndStevisFromTextFormat) {
@@ -268,6 +273,70 @@ TEST(OpenSource, ReportsSyntheticProblemsWithTheirPrefix) {
   ASSERT_FALSE(source.ok());
   EXPECT_THAT(source.error().message,
               AllOf(HasSubstr("source.synthetic"), HasSubstr("width"), HasSubstr("baseline_m")));
+}
+
+}  // namespace
+}  // namespace stevi::server
+
+namespace stevi::server {
+namespace {
+
+// Every field of the source's aravis, synthetic (both scenes) and replay configs, set alone to a
+// valid value other than the default, arrives in the drivers' options (read back through their
+// field lists). A field missing from a driver's list fails here, by name.
+template <class M, class Options>
+int ExpectSourceFieldsArrive(void (*place)(const M&, v1::SourceConfig&),
+                             Options (*from)(const v1::SourceConfig&, std::vector<std::string>&),
+                             const std::set<std::string>& skip,
+                             const std::vector<std::string>& texts = {"x"}) {
+  v1::SourceConfig base;
+  place(M{}, base);
+  std::vector<std::string> problems;
+  M defaults;
+  FieldsToProto(from(base, problems), defaults);
+  EXPECT_THAT(problems, ::testing::IsEmpty());
+  return proto_fields::ExpectEveryLeafArrives<M>(
+      defaults,
+      [&](const M& update) -> std::optional<M> {
+        v1::SourceConfig source;
+        place(update, source);
+        std::vector<std::string> found;
+        const Options options = from(source, found);
+        if (!found.empty() || !options.Validate().empty()) return std::nullopt;
+        M back;
+        FieldsToProto(options, back);
+        return back;
+      },
+      skip, texts);
+}
+
+TEST(SourceOptions, EveryFieldSetAloneArrives) {
+  const int aravis = ExpectSourceFieldsArrive<v1::AravisConfig>(
+      [](const v1::AravisConfig& a, v1::SourceConfig& s) {
+        s.set_left("GV01");
+        s.set_right("GV02");
+        *s.mutable_aravis() = a;
+      },
+      &AravisOptionsFrom, {}, {"BayerRG8"});
+  EXPECT_EQ(aravis, v1::AravisConfig::descriptor()->field_count());
+
+  const int synthetic = ExpectSourceFieldsArrive<v1::SyntheticConfig>(
+      [](const v1::SyntheticConfig& c, v1::SourceConfig& s) { *s.mutable_synthetic() = c; },
+      &SyntheticOptionsFrom, {"scene"});
+  EXPECT_EQ(synthetic, v1::SyntheticConfig::descriptor()->field_count() - 1);
+
+  const int chessboard = ExpectSourceFieldsArrive<v1::SyntheticConfig>(
+      [](const v1::SyntheticConfig& c, v1::SourceConfig& s) {
+        *s.mutable_synthetic() = c;
+        s.mutable_synthetic()->set_scene("chessboard");
+      },
+      &ChessboardOptionsFrom, {"scene", "loop_frames"});
+  EXPECT_EQ(chessboard, v1::SyntheticConfig::descriptor()->field_count() - 2);
+
+  const int replay = ExpectSourceFieldsArrive<v1::ReplayConfig>(
+      [](const v1::ReplayConfig& c, v1::SourceConfig& s) { *s.mutable_replay() = c; },
+      &ReplayOptionsFrom, {"dir"});
+  EXPECT_EQ(replay, v1::ReplayConfig::descriptor()->field_count() - 1);
 }
 
 }  // namespace

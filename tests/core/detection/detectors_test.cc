@@ -133,5 +133,13 @@ TEST(SteViSOptions, ValidateNamesEveryProblemWithItsStage) {
   EXPECT_THAT(all, HasSubstr("graph_level"));
 }
 
+TEST(SteViSOptions, ValidatesTheGraphOptionsInGraphModeOnly) {
+  SteViSOptions o;
+  o.graph.k = 0;
+  EXPECT_THAT(o.Validate(), ::testing::IsEmpty());
+  o.segmentation = SteViSOptions::Segmentation::kGraph;
+  EXPECT_THAT(o.Validate(), ::testing::ElementsAre("graph.k: must be > 0 grey levels (got 0)"));
+}
+
 }  // namespace
 }  // namespace stevi::detection

@@ -379,14 +379,17 @@ TEST(SaliencyOptions, ListsEveryProblem) {
   options.peak_fraction = 0;
   options.min_contrast = -1;
   const std::vector<std::string> problems = options.Validate();
-  EXPECT_THAT(problems, UnorderedElementsAre(
-                            HasSubstr("centre_level:"), HasSubstr("scales[1]:"),
-                            HasSubstr("scales[2]:"), HasSubstr("surround_radii: must not be empty"),
-                            HasSubstr("peak_fraction:"), HasSubstr("min_contrast:")));
+  EXPECT_THAT(problems, UnorderedElementsAre("centre_level: must be in [0, 8] (got 9)",
+                                             "scales[1]: repeats an earlier value (got 2)",
+                                             "scales: must be in [0, 8] (got -1)",
+                                             "surround_radii: must not be empty",
+                                             "peak_fraction: must be in (0, 1] (got 0)",
+                                             "min_contrast: must be >= 0 grey levels (got -1)"));
   options = SaliencyOptions{};
   options.surround_radii = {3, 0, 65};
-  EXPECT_THAT(options.Validate(), UnorderedElementsAre(HasSubstr("surround_radii[1]:"),
-                                                       HasSubstr("surround_radii[2]:")));
+  EXPECT_THAT(options.Validate(),
+              UnorderedElementsAre("surround_radii: must be in [1, 64] pixels (got 0)",
+                                   "surround_radii: must be in [1, 64] pixels (got 65)"));
 }
 
 }  // namespace

@@ -74,7 +74,7 @@ TEST(MountOptionsValidate, NamesEveryBadField) {
   EXPECT_THAT(problems, Contains(AllOf(HasSubstr("pitch_deg: must be in [-90, 90]"),
                                        HasSubstr("(got -91)"))));
   EXPECT_THAT(problems, Contains(AllOf(HasSubstr("yaw_deg:"), HasSubstr("(got nan)"))));
-  EXPECT_THAT(problems, Contains(AllOf(HasSubstr("lever_arm_x_m: must be in [-100, 100] metres"),
+  EXPECT_THAT(problems, Contains(AllOf(HasSubstr("lever_arm_x_m: must be in [-100, 100] m"),
                                        HasSubstr("(got 150)"))));
   EXPECT_THAT(problems, Contains(AllOf(HasSubstr("lever_arm_y_m:"), HasSubstr("(got inf)"))));
 }

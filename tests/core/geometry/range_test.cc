@@ -101,7 +101,7 @@ TEST(RangeOptionsValidate, ListsEveryProblem) {
   options.max_range_m = -5;
   options.disparity_sigma_px = 0;
   const std::vector<std::string> problems = options.Validate();
-  EXPECT_THAT(problems, ElementsAre(HasSubstr("min_disparity_px: must be > 0 (got -1)"),
+  EXPECT_THAT(problems, ElementsAre(HasSubstr("min_disparity_px: must be > 0 pixels (got -1)"),
                                     HasSubstr("max_range_m: must be >= 0"),
                                     HasSubstr("disparity_sigma_px: must be > 0")));
 }

@@ -94,30 +94,34 @@ TEST(BlockMatchingOptionsValidate, ListsEveryProblem) {
   o.speckle_window_size = -5;
   o.speckle_range = -1;
   const std::vector<std::string> problems = o.Validate();
-  EXPECT_THAT(problems, Contains("prefilter_size: must be odd (got 4)"));
-  EXPECT_THAT(problems, Contains("prefilter_size: must be in 5..255 (got 4)"));
-  EXPECT_THAT(problems, Contains("prefilter_cap: must be in 1..63 (got 0)"));
-  EXPECT_THAT(problems, Contains("block_size: must be odd (got 8)"));
-  EXPECT_THAT(problems, Contains("num_disparities: must be a positive multiple of 16 (got 50)"));
-  EXPECT_THAT(problems, Contains(HasSubstr("min_disparity: must be in 0..")));
+  EXPECT_THAT(problems, Contains("prefilter_size: must be in [5, 255] pixels and odd (got 4)"));
+  EXPECT_THAT(problems, Contains("prefilter_cap: must be in [1, 63] (got 0)"));
+  EXPECT_THAT(problems, Contains("block_size: must be in [5, 255] pixels and odd (got 8)"));
+  EXPECT_THAT(problems,
+              Contains("num_disparities: must be <= 512 pixels and a positive multiple of 16 "
+                       "(got 50)"));
+  EXPECT_THAT(problems, Contains("min_disparity: must be in [0, 512] pixels (got -2)"));
   EXPECT_THAT(problems, Contains("texture_threshold: must be >= 0 (got -1)"));
-  EXPECT_THAT(problems, Contains("uniqueness_ratio: must be in 0..100 (got 101)"));
-  EXPECT_THAT(problems, Contains("speckle_window_size: must be >= 0 (got -5)"));
-  EXPECT_THAT(problems, Contains(HasSubstr("speckle_range: must be in 0..")));
-  EXPECT_THAT(problems, SizeIs(10));
+  EXPECT_THAT(problems, Contains("uniqueness_ratio: must be in [0, 100] percent (got 101)"));
+  EXPECT_THAT(problems, Contains("speckle_window_size: must be >= 0 pixels (got -5)"));
+  EXPECT_THAT(problems, Contains(HasSubstr("speckle_range: must be in [0, ")));
+  EXPECT_THAT(problems, SizeIs(9));
 }
 
 TEST(BlockMatchingOptionsValidate, BlockSizeRangeAndDisparityCap) {
   BlockMatchingOptions o;
   o.block_size = 3;
   o.num_disparities = 1024;
-  EXPECT_THAT(o.Validate(),
-              testing::ElementsAre("block_size: must be in 5..255 (got 3)",
-                                   "num_disparities: must be at most 512 (got 1024)"));
+  EXPECT_THAT(
+      o.Validate(),
+      testing::ElementsAre(
+          "block_size: must be in [5, 255] pixels and odd (got 3)",
+          "num_disparities: must be <= 512 pixels and a positive multiple of 16 (got 1024)"));
   o.block_size = 5;
   o.num_disparities = 0;
   EXPECT_THAT(o.Validate(),
-              testing::ElementsAre("num_disparities: must be a positive multiple of 16 (got 0)"));
+              testing::ElementsAre(
+                  "num_disparities: must be <= 512 pixels and a positive multiple of 16 (got 0)"));
 }
 
 TEST(SemiGlobalOptionsValidate, DefaultsAreValid) {
@@ -137,17 +141,17 @@ TEST(SemiGlobalOptionsValidate, ListsEveryProblem) {
   o.speckle_range = -3;
   o.texture_threshold = -4;
   const std::vector<std::string> problems = o.Validate();
-  EXPECT_THAT(problems, Contains("block_size: must be odd (got 12)"));
-  EXPECT_THAT(problems, Contains("block_size: must be in 1..11 (got 12)"));
-  EXPECT_THAT(problems, Contains("num_disparities: must be a positive multiple of 16 (got -16)"));
+  EXPECT_THAT(problems, Contains("block_size: must be in [1, 11] pixels and odd (got 12)"));
+  EXPECT_THAT(problems, Contains("num_disparities: must be <= 512 pixels and a positive multiple "
+                                 "of 16 (got -16)"));
   EXPECT_THAT(problems, Contains("p2: must be greater than p1 (got p1=100, p2=50)"));
-  EXPECT_THAT(problems, Contains("disp12_max_diff: must be >= -1 (got -2)"));
-  EXPECT_THAT(problems, Contains("prefilter_cap: must be in 1..63 (got 64)"));
-  EXPECT_THAT(problems, Contains("uniqueness_ratio: must be in 0..100 (got -1)"));
-  EXPECT_THAT(problems, Contains("speckle_window_size: must be >= 0 (got -1)"));
-  EXPECT_THAT(problems, Contains(HasSubstr("speckle_range: must be in 0..")));
+  EXPECT_THAT(problems, Contains("disp12_max_diff: must be >= -1 pixels (got -2)"));
+  EXPECT_THAT(problems, Contains("prefilter_cap: must be in [1, 63] (got 64)"));
+  EXPECT_THAT(problems, Contains("uniqueness_ratio: must be in [0, 100] percent (got -1)"));
+  EXPECT_THAT(problems, Contains("speckle_window_size: must be >= 0 pixels (got -1)"));
+  EXPECT_THAT(problems, Contains(HasSubstr("speckle_range: must be in [0, ")));
   EXPECT_THAT(problems, Contains("texture_threshold: must be >= 0 (got -4)"));
-  EXPECT_THAT(problems, SizeIs(10));
+  EXPECT_THAT(problems, SizeIs(9));
 }
 
 TEST(SemiGlobalOptionsValidate, NamesTextureThresholdWhenNegative) {
@@ -184,10 +188,12 @@ TEST(MatcherOptionsValidate, PrefixesTheSelectedKindOnly) {
   options.semi_global.block_size = 4;
   options.kind = MatcherKind::kBlockMatching;
   EXPECT_THAT(options.Validate(),
-              testing::ElementsAre("block_matching.block_size: must be odd (got 8)"));
+              testing::ElementsAre(
+                  "block_matching.block_size: must be in [5, 255] pixels and odd (got 8)"));
   options.kind = MatcherKind::kSemiGlobal;
-  EXPECT_THAT(options.Validate(),
-              testing::ElementsAre("semi_global.block_size: must be odd (got 4)"));
+  EXPECT_THAT(
+      options.Validate(),
+      testing::ElementsAre("semi_global.block_size: must be in [1, 11] pixels and odd (got 4)"));
   EXPECT_EQ(MatcherKindName(MatcherKind::kSemiGlobal), "semi_global");
   EXPECT_EQ(MatcherKindName(MatcherKind::kBlockMatching), "block_matching");
 }

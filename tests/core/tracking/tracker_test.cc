@@ -706,7 +706,7 @@ TEST(TrackerOptions, ValidateNamesBadFields) {
   EXPECT_THAT(all, HasSubstr("gates.max_depth_ratio: must be >= 1 (got 0.9)"));
   EXPECT_THAT(all, HasSubstr("gates.max_distance_px: must be > 0"));
   EXPECT_THAT(all, HasSubstr("confirm_hits: must be >= 1 (got 0)"));
-  EXPECT_THAT(all, HasSubstr("tentative_delete_misses: must be in 1..delete_misses (got 5)"));
+  EXPECT_THAT(all, HasSubstr("tentative_delete_misses: must be <= delete_misses = 4 (got 5)"));
   EXPECT_THAT(all, HasSubstr("fading_beta: must be in (0, 1] (got 1.2)"));
   EXPECT_THAT(all, HasSubstr("min_score: must be in [0, 1] (got 1.5)"));
   EXPECT_THAT(all, HasSubstr("max_dt_s: must be > 0"));
