@@ -1,5 +1,7 @@
 #include "server/app_config.h"
 
+#include "core/common/format.h"
+
 #include "server/field_mapping.h"
 
 #include "drivers/synthetic/chessboard_source.h"
@@ -18,6 +20,7 @@
 #include "drivers/aravis/aravis_source.h"
 #include "drivers/files/image_source.h"
 #include "drivers/recording/replay_source.h"
+#include "drivers/synthetic/scenarios.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/auth.h"
 #include "server/convert.h"
@@ -40,12 +43,6 @@ class CollectingErrors : public google::protobuf::io::ErrorCollector {
 };
 
 // A number as %g prints it ("0.5", "86400", "nan").
-std::string FormatNumber(double value) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%g", value);
-  return buf;
-}
-
 std::optional<double> ParseDouble(const std::string& text) {
   double value = 0;
   const char* end = text.data() + text.size();
@@ -65,17 +62,6 @@ Result<std::unique_ptr<PoseSource>> MakePoseSource(
   std::optional<geo::VehicleState> fixed = synthetic_default;
   if (config.has_fixed_pose()) fixed = FromProto(config.fixed_pose());
   return PoseSource::Create(options, fixed);
-}
-
-std::optional<drivers::Scenario> FindScenario(const std::string& name) {
-  if (name == "flight") return drivers::FlightScenario();
-  for (std::vector<drivers::Scenario> list :
-       {drivers::EvaluationScenarios(), drivers::TrackingScenarios()}) {
-    for (drivers::Scenario& s : list) {
-      if (s.name == name) return std::move(s);
-    }
-  }
-  return std::nullopt;
 }
 
 Result<Flags> ParseFlags(int argc, const char* const* argv, const std::set<std::string>& known,
@@ -280,23 +266,31 @@ drivers::AravisOptions AravisOptionsFrom(const v1::SourceConfig& source,
   return options;
 }
 
+namespace {
+
+// A synthetic scene's options: source.synthetic's fields over `base`, at source.fps.
+template <class Options>
+Options SyntheticFieldsOver(Options base, const v1::SourceConfig& source,
+                            std::vector<std::string>& problems) {
+  base.fps = source.has_fps() ? source.fps() : kDefaultFps;
+  AppendPrefixed(problems, "", FieldsFromProto(source.synthetic(), base, "source.synthetic."));
+  return base;
+}
+
+}  // namespace
+
 drivers::SyntheticOptions SyntheticOptionsFrom(const v1::SourceConfig& source,
                                                std::vector<std::string>& problems) {
-  drivers::SyntheticOptions options;
-  if (std::optional<drivers::Scenario> scenario = FindScenario(source.synthetic().scene())) {
-    options = scenario->options;  // its rig, noise, seed and scene; the loop repeats it
-  }
-  options.fps = source.has_fps() ? source.fps() : kDefaultFps;
-  AppendPrefixed(problems, "", FieldsFromProto(source.synthetic(), options, "source.synthetic."));
-  return options;
+  // The named scenario's rig, noise, seed and scene (the loop repeats it), else the default.
+  const std::optional<drivers::Scenario> scenario =
+      drivers::FindScenario(source.synthetic().scene());
+  return SyntheticFieldsOver(scenario ? scenario->options : drivers::SyntheticOptions{}, source,
+                             problems);
 }
 
 drivers::ChessboardSourceOptions ChessboardOptionsFrom(const v1::SourceConfig& source,
                                                        std::vector<std::string>& problems) {
-  drivers::ChessboardSourceOptions options;
-  options.fps = source.has_fps() ? source.fps() : kDefaultFps;
-  AppendPrefixed(problems, "", FieldsFromProto(source.synthetic(), options, "source.synthetic."));
-  return options;
+  return SyntheticFieldsOver(drivers::ChessboardSourceOptions{}, source, problems);
 }
 
 drivers::ReplayOptions ReplayOptionsFrom(const v1::SourceConfig& source,
@@ -331,14 +325,15 @@ void ValidateSyntheticSource(const v1::SourceConfig& source, std::vector<std::st
     problems.push_back(
         "source: left, right and calibration are for the images source (--source images)");
   }
-  if (source.synthetic().scene() == "chessboard" && source.synthetic().has_loop_frames()) {
+  if (source.synthetic().scene() == drivers::kChessboardScene &&
+      source.synthetic().has_loop_frames()) {
     problems.push_back("source.synthetic.loop_frames: not for the chessboard scene");
   }
-  if (source.synthetic().has_scene() && source.synthetic().scene() != "airfield" &&
-      source.synthetic().scene() != "chessboard" && !FindScenario(source.synthetic().scene())) {
-    std::string names = "airfield, flight, chessboard";
-    for (const drivers::Scenario& s : drivers::EvaluationScenarios()) names += ", " + s.name;
-    for (const drivers::Scenario& s : drivers::TrackingScenarios()) names += ", " + s.name;
+  if (!drivers::IsKnownScene(source.synthetic().scene())) {
+    std::string names;
+    for (const std::string& name : drivers::SceneNames()) {
+      names += (names.empty() ? "" : ", ") + name;
+    }
     problems.push_back("source.synthetic.scene: unknown scene '" + source.synthetic().scene() +
                        "' (one of: " + names + ")");
   }
@@ -539,7 +534,7 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig
     return drivers::OpenImageSource(options);
   }
   const v1::SyntheticConfig& s = config.synthetic();
-  if (s.scene() == "chessboard") {
+  if (s.scene() == drivers::kChessboardScene) {
     std::vector<std::string> problems;
     drivers::ChessboardSourceOptions board = ChessboardOptionsFrom(config, problems);
     if (!problems.empty()) return Error::Invalid(problems);

@@ -65,9 +65,6 @@ Result<pipeline::PipelineConfig> BuildPipelineConfig(const v1::PipelineConfig& c
 Result<std::unique_ptr<PoseSource>> MakePoseSource(
     const v1::GeoConfig& config, const std::optional<geo::VehicleState>& synthetic_default);
 
-// A named evaluation or tracking scenario (drivers/synthetic), to play live with --scene NAME.
-std::optional<drivers::Scenario> FindScenario(const std::string& name);
-
 // The drivers' options of a source config: its fields over the drivers' defaults (the synthetic
 // ones over the named scenario's, the frame rates from source.fps), mapped by name through the
 // drivers' field lists. Problems of the proto itself (an unknown enum value) are appended, named

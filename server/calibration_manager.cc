@@ -1,5 +1,7 @@
 #include "server/calibration_manager.h"
 
+#include "core/common/format.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -20,10 +22,6 @@ Error CaptureCancelled() { return Error{ErrorCode::kCancelled, "capture cancelle
 constexpr int kDefaultCapturePairs = 20;
 constexpr double kDefaultCaptureInterval = 0.5;
 constexpr auto kCaptureFrameTimeout = std::chrono::seconds(5);
-
-std::string SizeText(cv::Size size) {
-  return std::to_string(size.width) + "x" + std::to_string(size.height);
-}
 
 v1::CalibrationSummary ToSummary(const calibration::CalibrationSummary& s, bool active) {
   v1::CalibrationSummary out;

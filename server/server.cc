@@ -7,6 +7,7 @@
 #include <grpcpp/health_check_service_interface.h>
 
 #include "server/app_config.h"
+#include "drivers/synthetic/scenarios.h"
 #include "server/convert.h"
 #include "server/runtime/log.h"
 
@@ -18,25 +19,16 @@ namespace {
 // scene, or nullopt for another source (or the chessboard, which has no vehicle).
 std::optional<geo::VehicleState> SyntheticPose(const v1::SourceConfig& source) {
   const v1::SourceKind kind = source.kind();
-  if ((kind != v1::SOURCE_KIND_SYNTHETIC && kind != v1::SOURCE_KIND_UNSPECIFIED) ||
-      source.synthetic().scene() == "chessboard") {
-    return std::nullopt;
-  }
-  const std::optional<drivers::Scenario> scenario = FindScenario(source.synthetic().scene());
-  return SyntheticRigPose(scenario ? scenario->options.scene.camera_height_m
-                                   : drivers::DefaultScene().camera_height_m);
+  if (kind != v1::SOURCE_KIND_SYNTHETIC && kind != v1::SOURCE_KIND_UNSPECIFIED) return std::nullopt;
+  return drivers::SceneRigPose(source.synthetic().scene());
 }
 
 // A scenario whose rig moves flies its path: the pose source follows it.
 void FollowSyntheticFlight(const v1::SourceConfig& source, const geo::VehicleState& start,
                            PoseSource& poses) {
-  const std::optional<drivers::Scenario> scenario = FindScenario(source.synthetic().scene());
-  if (!scenario || scenario->options.scene.rig_velocity_mps == cv::Vec3d(0, 0, 0)) return;
-  const drivers::Scene scene = scenario->options.scene;
-  poses.SetSyntheticPath([scene, start](int64_t t_ns) {
-    return MovedRigPose(start, scene.RigOffsetAt(static_cast<double>(t_ns) * 1e-9),
-                        scene.rig_velocity_mps);
-  });
+  if (auto path = drivers::SceneRigPath(source.synthetic().scene(), start)) {
+    poses.SetSyntheticPath(std::move(path));
+  }
 }
 
 // ServerConfig.record: recording from the first frame on (the tap is in place before the engine

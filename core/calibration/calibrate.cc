@@ -1,5 +1,7 @@
 #include "core/calibration/calibrate.h"
 
+#include "core/common/format.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -30,20 +32,10 @@ constexpr double kOutlierMinDropPx = 1.0;
 // Rejected pairs quoted in an error message before "and N more".
 constexpr std::size_t kQuotedRejections = 4;
 
-std::string SizeText(cv::Size s) {
-  return std::to_string(s.width) + "x" + std::to_string(s.height);
-}
-
 std::string PairLabel(int index, const std::string& name) {
   std::string label = "#" + std::to_string(index);
   if (!name.empty()) label += " (" + name + ")";
   return label;
-}
-
-std::string Fixed(double value, int digits) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, value);
-  return buf;
 }
 
 // ---- Images -----------------------------------------------------------------------------------

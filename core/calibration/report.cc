@@ -1,5 +1,7 @@
 #include "core/calibration/report.h"
 
+#include "core/common/format.h"
+
 #include <cstdio>
 #include <cstdlib>
 #include <iomanip>
@@ -18,12 +20,6 @@ constexpr RejectReason kAllReasons[] = {
 std::string Percent(double fraction) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.0f %%", 100.0 * fraction);
-  return buf;
-}
-
-std::string Fixed(double value, int digits) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, value);
   return buf;
 }
 

@@ -43,16 +43,6 @@ std::string Field::Problem(double value) const {
   return std::string(name_) + ": must be " + Describe(/*with_unit=*/true) + Got(value);
 }
 
-namespace internal {
-
-std::string FormatNumber(double value) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%g", value);
-  return buf;
-}
-
-}  // namespace internal
-
 namespace {
 
 std::string Escaped(const std::string& cell) {

@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "core/common/error.h"
+#include "core/common/format.h"
 
 namespace stevi::fields {
 
@@ -131,8 +132,7 @@ void Visit(S& s, V& v) {
 
 namespace internal {
 
-// printf's %g.
-std::string FormatNumber(double value);
+using stevi::FormatNumber;
 
 template <class T>
 double AsDouble(const T& value) {

@@ -1,5 +1,7 @@
 #include "core/pipeline/pipeline.h"
 
+#include "core/common/format.h"
+
 #include <chrono>
 #include <string>
 #include <utility>
@@ -15,10 +17,6 @@ using Clock = std::chrono::steady_clock;
 
 double MsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
-
-std::string SizeText(const cv::Size& size) {
-  return std::to_string(size.width) + "x" + std::to_string(size.height);
 }
 
 // Converts an already rectified 8-bit image to grey into `out` (reused when it fits).

@@ -20,6 +20,29 @@ inline constexpr int kMaxNumDisparities = 512;
 inline constexpr int kMaxMinDisparity = 512;
 inline constexpr int kMaxSpeckleRange = 1024;
 
+// The fields both matchers have: the disparity search, the pre-filter cap, the uniqueness and
+// speckle filters and the left padding (part of each options struct's field list).
+template <class Self, class V>
+void VisitSharedMatcherFields(Self& s, V& v) {
+  using fields::Field;
+  v.Number(s.num_disparities, Field("num_disparities", "pixels", "disparities searched")
+                                  .MultipleOf(16)
+                                  .AtMost(kMaxNumDisparities));
+  v.Number(s.min_disparity,
+           Field("min_disparity", "pixels", "smallest disparity searched").In(0, kMaxMinDisparity));
+  v.Number(s.prefilter_cap, Field("prefilter_cap", "", "pre-filter output cap").In(1, 63));
+  v.Number(s.uniqueness_ratio,
+           Field("uniqueness_ratio", "percent", "margin of the best cost over the second best")
+               .In(0, 100));
+  v.Number(s.speckle_window_size,
+           Field("speckle_window_size", "pixels", "largest speckle region; 0 disables the filter")
+               .AtLeast(0));
+  v.Number(s.speckle_range,
+           Field("speckle_range", "pixels", "largest disparity variation within a speckle")
+               .In(0, kMaxSpeckleRange));
+  v.Flag(s.pad_left, Field("pad_left", "", "pad on the left so the leftmost columns match"));
+}
+
 // SAD block matching with every parameter the thesis tunes: cv::StereoBM's output, computed by
 // SadBlockMatcher (block_matcher.h) for the x-Sobel pre-filter and by cv::StereoBM otherwise.
 struct BlockMatchingOptions {
@@ -71,27 +94,11 @@ struct BlockMatchingOptions {
              kPreFilterNames);
     v.Number(s.prefilter_size,
              Field("prefilter_size", "pixels", "normalized-response window").Odd().In(5, 255));
-    v.Number(s.prefilter_cap, Field("prefilter_cap", "", "pre-filter output cap").In(1, 63));
     v.Number(s.block_size, Field("block_size", "pixels", "SAD window").Odd().In(5, 255));
-    v.Number(s.num_disparities, Field("num_disparities", "pixels", "disparities searched")
-                                    .MultipleOf(16)
-                                    .AtMost(kMaxNumDisparities));
-    v.Number(
-        s.min_disparity,
-        Field("min_disparity", "pixels", "smallest disparity searched").In(0, kMaxMinDisparity));
+    VisitSharedMatcherFields(s, v);
     v.Number(s.texture_threshold,
              Field("texture_threshold", "", "minimum window sum of the pre-filtered left image")
                  .AtLeast(0));
-    v.Number(s.uniqueness_ratio,
-             Field("uniqueness_ratio", "percent", "margin of the best cost over the second best")
-                 .In(0, 100));
-    v.Number(s.speckle_window_size,
-             Field("speckle_window_size", "pixels", "largest speckle region; 0 disables the filter")
-                 .AtLeast(0));
-    v.Number(s.speckle_range,
-             Field("speckle_range", "pixels", "largest disparity variation within a speckle")
-                 .In(0, kMaxSpeckleRange));
-    v.Flag(s.pad_left, Field("pad_left", "", "pad on the left so the leftmost columns match"));
     v.Number(s.local_texture_threshold,
              Field("local_texture_threshold", "",
                    "halo gate: mean |x-Sobel| over 5x5 that keeps a disparity; 0 disables")
@@ -143,28 +150,12 @@ struct SemiGlobalOptions {
   static void Fields(Self& s, V& v) {
     using fields::Field;
     v.Number(s.block_size, Field("block_size", "pixels", "matched block").Odd().In(1, 11));
-    v.Number(s.num_disparities, Field("num_disparities", "pixels", "disparities searched")
-                                    .MultipleOf(16)
-                                    .AtMost(kMaxNumDisparities));
-    v.Number(
-        s.min_disparity,
-        Field("min_disparity", "pixels", "smallest disparity searched").In(0, kMaxMinDisparity));
+    VisitSharedMatcherFields(s, v);
     v.Number(s.p1, Field("p1", "", "smoothness penalty; 0 = 8 * block_size^2").AtLeast(0));
     v.Number(s.p2, Field("p2", "", "> p1 when set; 0 = 32 * block_size^2").AtLeast(0));
     v.Number(s.disp12_max_diff,
              Field("disp12_max_diff", "pixels", "left-right check; -1 disables").AtLeast(-1));
-    v.Number(s.prefilter_cap, Field("prefilter_cap", "", "pre-filter output cap").In(1, 63));
-    v.Number(s.uniqueness_ratio,
-             Field("uniqueness_ratio", "percent", "margin of the best cost over the second best")
-                 .In(0, 100));
-    v.Number(s.speckle_window_size,
-             Field("speckle_window_size", "pixels", "largest speckle region; 0 disables the filter")
-                 .AtLeast(0));
-    v.Number(s.speckle_range,
-             Field("speckle_range", "pixels", "largest disparity variation within a speckle")
-                 .In(0, kMaxSpeckleRange));
     v.Choice(s.mode, Field("mode", "", "cv::StereoSGBM's mode"), kModeNames);
-    v.Flag(s.pad_left, Field("pad_left", "", "pad on the left so the leftmost columns match"));
     v.Number(s.texture_threshold,
              Field("texture_threshold", "",
                    "texture gate: mean |x-Sobel| over the block that keeps a disparity; 0 disables")

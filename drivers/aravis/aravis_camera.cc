@@ -1,5 +1,7 @@
 #include "drivers/aravis/aravis_camera.h"
 
+#include "core/common/format.h"
+
 #include <arv.h>
 
 #include <algorithm>
@@ -76,16 +78,6 @@ class GErrorSlot {
 };
 
 std::string Str(const char* s) { return s != nullptr ? s : ""; }
-
-std::string SizeText(int width, int height) {
-  return std::to_string(width) + "x" + std::to_string(height);
-}
-
-std::string Number(double value) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%g", value);
-  return buf;
-}
 
 std::string Join(const std::vector<std::string>& items) {
   std::string out;
@@ -505,9 +497,9 @@ Status ConfigureAnalog(ConfigureStep& step, const AnalogControl& c, bool automat
     }
   } else {
     if (!has) {
-      return Error{ErrorCode::kInvalidArgument, step.name + ": " + c.setting + " " + Number(value) +
-                                                    " was asked but the camera has no " +
-                                                    c.control};
+      return Error{ErrorCode::kInvalidArgument,
+                   step.name + ": " + c.setting + " " + FormatNumber(value) +
+                       " was asked but the camera has no " + c.control};
     }
     if (has_auto) {
       c.set_auto(step.camera, ARV_AUTO_OFF, step.error.out());
@@ -517,13 +509,14 @@ Status ConfigureAnalog(ConfigureStep& step, const AnalogControl& c, bool automat
     c.get_bounds(step.camera, &lo, &hi, step.error.out());
     if (step.error) return step.Failed("reading the " + noun + " bounds");
     if (value < lo || value > hi) {
-      return Error{ErrorCode::kInvalidArgument, step.name + ": " + c.setting + " " + Number(value) +
-                                                    " is outside its range " + Number(lo) + ".." +
-                                                    Number(hi) + " " + c.unit};
+      return Error{ErrorCode::kInvalidArgument, step.name + ": " + c.setting + " " +
+                                                    FormatNumber(value) + " is outside its range " +
+                                                    FormatNumber(lo) + ".." + FormatNumber(hi) +
+                                                    " " + c.unit};
     }
     c.set(step.camera, value, step.error.out());
     if (step.error)
-      return step.Failed("setting the " + noun + " to " + Number(value) + " " + c.unit);
+      return step.Failed("setting the " + noun + " to " + FormatNumber(value) + " " + c.unit);
   }
   if (has) {
     actual = c.get(step.camera, step.error.out());
@@ -541,13 +534,14 @@ Status ConfigureFrameRate(ConfigureStep& step, const CameraSettings& settings, C
       arv_camera_get_frame_rate_bounds(step.camera, &lo, &hi, step.error.out());
       if (step.error) return step.Failed("reading the frame rate bounds");
       if (settings.frame_rate_hz < lo || settings.frame_rate_hz > hi) {
-        return Error{ErrorCode::kInvalidArgument,
-                     step.name + ": frame_rate_hz " + Number(settings.frame_rate_hz) +
-                         " is outside its range " + Number(lo) + ".." + Number(hi) + " Hz"};
+        return Error{ErrorCode::kInvalidArgument, step.name + ": frame_rate_hz " +
+                                                      FormatNumber(settings.frame_rate_hz) +
+                                                      " is outside its range " + FormatNumber(lo) +
+                                                      ".." + FormatNumber(hi) + " Hz"};
       }
       arv_camera_set_frame_rate(step.camera, settings.frame_rate_hz, step.error.out());
       if (step.error)
-        return step.Failed("setting the frame rate to " + Number(settings.frame_rate_hz));
+        return step.Failed("setting the frame rate to " + FormatNumber(settings.frame_rate_hz));
     }
     info.frame_rate_hz = arv_camera_get_frame_rate(step.camera, step.error.out());
     if (step.error) return step.Failed("reading the frame rate back");

@@ -1,5 +1,7 @@
 #include "drivers/files/image_source.h"
 
+#include "core/common/format.h"
+
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -15,10 +17,6 @@
 
 namespace stevi::drivers {
 namespace {
-
-std::string SizeText(const cv::Size& size) {
-  return std::to_string(size.width) + "x" + std::to_string(size.height);
-}
 
 bool IsPattern(const std::string& path) { return path.find('%') != std::string::npos; }
 

@@ -1,5 +1,7 @@
 #include "drivers/recording/recorder.h"
 
+#include "core/common/format.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -27,12 +29,6 @@ namespace fs = std::filesystem;
 constexpr size_t kMaxQueuedOther = 4096;
 // Calibration YAML is a few KiB; this keeps a change record far inside kMaxRecordBytes.
 constexpr size_t kMaxCalibrationYamlBytes = 1 << 20;
-
-int64_t UnixNowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
 
 std::string ManifestJson(const v1::RecordingManifest& manifest) {
   google::protobuf::util::JsonPrintOptions options;

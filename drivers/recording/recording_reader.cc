@@ -1,5 +1,7 @@
 #include "drivers/recording/recording_reader.h"
 
+#include "core/common/format.h"
+
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -17,10 +19,6 @@ namespace stevi::drivers {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string SizeText(int width, int height) {
-  return std::to_string(width) + "x" + std::to_string(height);
-}
 
 bool MatEqual(const cv::Mat& a, const cv::Mat& b) {
   if (a.size() != b.size() || a.type() != b.type()) return false;

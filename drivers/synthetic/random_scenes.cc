@@ -1,5 +1,7 @@
 #include "drivers/synthetic/random_scenes.h"
 
+#include "drivers/synthetic/scene_helpers.h"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -13,13 +15,6 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kFps = 10.0;
-
-uint64_t SplitMix64(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
 
 uint64_t HashString(const std::string& s) {
   uint64_t h = 0xCBF29CE484222325ull;

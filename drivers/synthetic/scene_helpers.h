@@ -14,6 +14,14 @@ namespace stevi::drivers {
 
 // An obstacle: id (> 0), name, size (x width, y height, z depth; metres), path, and texture
 // (mean grey 0..1, contrast 0..1, finest detail in metres).
+// SplitMix64's output function: a well-mixed 64-bit hash of x (seeds, textures, noise).
+inline uint64_t SplitMix64(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
 Obstacle MakeObstacle(int id, std::string name, cv::Vec3d size_m, Path path, double albedo,
                       double contrast, double cell_m);
 

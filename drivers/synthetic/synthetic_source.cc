@@ -1,5 +1,7 @@
 #include "drivers/synthetic/synthetic_source.h"
 
+#include "drivers/synthetic/scene_helpers.h"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -35,13 +37,6 @@ constexpr double kHillMaxStretch = 50.0;
 // Triplanar texture blend: a plane counts where its squared normal component exceeds this
 // fraction of the largest.
 constexpr double kHillBlendFloor = 0.6;
-
-uint64_t SplitMix64(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
 
 uint64_t Mix(uint64_t a, uint64_t b) { return SplitMix64(a ^ SplitMix64(b)); }
 

@@ -1,5 +1,7 @@
 #include "server/runtime/engine.h"
 
+#include "core/common/format.h"
+
 #include "server/runtime/log.h"
 
 #include <algorithm>
@@ -47,12 +49,6 @@ auto Guarded(Fn&& fn) -> decltype(fn()) {
   } catch (const std::exception& e) {
     return Error{ErrorCode::kInternal, std::string("unexpected failure: ") + e.what()};
   }
-}
-
-int64_t UnixNowNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
 }
 
 }  // namespace

@@ -4,8 +4,6 @@
 #include <numbers>
 #include <utility>
 
-#include <GeographicLib/LocalCartesian.hpp>
-
 namespace stevi::server {
 
 Result<std::unique_ptr<PoseSource>> PoseSource::Create(
@@ -59,29 +57,5 @@ geo::PoseLookup PoseSource::At(int64_t t_ns, int64_t unix_time_ns) const {
 }
 
 Status PoseSource::Publish(const geo::VehicleState& state) { return buffer_.Add(state); }
-
-geo::VehicleState MovedRigPose(const geo::VehicleState& start, const cv::Vec3d& offset_m,
-                               const cv::Vec3d& velocity_mps) {
-  const double yaw = start.yaw_deg * std::numbers::pi / 180.0;
-  const auto to_ned = [&](const cv::Vec3d& v) {  // forward z, right x
-    return Eigen::Vector3d(v[2] * std::cos(yaw) - v[0] * std::sin(yaw),
-                           v[2] * std::sin(yaw) + v[0] * std::cos(yaw), v[1]);
-  };
-  const Eigen::Vector3d ned = to_ned(offset_m);
-  const GeographicLib::LocalCartesian local(start.lat_deg, start.lon_deg, start.alt_m);
-  geo::VehicleState moved = start;
-  local.Reverse(ned.y(), ned.x(), -ned.z(), moved.lat_deg, moved.lon_deg, moved.alt_m);
-  moved.velocity_ned_mps = to_ned(velocity_mps);
-  return moved;
-}
-
-geo::VehicleState SyntheticRigPose(double camera_height_m) {
-  geo::VehicleState s;
-  s.lat_deg = 43.6839;
-  s.lon_deg = 10.3925;
-  s.alt_m = 49.5 + camera_height_m;
-  s.yaw_deg = 43;
-  return s;
-}
 
 }  // namespace stevi::server

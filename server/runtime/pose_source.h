@@ -55,15 +55,4 @@ class PoseSource {
   std::unordered_map<int64_t, geo::VehicleState> recorded_;  // by the frame's unix_time_ns
 };
 
-// The synthetic rig's pose after it moved `offset_m` (scene frame: x right, z forward, level)
-// from `start` at `velocity_mps` (same frame): position and NED velocity turned by the heading.
-geo::VehicleState MovedRigPose(const geo::VehicleState& start, const cv::Vec3d& offset_m,
-                               const cv::Vec3d& velocity_mps);
-
-// The synthetic rig's pose: hovering over the threshold of runway 04R at Pisa airport
-// (43.6839 N, 10.3925 E), its camera `camera_height_m` above the ground (the ground there is
-// about 49.5 m above the WGS84 ellipsoid: 2 m above sea level plus a 47.5 m geoid undulation),
-// level, heading 043 (the runway's).
-geo::VehicleState SyntheticRigPose(double camera_height_m);
-
 }  // namespace stevi::server

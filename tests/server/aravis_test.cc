@@ -101,9 +101,9 @@ TEST_F(AravisServerTest, StreamsPairedFramesWithSkewAndCountersInStatus) {
   EXPECT_EQ(status.source_state(), v1::SOURCE_STATE_RUNNING);
   EXPECT_THAT(status.source(), HasSubstr("aravis Aravis-Fake-GV01 + Aravis-Fake-GV02 640x480"));
   EXPECT_GE(status.pairing().pairs(), 40u);
-  // The >= 25 fps acquisition is asserted at the driver (drivers/aravis_source_test); through the
-  // whole server, on two cores shared with other tests, the bound is looser (30 alone, 17 seen
-  // under a 32-client load test running beside it).
+  // The >= 25 fps acquisition is asserted at the driver (drivers/aravis/aravis_source_test);
+  // through the whole server, on two cores shared with other tests, the bound is looser (30 alone,
+  // 17 seen under a 32-client load test running beside it).
   EXPECT_GE(status.fps_in(), 12.0) << "two cameras at 30 fps";
   EXPECT_LE(status.pairing().max_abs_skew_ns(), tolerance_ns);
   EXPECT_GT(status.pairing().mean_abs_skew_ns(), 0.0) << "two clocks never agree exactly";

@@ -1,4 +1,5 @@
 // The server in-process on a loopback port, through real gRPC channels.
+#include "drivers/synthetic/scenarios.h"
 #include "server/server.h"
 
 #include <gmock/gmock.h>
@@ -385,7 +386,7 @@ TEST_F(ServerTest, TracksCarryGeodeticPositionsMatchingTheTruth) {
   drivers::SyntheticOptions options;
   options.fps = kFps;
   drivers::SyntheticRenderer renderer(options);
-  const geo::VehicleState rig = SyntheticRigPose(drivers::DefaultScene().camera_height_m);
+  const geo::VehicleState rig = drivers::SyntheticRigPose(drivers::DefaultScene().camera_height_m);
   const geo::Georeferencer georeferencer;
   struct Band {
     double lo, hi;
@@ -477,7 +478,8 @@ TEST(ServerFlight, AStandingTowerKeepsItsPlaceWhileTheRigFlies) {
   const std::vector<v1::TrackFrame> frames = CollectFrames(client, 40);
   ASSERT_EQ(frames.size(), 40u);
   // The tower: the confirmed track nearest the truth's tower bearing (left, 43-45 m).
-  const geo::VehicleState start = SyntheticRigPose(drivers::DefaultScene().camera_height_m);
+  const geo::VehicleState start =
+      drivers::SyntheticRigPose(drivers::DefaultScene().camera_height_m);
   const geo::Georeferencer georeferencer;
   geo::VehiclePose pose;
   pose.state = start;

@@ -1,12 +1,10 @@
 // Where the vehicle pose comes from (server/runtime/pose_source.h): validation, the order of
-// precedence (published, recorded, synthetic path, fixed, none), and the synthetic rig's motion
-// against GeographicLib's geodesic as an independent reference.
+// precedence (published, recorded, synthetic path, fixed, none). The synthetic rig's own pose and
+// motion: tests/drivers/synthetic/scene_registry_test.cc.
 #include "server/runtime/pose_source.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
-
-#include <GeographicLib/Geodesic.hpp>
 
 namespace stevi::server {
 namespace {
@@ -81,35 +79,6 @@ TEST(PoseSource, RecordedStatesAreFoundByTheFramesExactTime) {
   lookup = poses->At(0, 150);
   EXPECT_EQ(lookup.status, geo::GeoStatus::kNoPose);
   EXPECT_THAT(lookup.message, HasSubstr("no pose was recorded"));
-}
-
-TEST(SyntheticRigPose, HoversOverPisaRunway04RAtTheCameraHeight) {
-  const geo::VehicleState s = SyntheticRigPose(12);
-  EXPECT_DOUBLE_EQ(s.lat_deg, 43.6839);
-  EXPECT_DOUBLE_EQ(s.lon_deg, 10.3925);
-  EXPECT_DOUBLE_EQ(s.alt_m, 49.5 + 12);
-  EXPECT_DOUBLE_EQ(s.yaw_deg, 43);
-  EXPECT_TRUE(s.Validate().empty());
-}
-
-// 1 km forward and 200 m right at heading 43: the geodesic from the start must be as long as the
-// offset and point along heading + atan(200 / 1000); the velocity turns by the heading too.
-TEST(MovedRigPose, MovesAlongTheHeadingAsTheGeodesicSays) {
-  const geo::VehicleState start = SyntheticRigPose(10);
-  const geo::VehicleState moved = MovedRigPose(start, cv::Vec3d(200, 0, 1000), cv::Vec3d(0, 0, 50));
-  double distance = 0, azimuth = 0, azimuth_end = 0;
-  GeographicLib::Geodesic::WGS84().Inverse(start.lat_deg, start.lon_deg, moved.lat_deg,
-                                           moved.lon_deg, distance, azimuth, azimuth_end);
-  const double expected_distance = std::hypot(200.0, 1000.0);
-  // The local tangent plane curves away from the ellipsoid: at 1 km, by well under a millimetre
-  // horizontally, and the height rises by d^2 / (2 R) = 8 cm.
-  EXPECT_NEAR(distance, expected_distance, 0.01);
-  EXPECT_NEAR(azimuth, 43 + std::atan2(200.0, 1000.0) * 180 / M_PI, 1e-3);
-  EXPECT_NEAR(moved.alt_m - start.alt_m, expected_distance * expected_distance / (2 * 6.371e6),
-              0.01);
-  EXPECT_NEAR(moved.velocity_ned_mps.x(), 50 * std::cos(43 * M_PI / 180), 1e-9);
-  EXPECT_NEAR(moved.velocity_ned_mps.y(), 50 * std::sin(43 * M_PI / 180), 1e-9);
-  EXPECT_NEAR(moved.velocity_ned_mps.z(), 0, 1e-12);
 }
 
 }  // namespace

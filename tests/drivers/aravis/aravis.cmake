@@ -2,8 +2,8 @@
 # against Aravis's in-process fake camera and against two real arv-fake-gv-camera-0.8
 # processes. Included from tests/CMakeLists.txt; paths are relative to tests/.
 if(TARGET stevi_aravis)
-  stevi_test(drivers/stereo_pairer_test SOURCES drivers/stereo_pairer_test.cc LIBS stevi_pairing
-    LABELS aravis TIMEOUT 60)
+  stevi_test(drivers/aravis/stereo_pairer_test SOURCES drivers/aravis/stereo_pairer_test.cc
+    LIBS stevi_pairing LABELS aravis TIMEOUT 60)
 
   # The fake GigE Vision camera of Debian's aravis-tools. When it is missing the GigE tests fail
   # and say so (they never skip silently).
@@ -19,17 +19,17 @@ if(TARGET stevi_aravis)
     STEVI_ARV_FAKE_GV_CAMERA="${STEVI_ARV_FAKE_GV_CAMERA}")
   target_link_libraries(stevi_testing_fake_camera PUBLIC GTest::gtest stevi_aravis
     PRIVATE stevi_warnings)
-  add_executable(drivers_aravis_source_test drivers/aravis_source_test.cc)
-  target_link_libraries(drivers_aravis_source_test PRIVATE stevi_testing GTest::gtest_main
+  add_executable(drivers_aravis_aravis_source_test drivers/aravis/aravis_source_test.cc)
+  target_link_libraries(drivers_aravis_aravis_source_test PRIVATE stevi_testing GTest::gtest_main
     stevi_aravis stevi_testing_fake_camera opencv_imgproc stevi_warnings)
-  add_test(NAME drivers/aravis_camera_test
-    COMMAND drivers_aravis_source_test --gtest_filter=-AravisGigE*)
-  add_test(NAME drivers/aravis_source_test
+  add_test(NAME drivers/aravis/aravis_camera_test
+    COMMAND drivers_aravis_aravis_source_test --gtest_filter=-AravisGigE*)
+  add_test(NAME drivers/aravis/aravis_source_test
     COMMAND /bin/sh ${CMAKE_CURRENT_SOURCE_DIR}/drivers/fake_camera_netns.sh
-            $<TARGET_FILE:drivers_aravis_source_test> --gtest_filter=AravisGigE*)
-  set_tests_properties(drivers/aravis_camera_test PROPERTIES LABELS aravis TIMEOUT 120)
+            $<TARGET_FILE:drivers_aravis_aravis_source_test> --gtest_filter=AravisGigE*)
+  set_tests_properties(drivers/aravis/aravis_camera_test PROPERTIES LABELS aravis TIMEOUT 120)
   # RESOURCE_LOCK: where no private namespace can be made, the fake cameras share the host's
   # GigE Vision port (see fake_camera_netns.sh).
-  set_tests_properties(drivers/aravis_source_test PROPERTIES LABELS aravis TIMEOUT 300
+  set_tests_properties(drivers/aravis/aravis_source_test PROPERTIES LABELS aravis TIMEOUT 300
     RESOURCE_LOCK fake_gige_cameras)
 endif()

@@ -1,0 +1,22 @@
+// Small text and time helpers shared by the core, the drivers and the server, so that each is
+// written once: numbers as printf formats them, image sizes, and the wall-clock time.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+namespace stevi {
+
+// printf's %g: "0.5", "1e+08", "640".
+std::string FormatNumber(double value);
+// printf's %.*f: Fixed(0.123456, 3) is "0.123".
+std::string Fixed(double value, int digits);
+// "640x480".
+std::string SizeText(int width, int height);
+inline std::string SizeText(const cv::Size& size) { return SizeText(size.width, size.height); }
+// Nanoseconds since the Unix epoch, by the system clock.
+int64_t UnixNowNs();
+
+}  // namespace stevi
