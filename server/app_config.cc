@@ -147,17 +147,13 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
   if (const std::string* v = get("listen")) config.set_listen(*v);
   v1::SourceConfig* source = config.mutable_source();
   if (const std::string* v = get("source")) {
-    if (*v == "synthetic") {
-      source->set_kind(v1::SOURCE_KIND_SYNTHETIC);
-    } else if (*v == "images") {
-      source->set_kind(v1::SOURCE_KIND_IMAGES);
-    } else if (*v == "aravis") {
-      source->set_kind(v1::SOURCE_KIND_ARAVIS);
-    } else if (*v == "replay") {
-      source->set_kind(v1::SOURCE_KIND_REPLAY);
+    std::string value_name = "SOURCE_KIND_";
+    for (char c : *v) value_name += static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    v1::SourceKind kind = v1::SOURCE_KIND_UNSPECIFIED;
+    if (FindSourceKind(*v) != nullptr && v1::SourceKind_Parse(value_name, &kind)) {
+      source->set_kind(kind);
     } else {
-      problems.push_back("--source: unknown source '" + *v +
-                         "' (synthetic, images, aravis or replay)");
+      problems.push_back("--source: unknown source '" + *v + "' (" + SourceKindNames() + ")");
     }
   }
   if (const std::string* v = get("replay")) source->mutable_replay()->set_dir(*v);
@@ -300,6 +296,38 @@ drivers::ReplayOptions ReplayOptionsFrom(const v1::SourceConfig& source,
   return options;
 }
 
+std::string SourceKindName(v1::SourceKind kind) {
+  if (kind == v1::SOURCE_KIND_UNSPECIFIED) return std::string(SourceKinds().front().name);
+  const std::string prefix = "SOURCE_KIND_";
+  std::string name = v1::SourceKind_Name(kind);
+  if (name.rfind(prefix, 0) != 0) return std::to_string(static_cast<int>(kind));
+  name.erase(0, prefix.size());
+  for (char& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return name;
+}
+
+SourceSpec SourceSpecFrom(const v1::SourceConfig& source, bool loop_images,
+                          std::vector<std::string>& problems) {
+  SourceSpec spec;
+  spec.kind = SourceKindName(source.kind());
+  spec.left = source.left();
+  spec.right = source.right();
+  spec.calibration = source.calibration();
+  spec.scene = source.synthetic().scene();
+  spec.synthetic = SyntheticOptionsFrom(source, problems);
+  std::vector<std::string> board_problems;  // the same fields as synthetic's: named once
+  spec.chessboard = ChessboardOptionsFrom(source, board_problems);
+  spec.images.left = source.left();
+  spec.images.right = source.right();
+  spec.images.calibration = source.calibration();
+  spec.images.fps = source.has_fps() ? source.fps() : kDefaultFps;
+  spec.images.loop = source.has_loop() ? source.loop() : loop_images;
+  spec.aravis = AravisOptionsFrom(source, problems);
+  spec.replay_dir = source.replay().dir();
+  spec.replay = ReplayOptionsFrom(source, problems);
+  return spec;
+}
+
 namespace {
 
 // ValidateServerConfig's parts, each appending to `problems`.
@@ -320,81 +348,13 @@ void ValidateListen(const v1::ServerConfig& config, std::vector<std::string>& pr
   }
 }
 
-void ValidateSyntheticSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
-  if (source.has_left() || source.has_right() || source.has_calibration()) {
-    problems.push_back(
-        "source: left, right and calibration are for the images source (--source images)");
-  }
-  if (source.synthetic().scene() == drivers::kChessboardScene &&
-      source.synthetic().has_loop_frames()) {
-    problems.push_back("source.synthetic.loop_frames: not for the chessboard scene");
-  }
-  if (!drivers::IsKnownScene(source.synthetic().scene())) {
-    std::string names;
-    for (const std::string& name : drivers::SceneNames()) {
-      names += (names.empty() ? "" : ", ") + name;
-    }
-    problems.push_back("source.synthetic.scene: unknown scene '" + source.synthetic().scene() +
-                       "' (one of: " + names + ")");
-  }
-}
-
-void ValidateImagesSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
-  if (source.left().empty()) problems.push_back("source.left: required for the images source");
-  if (source.right().empty()) problems.push_back("source.right: required for the images source");
-  if (source.calibration().empty()) {
-    problems.push_back("source.calibration: required for the images source");
-  }
-}
-
-void ValidateAravisSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
-  if (source.left().empty()) {
-    problems.push_back(
-        "source.left: required for the aravis source (device id, serial or address)");
-  }
-  if (source.right().empty()) {
-    problems.push_back(
-        "source.right: required for the aravis source (device id, serial or address)");
-  }
-  if (!source.left().empty() && source.left() == source.right()) {
-    problems.push_back("source.right: must be another camera than source.left (both '" +
-                       source.left() + "')");
-  }
-  // The driver's own checks of each field (their ranges live in drivers/aravis), and the trigger
-  // line a hardware trigger needs; the rest (exposure against the frame period, the pixel format)
-  // is checked when the cameras open.
-  drivers::AravisOptions options = AravisOptionsFrom(source, problems);
-  AppendPrefixed(problems, "source.aravis.", fields::Check(options));
-  if (options.trigger.mode == drivers::TriggerMode::kHardware && options.trigger.line.empty()) {
-    problems.push_back("source.aravis.trigger_line: required with a hardware trigger (e.g. Line0)");
-  }
-}
-
-void ValidateReplaySource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
-  if (source.replay().dir().empty()) {
-    problems.push_back("source.replay.dir: required for the replay source (--replay DIR)");
-  }
-  if (source.has_left() || source.has_right() || source.has_calibration()) {
-    problems.push_back(
-        "source: left, right and calibration do not apply to a replay (the "
-        "recording holds its frames and calibration)");
-  }
-  AppendPrefixed(problems, "source.replay.", ReplayOptionsFrom(source, problems).Validate());
-}
-
 void ValidateSource(const v1::SourceConfig& source, std::vector<std::string>& problems) {
   if (source.has_fps() && !(source.fps() > 0 && source.fps() <= 1000)) {
     problems.push_back("source.fps: must be in (0, 1000] (got " + std::to_string(source.fps()) +
                        ")");
   }
-  switch (source.kind()) {
-    case v1::SOURCE_KIND_UNSPECIFIED:
-    case v1::SOURCE_KIND_SYNTHETIC: ValidateSyntheticSource(source, problems); break;
-    case v1::SOURCE_KIND_IMAGES: ValidateImagesSource(source, problems); break;
-    case v1::SOURCE_KIND_ARAVIS: ValidateAravisSource(source, problems); break;
-    case v1::SOURCE_KIND_REPLAY: ValidateReplaySource(source, problems); break;
-    default: problems.push_back("source.kind: unknown value " + std::to_string(source.kind()));
-  }
+  const SourceSpec spec = SourceSpecFrom(source, /*loop_images=*/true, problems);
+  AppendPrefixed(problems, "", CheckSource(spec));
 }
 
 }  // namespace
@@ -487,77 +447,10 @@ Result<pipeline::PipelineConfig> BuildPipelineConfig(const v1::PipelineConfig& c
 
 Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig& config,
                                                           bool loop_images) {
-  const double fps = config.has_fps() ? config.fps() : kDefaultFps;
-  if (config.kind() == v1::SOURCE_KIND_ARAVIS) {
-    std::vector<std::string> problems;
-    drivers::AravisOptions options = AravisOptionsFrom(config, problems);
-    if (!problems.empty()) return Error::Invalid(problems);
-    std::shared_ptr<const geometry::StereoRig> rig;
-    if (!config.calibration().empty()) {
-      Result<geometry::StereoRig> loaded = geometry::StereoRig::FromFile(config.calibration());
-      if (!loaded.ok()) {
-        Error error = loaded.error();
-        error.message = "source.calibration: " + error.message;
-        return error;
-      }
-      rig = std::make_shared<const geometry::StereoRig>(std::move(loaded).value());
-    }
-    Result<std::unique_ptr<drivers::AravisStereoSource>> source =
-        drivers::AravisStereoSource::Open(std::move(options), std::move(rig));
-    if (!source.ok()) {
-      Error error = source.error();
-      error.message = "source.aravis: " + error.message;
-      return error;
-    }
-    return std::unique_ptr<drivers::StereoSource>(std::move(source).value());
-  }
-  if (config.kind() == v1::SOURCE_KIND_REPLAY) {
-    std::vector<std::string> problems;
-    drivers::ReplayOptions options = ReplayOptionsFrom(config, problems);
-    if (!problems.empty()) return Error::Invalid(problems);
-    Result<std::unique_ptr<drivers::ReplaySource>> source =
-        drivers::ReplaySource::Open(config.replay().dir(), options);
-    if (!source.ok()) {
-      Error error = source.error();
-      error.message = "source.replay: " + error.message;
-      return error;
-    }
-    return std::unique_ptr<drivers::StereoSource>(std::move(source).value());
-  }
-  if (config.kind() == v1::SOURCE_KIND_IMAGES) {
-    drivers::ImageSourceOptions options;
-    options.left = config.left();
-    options.right = config.right();
-    options.calibration = config.calibration();
-    options.fps = fps;
-    options.loop = config.has_loop() ? config.loop() : loop_images;
-    return drivers::OpenImageSource(options);
-  }
-  const v1::SyntheticConfig& s = config.synthetic();
-  if (s.scene() == drivers::kChessboardScene) {
-    std::vector<std::string> problems;
-    drivers::ChessboardSourceOptions board = ChessboardOptionsFrom(config, problems);
-    if (!problems.empty()) return Error::Invalid(problems);
-    Result<std::unique_ptr<drivers::ChessboardSource>> source =
-        drivers::ChessboardSource::Open(std::move(board));
-    if (!source.ok()) {
-      Error error = source.error();
-      error.message = "source.synthetic: " + error.message;
-      return error;
-    }
-    return std::unique_ptr<drivers::StereoSource>(std::move(source).value());
-  }
   std::vector<std::string> problems;
-  drivers::SyntheticOptions options = SyntheticOptionsFrom(config, problems);
+  const SourceSpec spec = SourceSpecFrom(config, loop_images, problems);
   if (!problems.empty()) return Error::Invalid(problems);
-  Result<std::unique_ptr<drivers::SyntheticSource>> source =
-      drivers::OpenSyntheticSource(std::move(options));
-  if (!source.ok()) {
-    Error error = source.error();
-    error.message = "source.synthetic: " + error.message;
-    return error;
-  }
-  return std::unique_ptr<drivers::StereoSource>(std::move(source).value());
+  return server::OpenSource(spec);
 }
 
 }  // namespace stevi::server

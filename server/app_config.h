@@ -18,6 +18,7 @@
 #include "drivers/synthetic/chessboard_source.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/runtime/pose_source.h"
+#include "server/runtime/source_factory.h"
 #include "stevi/v1/config.pb.h"
 
 namespace stevi::server {
@@ -78,8 +79,16 @@ drivers::ChessboardSourceOptions ChessboardOptionsFrom(const v1::SourceConfig& s
 drivers::ReplayOptions ReplayOptionsFrom(const v1::SourceConfig& source,
                                          std::vector<std::string>& problems);
 
-// Opens the configured source. `loop_images` is what an image source does at its end when the
-// config does not say (the server loops; stevi-process does not).
+// The source kind's name ("aravis" for SOURCE_KIND_ARAVIS; the default kind for UNSPECIFIED).
+std::string SourceKindName(v1::SourceKind kind);
+// What the runtime's source factory takes: the kind, and every driver's options from the config's
+// fields. Problems of the proto itself are appended.
+SourceSpec SourceSpecFrom(const v1::SourceConfig& source, bool loop_images,
+                          std::vector<std::string>& problems);
+
+// Opens the configured source (through the runtime's source factory). `loop_images` is what an
+// image source does at its end when the config does not say (the server loops; stevi-process does
+// not).
 Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig& config,
                                                           bool loop_images);
 

@@ -40,6 +40,10 @@ struct Error {
 
   // Joins a list of problems ("field: problem") into one message.
   static Error Invalid(const std::vector<std::string>& problems);
+  // The same error, its message after `prefix` ("source.aravis: ").
+  Error Prefixed(std::string_view prefix) const {
+    return Error{code, std::string(prefix) + message};
+  }
 };
 
 // Either a value or an Error. Small on purpose: C++20 has no std::expected.

@@ -341,3 +341,27 @@ TEST(SourceOptions, EveryFieldSetAloneArrives) {
 
 }  // namespace
 }  // namespace stevi::server
+
+namespace stevi::server {
+namespace {
+
+// Every SourceConfig.kind value is a kind of the runtime's source factory, by name, and the
+// other way round: a kind added to the factory without its proto value (or the reverse) fails.
+TEST(SourceKinds, MatchTheProtoValuesOneToOne) {
+  const google::protobuf::EnumDescriptor* e = v1::SourceKind_descriptor();
+  std::set<std::string> from_proto;
+  for (int i = 0; i < e->value_count(); ++i) {
+    const auto kind = static_cast<v1::SourceKind>(e->value(i)->number());
+    if (kind == v1::SOURCE_KIND_UNSPECIFIED) continue;
+    const std::string name = SourceKindName(kind);
+    EXPECT_NE(FindSourceKind(name), nullptr) << e->value(i)->name() << " has no factory kind";
+    from_proto.insert(name);
+  }
+  for (const SourceKind& kind : SourceKinds()) {
+    EXPECT_EQ(from_proto.count(std::string(kind.name)), 1u) << kind.name << " has no proto value";
+  }
+  EXPECT_EQ(SourceKindName(v1::SOURCE_KIND_UNSPECIFIED), "synthetic");
+}
+
+}  // namespace
+}  // namespace stevi::server
