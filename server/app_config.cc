@@ -56,9 +56,10 @@ std::optional<double> ParseDouble(const std::string& text) {
 Result<std::unique_ptr<PoseSource>> MakePoseSource(
     const v1::GeoConfig& config, const std::optional<geo::VehicleState>& synthetic_default) {
   geo::PoseBufferOptions options;
-  if (config.has_max_age_s()) options.max_age_s = config.max_age_s();
-  if (config.has_max_extrapolation_s()) options.max_extrapolation_s = config.max_extrapolation_s();
-  if (config.has_max_gap_s()) options.max_gap_s = config.max_gap_s();
+  if (std::vector<std::string> problems = FieldsFromProto(config, options, "geo.");
+      !problems.empty()) {
+    return Error::Invalid(problems);
+  }
   std::optional<geo::VehicleState> fixed = synthetic_default;
   if (config.has_fixed_pose()) fixed = FromProto(config.fixed_pose());
   return PoseSource::Create(options, fixed);

@@ -66,18 +66,8 @@ std::string_view GeoStatusName(GeoStatus status) {
 }
 
 std::vector<std::string> PoseBufferOptions::Validate() const {
-  std::vector<std::string> problems;
+  std::vector<std::string> problems = fields::Check(*this);
   if (capacity < 2) problems.push_back("capacity: must be >= 2 states" + Got(capacity));
-  if (!(std::isfinite(max_age_s) && max_age_s > 0)) {
-    problems.push_back("max_age_s: must be > 0 seconds and finite" + Got(max_age_s));
-  }
-  if (!(std::isfinite(max_extrapolation_s) && max_extrapolation_s >= 0)) {
-    problems.push_back("max_extrapolation_s: must be >= 0 seconds and finite" +
-                       Got(max_extrapolation_s));
-  }
-  if (!(std::isfinite(max_gap_s) && max_gap_s > 0)) {
-    problems.push_back("max_gap_s: must be > 0 seconds and finite" + Got(max_gap_s));
-  }
   return problems;
 }
 

@@ -12,6 +12,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/common/fields.h"
 #include "core/common/error.h"
 #include "core/geo/vehicle_state.h"
 
@@ -47,6 +48,17 @@ struct PoseBufferOptions {
   // Every problem, as "field: problem (got X)".
   std::vector<std::string> Validate() const;
   bool operator==(const PoseBufferOptions&) const = default;
+
+  // The fields of stevi.v1.GeoConfig (the capacity is not configurable over the wire).
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.max_age_s,
+             Field("max_age_s", "s", "oldest frame against the newest state").Above(0));
+    v.Number(s.max_extrapolation_s,
+             Field("max_extrapolation_s", "s", "extrapolation past the newest state").AtLeast(0));
+    v.Number(s.max_gap_s, Field("max_gap_s", "s", "largest gap interpolated over").Above(0));
+  }
 };
 
 // The answer of PoseBuffer::At.

@@ -92,6 +92,30 @@ inline float Texture(uint32_t seed, double s, double t, double cell_m, double fo
   return sum;
 }
 
+// Triplanar texture at (x, y, z) for the unit normal n: the textures of the planes facing x, y
+// and z (seeds seed[0..2], sampled on (z, y), (x, z) and (x, y)), weighted by n_i^2 above
+// kHillBlendFloor times the largest n_j^2, normalised. Continuous in the normal, and only one or
+// two planes are sampled per pixel (the texture is the cost).
+inline float Triplanar(const double n[3], const uint32_t seed[3], double x, double y, double z,
+                       double cell_m, double footprint_m) {
+  const double n2[3] = {n[0] * n[0], n[1] * n[1], n[2] * n[2]};
+  const double floor2 = kHillBlendFloor * std::max({n2[0], n2[1], n2[2]});
+  const double wx = std::max(0.0, n2[0] - floor2);
+  const double wy = std::max(0.0, n2[1] - floor2);
+  const double wz = std::max(0.0, n2[2] - floor2);
+  const double w_sum = wx + wy + wz;
+  float tex = 0.0f;
+  if (w_sum > 0.0) {
+    if (wy > 0.0)
+      tex += static_cast<float>(wy / w_sum) * Texture(seed[1], x, z, cell_m, footprint_m);
+    if (wz > 0.0)
+      tex += static_cast<float>(wz / w_sum) * Texture(seed[2], x, y, cell_m, footprint_m);
+    if (wx > 0.0)
+      tex += static_cast<float>(wx / w_sum) * Texture(seed[0], z, y, cell_m, footprint_m);
+  }
+  return tex;
+}
+
 // One solid of an obstacle at the frame's time: a box, or the ellipsoid inscribed in it.
 struct Box {
   int id = 0;
@@ -696,24 +720,8 @@ struct SyntheticRenderer::Impl {
     const double w_norm = std::sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
     const double incidence = std::abs(n[0] * w[0] + n[1] * w[1] + n[2] * w[2]) / w_norm;
     const double footprint = z / options.f_px * std::min(1.0 / incidence, kHillMaxStretch);
-    // Triplanar weights: n_i^2 above 0.6 times the largest n_j^2, normalised. Continuous in the
-    // normal, and only one or two planes are sampled per pixel (the texture is the cost).
-    const double n2[3] = {n[0] * n[0], n[1] * n[1], n[2] * n[2]};
-    const double floor2 = kHillBlendFloor * std::max({n2[0], n2[1], n2[2]});
-    const double wx = std::max(0.0, n2[0] - floor2);
-    const double wy = std::max(0.0, n2[1] - floor2);
-    const double wz = std::max(0.0, n2[2] - floor2);
-    const double w_sum = wx + wy + wz;
-    float tex = 0.0f;
-    if (wy > 0.0) {
-      tex += static_cast<float>(wy / w_sum) * Texture(g.seed, x, z, g.cell_m, footprint);
-    }
-    if (wz > 0.0) {
-      tex += static_cast<float>(wz / w_sum) * Texture(g.seed + 1u, x, y, g.cell_m, footprint);
-    }
-    if (wx > 0.0) {
-      tex += static_cast<float>(wx / w_sum) * Texture(g.seed + 2u, z, y, g.cell_m, footprint);
-    }
+    const uint32_t seeds[3] = {g.seed + 2u, g.seed, g.seed + 1u};
+    const float tex = Triplanar(n, seeds, x, y, z, g.cell_m, footprint);
     const double lit = n[0] * hill_light[0] + n[1] * hill_light[1] + n[2] * hill_light[2];
     const auto shade = static_cast<float>(kHillAmbient + kHillDiffuse * lit);
     return shade * (g.albedo + 2.0f * g.contrast * tex);
@@ -731,27 +739,7 @@ struct SyntheticRenderer::Impl {
       for (double& c : n) c /= n_norm;
     }
     const double footprint = depth / options.f_px;
-    const double n2[3] = {n[0] * n[0], n[1] * n[1], n[2] * n[2]};
-    const double floor2 = kHillBlendFloor * std::max({n2[0], n2[1], n2[2]});
-    const double wx = std::max(0.0, n2[0] - floor2);
-    const double wy = std::max(0.0, n2[1] - floor2);
-    const double wz = std::max(0.0, n2[2] - floor2);
-    const double w_sum = wx + wy + wz;
-    float tex = 0.0f;
-    if (w_sum > 0.0) {
-      if (wy > 0.0) {
-        tex += static_cast<float>(wy / w_sum) *
-               Texture(box.seed[1], p[0], p[2], box.cell_m, footprint);
-      }
-      if (wz > 0.0) {
-        tex += static_cast<float>(wz / w_sum) *
-               Texture(box.seed[2], p[0], p[1], box.cell_m, footprint);
-      }
-      if (wx > 0.0) {
-        tex += static_cast<float>(wx / w_sum) *
-               Texture(box.seed[0], p[2], p[1], box.cell_m, footprint);
-      }
-    }
+    const float tex = Triplanar(n, box.seed, p[0], p[1], p[2], box.cell_m, footprint);
     const double lit = n[0] * hill_light[0] + n[1] * hill_light[1] + n[2] * hill_light[2];
     const auto shade = static_cast<float>(kHillAmbient + kHillDiffuse * lit);
     return shade * (box.albedo + 2.0f * box.contrast * tex);

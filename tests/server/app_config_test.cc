@@ -365,3 +365,29 @@ TEST(SourceKinds, MatchTheProtoValuesOneToOne) {
 
 }  // namespace
 }  // namespace stevi::server
+
+namespace stevi::server {
+namespace {
+
+// GeoConfig's fields but the fixed pose (a VehicleState, converted on its own) are the pose
+// buffer's field list.
+TEST(GeoConfig, EveryFieldButThePoseArrives) {
+  v1::GeoConfig defaults;
+  FieldsToProto(geo::PoseBufferOptions{}, defaults);
+  const int checked = proto_fields::ExpectEveryLeafArrives<v1::GeoConfig>(
+      defaults,
+      [](const v1::GeoConfig& update) -> std::optional<v1::GeoConfig> {
+        geo::PoseBufferOptions options;
+        if (!FieldsFromProto(update, options, "geo.").empty() || !options.Validate().empty()) {
+          return std::nullopt;
+        }
+        v1::GeoConfig back;
+        FieldsToProto(options, back);
+        return back;
+      },
+      {"fixed_pose"});
+  EXPECT_EQ(checked, v1::GeoConfig::descriptor()->field_count() - 1);
+}
+
+}  // namespace
+}  // namespace stevi::server
