@@ -1,7 +1,7 @@
 #include "client/client.h"
 
 #include <algorithm>
-#include <thread>
+#include <optional>
 
 namespace stevi::client {
 
@@ -44,6 +44,11 @@ Client::Client(ClientOptions options) : options_(std::move(options)) {
   // The unary calls keep the default window: a snapshot download over a radio link needs it.
   args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
   args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, kStreamLookaheadBytes);
+  // After a server restart the stream comes back within a second: gRPC's own reconnection
+  // backoff (1 s growing to 120 s by default) would otherwise hold a consumer silent for minutes.
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
   stream_channel_ = grpc::CreateCustomChannel(options_.address, credentials, args);
   stream_stub_ = v1::ObstacleService::NewStub(stream_channel_);
 }
@@ -171,64 +176,136 @@ grpc::Status Client::GetDisparitySnapshot(v1::DisparitySnapshot* response, bool 
   return stub_->GetDisparitySnapshot(&context, request, response);
 }
 
+bool IsTransientStreamEnd(const grpc::Status& status) {
+  switch (status.error_code()) {
+    case grpc::StatusCode::OK:         // the server ended the stream
+    case grpc::StatusCode::CANCELLED:  // by the server: a graceful stop, a restart
+    case grpc::StatusCode::UNAVAILABLE:
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+    case grpc::StatusCode::ABORTED:
+    case grpc::StatusCode::INTERNAL:
+    case grpc::StatusCode::UNKNOWN:
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+    case grpc::StatusCode::DATA_LOSS: return true;
+    default: return false;
+  }
+}
+
+Client::Attempt Client::StreamOnce(const v1::StreamTracksRequest& request,
+                                   const std::function<bool(const v1::TrackFrame&)>& on_frame,
+                                   const StreamOptions& options, uint64_t& received) {
+  Attempt attempt;
+  grpc::ClientContext context;
+  AddCredentials(context);
+  {
+    std::lock_guard lock(stream_mu_);
+    if (cancelled_) {
+      attempt.stop = true;
+      return attempt;
+    }
+    stream_context_ = &context;
+  }
+  // Fail fast when the server cannot be reached within the timeout.
+  if (!WaitForStreamChannel()) {
+    attempt.status = grpc::Status(grpc::StatusCode::UNAVAILABLE,
+                                  "cannot connect to " + options_.address + " within " +
+                                      std::to_string(options_.timeout.count()) + " ms");
+  } else {
+    std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader =
+        stream_stub_->StreamTracks(&context, request);
+    v1::TrackFrame frame;
+    while (reader->Read(&frame)) {
+      attempt.got_frames = true;
+      ++received;
+      if (!on_frame(frame) || (options.max_frames > 0 && received >= options.max_frames)) {
+        attempt.stop = true;
+        context.TryCancel();
+        break;
+      }
+    }
+    attempt.status = reader->Finish();
+    if (attempt.status.ok()) {
+      attempt.status = grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server ended the stream");
+    }
+  }
+  std::lock_guard lock(stream_mu_);
+  stream_context_ = nullptr;
+  if (cancelled_) attempt.stop = true;
+  return attempt;
+}
+
+bool Client::WaitForStreamChannel() {
+  // In slices, so that Cancel() is heard while the server is away.
+  const auto deadline = std::chrono::system_clock::now() + options_.timeout;
+  while (true) {
+    const auto slice =
+        std::min(deadline, std::chrono::system_clock::now() + std::chrono::milliseconds(100));
+    if (stream_channel_->WaitForConnected(slice)) return true;
+    std::lock_guard lock(stream_mu_);
+    if (cancelled_ || std::chrono::system_clock::now() >= deadline) return false;
+  }
+}
+
+bool Client::WaitToReconnect(std::chrono::milliseconds delay) {
+  std::unique_lock lock(stream_mu_);
+  return !stream_cv_.wait_for(lock, delay, [this] { return cancelled_; });
+}
+
 grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,
                                   const StreamOptions& options) {
-  cancelled_ = false;
+  {
+    std::lock_guard lock(stream_mu_);
+    cancelled_ = false;
+  }
   v1::StreamTracksRequest request;
   request.set_confirmed_only(options.confirmed_only);
   request.set_min_score(options.min_score);
   uint64_t received = 0;
   int failures = 0;
-  auto backoff = std::chrono::milliseconds(200);
-  while (true) {
-    grpc::ClientContext context;
-    AddCredentials(context);
-    {
-      std::lock_guard lock(stream_mu_);
-      if (cancelled_) return grpc::Status::OK;
-      stream_context_ = &context;
-    }
-    // Fail fast when the server cannot be reached within the timeout.
-    bool connected =
-        stream_channel_->WaitForConnected(std::chrono::system_clock::now() + options_.timeout);
-    grpc::Status status;
-    bool stop = false;
-    if (!connected) {
-      status = grpc::Status(grpc::StatusCode::UNAVAILABLE,
-                            "cannot connect to " + options_.address + " within " +
-                                std::to_string(options_.timeout.count()) + " ms");
-    } else {
-      std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader =
-          stream_stub_->StreamTracks(&context, request);
-      v1::TrackFrame frame;
-      while (reader->Read(&frame)) {
-        failures = 0;
-        backoff = std::chrono::milliseconds(200);
-        ++received;
-        if (!on_frame(frame) || (options.max_frames > 0 && received >= options.max_frames)) {
-          stop = true;
-          context.TryCancel();
-          break;
-        }
+  bool streaming = false;  // frames arrived since the call began
+  uint64_t reconnects = 0;
+  std::optional<std::chrono::steady_clock::time_point> lost_since;  // the last frame before a loss
+  constexpr auto kFirstBackoff = std::chrono::milliseconds(100);
+  auto backoff = kFirstBackoff;
+  // Frames after a loss: the resume is reported before the first of them is handed on.
+  const auto on_frame_after_loss = [&](const v1::TrackFrame& frame) {
+    if (lost_since) {
+      if (options.on_event) {
+        StreamEvent event;
+        event.kind = StreamEvent::Kind::kResumed;
+        event.gap = std::chrono::duration_cast<std::chrono::milliseconds>(
+            std::chrono::steady_clock::now() - *lost_since);
+        event.reconnects = reconnects;
+        options.on_event(event);
       }
-      status = reader->Finish();
+      lost_since.reset();
     }
-    {
-      std::lock_guard lock(stream_mu_);
-      stream_context_ = nullptr;
-      if (cancelled_) stop = true;
+    return on_frame(frame);
+  };
+  while (true) {
+    const Attempt attempt = StreamOnce(request, on_frame_after_loss, options, received);
+    if (attempt.stop) return grpc::Status::OK;
+    if (attempt.got_frames) {
+      streaming = true;
+      failures = 0;
+      backoff = kFirstBackoff;
+      lost_since = std::chrono::steady_clock::now();
+      if (options.on_event && options.reconnect && IsTransientStreamEnd(attempt.status)) {
+        StreamEvent event;
+        event.kind = StreamEvent::Kind::kLost;
+        event.status = attempt.status;
+        event.reconnects = reconnects;
+        options.on_event(event);
+      }
     }
-    if (stop) return grpc::Status::OK;
-    if (!options.reconnect || status.error_code() != grpc::StatusCode::UNAVAILABLE) {
-      return status.ok()
-                 ? grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server ended the stream")
-                 : status;
-    }
-    if (options.max_reconnect_attempts > 0 && ++failures > options.max_reconnect_attempts) {
-      return status;
-    }
-    std::this_thread::sleep_for(backoff);  // reconnect backoff, not synchronisation
-    backoff = std::min(backoff * 2, std::chrono::milliseconds(5000));
+    if (!options.reconnect || !IsTransientStreamEnd(attempt.status)) return attempt.status;
+    ++failures;
+    const bool bounded =
+        options.max_reconnect_attempts > 0 && !(streaming && options.persist_once_streaming);
+    if (bounded && failures >= options.max_reconnect_attempts) return attempt.status;
+    if (!WaitToReconnect(backoff)) return grpc::Status::OK;
+    backoff = std::min(backoff * 2, options.max_backoff);
+    ++reconnects;
   }
 }
 
@@ -236,6 +313,7 @@ void Client::Cancel() {
   std::lock_guard lock(stream_mu_);
   cancelled_ = true;
   if (stream_context_ != nullptr) stream_context_->TryCancel();
+  stream_cv_.notify_all();
 }
 
 }  // namespace stevi::client

@@ -2,8 +2,8 @@
 // Depends on the proto library only.
 #pragma once
 
-#include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -34,17 +34,46 @@ struct ClientOptions {
   std::string bearer_token;
 };
 
+// What happens to a stream between frames, for consumers that log their gaps.
+struct StreamEvent {
+  enum class Kind {
+    kLost,     // a stream that was delivering frames broke (status says why); reconnecting
+    kResumed,  // the first frame after a loss arrived (gap: since the last frame before it)
+  };
+  Kind kind = Kind::kLost;
+  grpc::Status status;               // kLost: why the stream ended
+  std::chrono::milliseconds gap{0};  // kResumed: time without frames
+  uint64_t reconnects = 0;           // streams opened again so far in this call
+};
+
 struct StreamOptions {
   // Stop after this many frames (0 = until cancelled or the server ends the stream).
   uint64_t max_frames = 0;
-  // Reconnect with exponential backoff (0.2 s doubling to 5 s) when the stream breaks.
+  // Reconnect when the stream breaks or cannot be opened, with a backoff from 0.1 s doubling to
+  // max_backoff. Every end the caller did not ask for counts as a break: UNAVAILABLE, a server
+  // that ends the stream (OK or CANCELLED from a graceful stop or a restart), DEADLINE_EXCEEDED,
+  // ABORTED, INTERNAL, UNKNOWN, RESOURCE_EXHAUSTED (too many subscribers, for now). A refusal
+  // that trying again cannot change ends the call: UNAUTHENTICATED, PERMISSION_DENIED,
+  // INVALID_ARGUMENT, UNIMPLEMENTED, FAILED_PRECONDITION, NOT_FOUND, OUT_OF_RANGE.
   bool reconnect = false;
-  // Give up reconnecting after this many failed attempts in a row (0 = never give up).
+  // Give up after this many failed attempts in a row (0 = never give up).
   int max_reconnect_attempts = 10;
+  // Once a frame has arrived, never give up: a server restart or an outage of any length is
+  // survived, and max_reconnect_attempts bounds only the attempts before the first frame (so that
+  // a wrong address still fails fast). What the streaming commands use.
+  bool persist_once_streaming = false;
+  std::chrono::milliseconds max_backoff{1000};
+  // Called on the streaming thread when a stream that delivered frames breaks and when frames
+  // resume; never for the attempts before the first frame.
+  std::function<void(const StreamEvent&)> on_event;
   // Server-side filters: no TENTATIVE tracks; only tracks scoring at least min_score (0..1).
   bool confirmed_only = false;
   double min_score = 0.0;
 };
+
+// True when a stream that ended with `status` (not cancelled by its caller) may succeed when
+// opened again (see StreamOptions::reconnect).
+bool IsTransientStreamEnd(const grpc::Status& status);
 
 // Thread-safe, except that one StreamTracks() runs at a time per Client.
 class Client {
@@ -60,7 +89,8 @@ class Client {
 
   // Calls on_frame for every frame until it returns false, max_frames arrived, Cancel() is called,
   // or the stream fails (and reconnecting, if asked, gives up). Returns OK in the first three
-  // cases.
+  // cases, else the last failure (a server that ended the stream is UNAVAILABLE "the server ended
+  // the stream").
   grpc::Status StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,
                             const StreamOptions& options = {});
   // Calibration (CalibrationService). Calibrate() streams `settings` then every pair; the
@@ -84,7 +114,7 @@ class Client {
   grpc::Status GetCalibration(const std::string& id, v1::CalibrationRecord* record);
   grpc::Status ActivateCalibration(const std::string& id, v1::CalibrationRecord* record);
 
-  // Ends a running StreamTracks() from another thread.
+  // Ends a running StreamTracks() from another thread, also while it waits to reconnect.
   void Cancel();
 
   const ClientOptions& options() const { return options_; }
@@ -101,9 +131,24 @@ class Client {
   std::unique_ptr<v1::CalibrationService::Stub> calibration_stub_;
   std::shared_ptr<grpc::Channel> stream_channel_;  // StreamTracks only: a small receive window
   std::unique_ptr<v1::ObstacleService::Stub> stream_stub_;
+  // One attempt of StreamTracks: opens the stream and reads it until it ends.
+  struct Attempt {
+    grpc::Status status;
+    bool stop = false;        // the caller's on_frame, max_frames or Cancel() ended it
+    bool got_frames = false;  // at least one frame arrived on this stream
+  };
+  Attempt StreamOnce(const v1::StreamTracksRequest& request,
+                     const std::function<bool(const v1::TrackFrame&)>& on_frame,
+                     const StreamOptions& options, uint64_t& received);
+  // Waits until the stream's channel is connected: false after options_.timeout or on Cancel().
+  bool WaitForStreamChannel();
+  // Waits `delay` or until Cancel(); false when cancelled.
+  bool WaitToReconnect(std::chrono::milliseconds delay);
+
   std::mutex stream_mu_;
+  std::condition_variable stream_cv_;  // Cancel() wakes WaitToReconnect()
   grpc::ClientContext* stream_context_ = nullptr;
-  std::atomic<bool> cancelled_{false};
+  bool cancelled_ = false;  // guarded by stream_mu_
 };
 
 // "UNAVAILABLE", "INVALID_ARGUMENT", ...

@@ -91,6 +91,7 @@ constexpr Command kCommands[] = {
 }  // namespace
 
 int main(int argc, char** argv) {
+  commands::HandleStopSignals();
   const commands::Args args(argv + 1, argv + argc);
   commands::GlobalOptions global;
   if (std::string problem = commands::ParseGlobalOptions(args, global); !problem.empty()) {

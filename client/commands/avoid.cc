@@ -83,11 +83,11 @@ int Avoid(Client& client, const Args& args) {
   if (!problem.empty()) return Usage(problem);
   Advisor advisor(options);
   std::mutex mu;  // the advisor and stdout, shared by the stream and the watchdog
-  int64_t last_no_data_print = 0;
   const auto print = [](const Advisory& advisory) {
     std::cout << AdvisoryJson(advisory) << "\n" << std::flush;
   };
-  // The watchdog: never silent, never CLEAR on stale data.
+  // The watchdog: never silent, never CLEAR on stale data. Once the frames are older than
+  // no_data_after_ns it prints NO_DATA at every tick (10 Hz) until they come back.
   std::atomic<bool> done{false};
   std::thread watchdog([&] {
     while (!done) {
@@ -95,19 +95,15 @@ int Avoid(Client& client, const Args& args) {
       std::lock_guard lock(mu);
       const int64_t now = SteadyNowNs();
       const Advisory advisory = advisor.OnTick(now);
-      if (advisory.level == AdvisoryLevel::kNoData &&
-          now - last_no_data_print >= options.no_data_after_ns) {
-        print(advisory);
-        last_no_data_print = now;
-      }
+      if (advisory.level == AdvisoryLevel::kNoData) print(advisory);
     }
   });
   std::optional<GeoPoint> origin;
-  StreamOptions stream;
+  // Live (no --count): never give up. With --count (tests, scripts): give up after 3 attempts
+  // when no frame ever came; once frames flowed, a server restart is waited out (NO_DATA).
+  StreamOptions stream = LiveStreamOptions("avoid", count > 0 ? 3 : 0);
   stream.max_frames = count;
-  stream.reconnect = true;
-  // Live (no --count): never give up. With --count (tests, scripts): give up after 3 attempts.
-  stream.max_reconnect_attempts = count > 0 ? 3 : 0;
+  OnStopSignal([&client] { client.Cancel(); });  // Ctrl-C or SIGTERM: end cleanly
   const grpc::Status status = client.StreamTracks(
       [&](const v1::TrackFrame& frame) {
         std::lock_guard lock(mu);

@@ -2,7 +2,13 @@
 
 #include <google/protobuf/util/json_util.h>
 
+#include <pthread.h>
+
 #include <algorithm>
+#include <csignal>
+#include <cstdlib>
+#include <mutex>
+#include <thread>
 #include <cctype>
 #include <fstream>
 #include <iomanip>
@@ -30,6 +36,61 @@ int RpcFailed(const Client& client, const std::string& what, const grpc::Status&
               << "\n";
   }
   return 1;
+}
+
+namespace {
+
+std::mutex stop_mu;
+std::function<void()> stop_handler;  // guarded by stop_mu
+
+}  // namespace
+
+void HandleStopSignals() {
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGINT);
+  sigaddset(&stop_signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+  // Detached: the process exits when the command returns.
+  std::thread([stop_signals] {
+    for (int received = 0;; ++received) {
+      int signal_number = 0;
+      if (sigwait(&stop_signals, &signal_number) != 0) continue;
+      std::function<void()> handler;
+      {
+        std::lock_guard lock(stop_mu);
+        handler = stop_handler;
+      }
+      if (received > 0 || !handler) std::_Exit(128 + signal_number);
+      handler();
+    }
+  }).detach();
+}
+
+void OnStopSignal(std::function<void()> handler) {
+  std::lock_guard lock(stop_mu);
+  stop_handler = std::move(handler);
+}
+
+StreamOptions LiveStreamOptions(const std::string& what, int attempts_before_first_frame) {
+  StreamOptions options;
+  options.reconnect = true;
+  options.persist_once_streaming = true;
+  options.max_reconnect_attempts = attempts_before_first_frame;
+  options.on_event = [what](const StreamEvent& event) {
+    if (event.kind == StreamEvent::Kind::kLost) {
+      std::string message = event.status.error_message();
+      std::replace(message.begin(), message.end(), '\n', ' ');
+      std::cerr << "stevi: " << what << ": stream lost ("
+                << StatusCodeName(event.status.error_code()) << ": " << message
+                << "), reconnecting\n";
+    } else {
+      std::cerr << "stevi: " << what << ": stream back after " << std::fixed << std::setprecision(1)
+                << static_cast<double>(event.gap.count()) / 1000.0 << " s\n";
+    }
+    std::cerr << std::flush;
+  };
+  return options;
 }
 
 std::string Json(const google::protobuf::Message& message) {

@@ -5,6 +5,7 @@
 #include <google/protobuf/message.h>
 
 #include <cstddef>
+#include <functional>
 #include <iostream>
 #include <string>
 #include <type_traits>
@@ -23,6 +24,19 @@ int Usage(const std::string& problem);
 // "stevi: WHAT: CODE: MESSAGE" on stderr (saying that the server cannot be reached when it is
 // unavailable or the deadline passed); returns the exit status of a failed call, 1.
 int RpcFailed(const Client& client, const std::string& what, const grpc::Status& status);
+
+// The stream options of a live consumer (`watch`, `avoid`, `export`, `mavlink`): it survives a
+// server restart or an outage of any length once frames have flowed, and says so on stderr
+// ("stevi: WHAT: stream lost (CODE: MESSAGE), reconnecting" and "stevi: WHAT: stream back after
+// 1.4 s"). Before the first frame it tries `attempts_before_first_frame` times (0 = for ever).
+StreamOptions LiveStreamOptions(const std::string& what, int attempts_before_first_frame);
+
+// Blocks SIGINT and SIGTERM in every thread (call it first in main(), before any thread starts:
+// gRPC's threads inherit the mask) and waits for them on a thread of its own. The first signal
+// calls the handler set by OnStopSignal (a streaming command ends its stream and exits cleanly);
+// with none set, or at a second signal, the process exits with 128 + the signal number.
+void HandleStopSignals();
+void OnStopSignal(std::function<void()> handler);
 
 // The message as one line of JSON, with the proto field names and every primitive field.
 std::string Json(const google::protobuf::Message& message);

@@ -95,8 +95,10 @@ int Export(Client& client, const Args& args) {
   if (!a.in_path.empty()) {
     if (!ReadFramesFile(a.in_path, points)) return 1;
   } else {
-    StreamOptions stream;
+    // A server restart while collecting is waited out; a wrong address fails at once.
+    StreamOptions stream = LiveStreamOptions("export", 1);
     stream.max_frames = a.count;
+    OnStopSignal([&client] { client.Cancel(); });  // Ctrl-C or SIGTERM: end cleanly
     const grpc::Status status = client.StreamTracks(
         [&points](const v1::TrackFrame& frame) {
           CollectTrackPoints(frame, points);

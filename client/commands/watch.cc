@@ -1,14 +1,10 @@
 // stevi watch [--count N] [--json] [--confirmed] [--min-score S]: the live tracks, as a table or
 // one TrackFrame JSON per line.
-#include <pthread.h>
-
-#include <csignal>
 #include <cstdint>
 #include <iomanip>
 #include <iostream>
 #include <sstream>
 #include <string>
-#include <thread>
 
 #include "client/commands/commands.h"
 #include "client/flags.h"
@@ -68,26 +64,12 @@ void PrintFrameTable(const v1::TrackFrame& f) {
   std::cout << out.str() << std::flush;
 }
 
-// Ctrl-C or SIGTERM ends the stream cleanly: a thread waits for them (a signal handler may not
-// take the client's lock). It is detached; the process exits when the stream ends.
-void CancelOnStopSignals(Client& client) {
-  sigset_t stop_signals;
-  sigemptyset(&stop_signals);
-  sigaddset(&stop_signals, SIGINT);
-  sigaddset(&stop_signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
-  std::thread([&client, stop_signals] {
-    int signal_number = 0;
-    sigwait(&stop_signals, &signal_number);
-    client.Cancel();
-  }).detach();
-}
-
 }  // namespace
 
 int Watch(Client& client, const Args& args) {
   bool json = false;
-  StreamOptions options;
+  // A wrong address fails at once; a server that goes away after frames flowed is waited for.
+  StreamOptions options = LiveStreamOptions("watch", 1);
   const std::string problem =
       flags::FlagSet("watch")
           .Switch("--json", &json)
@@ -98,7 +80,7 @@ int Watch(Client& client, const Args& args) {
                  [&options](std::int64_t n) { options.max_frames = static_cast<uint64_t>(n); })
           .Parse(args);
   if (!problem.empty()) return Usage(problem);
-  CancelOnStopSignals(client);
+  OnStopSignal([&client] { client.Cancel(); });  // Ctrl-C or SIGTERM: end cleanly
   const grpc::Status status = client.StreamTracks(
       [&](const v1::TrackFrame& frame) {
         if (json) {

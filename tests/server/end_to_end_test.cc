@@ -255,6 +255,92 @@ TEST(AvoidWithoutAServer, SaysNoDataAndNeverClear) {
   EXPECT_EQ(std::count(levels.begin(), levels.end(), "NO_DATA"), static_cast<long>(levels.size()));
 }
 
+// The next stdout line of `process` that carries an advisory from a frame (not NO_DATA), within
+// `lines` advisories; nullopt when none came.
+std::optional<std::string> NextFrameAdvisory(Subprocess& process, int lines) {
+  for (int i = 0; i < lines; ++i) {
+    const std::optional<std::string> line = process.WaitForStdoutLine("\"level\":\"", 30s);
+    if (!line) return std::nullopt;
+    if (line->find("NO_DATA") == std::string::npos) return line;
+  }
+  return std::nullopt;
+}
+
+// The t_ns of each advisory line, in order, and whether it is NO_DATA.
+std::vector<std::pair<int64_t, bool>> AdvisoryTimes(const std::string& out) {
+  std::vector<std::pair<int64_t, bool>> times;
+  const std::regex advisory("\"t_ns\":(-?\\d+),\"level\":\"([A-Z_]+)\"");
+  std::istringstream lines(out);
+  std::string line;
+  while (std::getline(lines, line)) {
+    std::smatch m;
+    if (std::regex_search(line, m, advisory)) {
+      times.emplace_back(std::stoll(m[1].str()), m[2].str() == "NO_DATA");
+    }
+  }
+  return times;
+}
+
+// A graceful server stop (SIGTERM, as systemd does) and a restart on the same port: every
+// streaming consumer waits it out and resumes, and the autopilot example says NO_DATA at 10 Hz in
+// between, never anything else and never silent.
+TEST_F(ServerProcessTest, StreamingConsumersSurviveAServerRestart) {
+  Subprocess avoid({BinaryPath("stevi"), "--server", address_, "--timeout", "5", "avoid"});
+  Subprocess watch(
+      {BinaryPath("stevi"), "--server", address_, "--timeout", "5", "watch", "--json"});
+  const std::string kml = testing::MakeTempDir("stevi-restart") + "/flight.kml";
+  // 20 fps: 200 frames take 10 s, so the export is mid-stream when the server stops.
+  Subprocess exporter({BinaryPath("stevi"), "--server", address_, "--timeout", "5", "export",
+                       "--format", "kml", "--count", "200", "--out", kml});
+  ASSERT_TRUE(NextFrameAdvisory(avoid, 100)) << avoid.DrainStderr();
+  ASSERT_TRUE(watch.WaitForStdoutLine("\"frame_id\"", 30s)) << watch.DrainStderr();
+
+  server_.process()->Signal(SIGTERM);
+  ASSERT_EQ(server_.process()->Wait(10s), 0);
+  // The consumers see the stream end; the autopilot example then says NO_DATA.
+  ASSERT_TRUE(avoid.WaitForStderrLine("stevi: avoid: stream lost", 10s));
+  ASSERT_TRUE(watch.WaitForStderrLine("stevi: watch: stream lost", 10s));
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(avoid.WaitForStdoutLine("NO_DATA", 10s));
+  ASSERT_NO_FATAL_FAILURE(server_.Restart());
+
+  const std::optional<std::string> back = avoid.WaitForStderrLine("stevi: avoid: stream back", 30s);
+  ASSERT_TRUE(back) << avoid.DrainStderr();
+  std::cout << *back << "\n";
+  ASSERT_TRUE(NextFrameAdvisory(avoid, 100));
+  ASSERT_TRUE(watch.WaitForStderrLine("stevi: watch: stream back", 30s));
+  ASSERT_TRUE(watch.WaitForStdoutLine("\"frame_id\"", 30s));
+  const std::optional<int> exported = exporter.Wait(60s);
+  EXPECT_EQ(exported, 0) << exporter.DrainStderr();
+  EXPECT_THAT(exporter.DrainStderr(), HasSubstr("stevi: export: stream back"));
+
+  avoid.Signal(SIGTERM);
+  watch.Signal(SIGTERM);
+  EXPECT_EQ(avoid.Wait(10s), 0) << "avoid ends cleanly on SIGTERM";
+  EXPECT_EQ(watch.Wait(10s), 0) << "watch ends cleanly on SIGTERM";
+  // From the last frame before the stop to the first after the restart: only NO_DATA, each
+  // within 250 ms of the one before (10 Hz, with slack for a busy machine).
+  const std::vector<std::pair<int64_t, bool>> times = AdvisoryTimes(avoid.DrainStdout());
+  size_t first_no_data = 0;
+  while (first_no_data < times.size() && times[first_no_data].second) ++first_no_data;  // startup
+  while (first_no_data < times.size() && !times[first_no_data].second) ++first_no_data;
+  ASSERT_LT(first_no_data, times.size());
+  size_t resumed = first_no_data;
+  while (resumed < times.size() && times[resumed].second) ++resumed;
+  ASSERT_LT(resumed, times.size()) << "frames resumed";
+  const int64_t first_gap_ns = times[first_no_data].first - times[first_no_data - 1].first;
+  int64_t longest_gap_ns = 0;  // between NO_DATA advisories
+  for (size_t i = first_no_data + 1; i < resumed; ++i) {
+    longest_gap_ns = std::max(longest_gap_ns, times[i].first - times[i - 1].first);
+  }
+  std::cout << "avoid across the restart: " << resumed - first_no_data
+            << " NO_DATA advisories, the first " << first_gap_ns / 1'000'000
+            << " ms after the last frame, then at most " << longest_gap_ns / 1'000'000
+            << " ms apart\n";
+  EXPECT_GE(resumed - first_no_data, 5u);  // waited for before the restart
+  EXPECT_LE(first_gap_ns, 1'000'000'000) << "NO_DATA comes 500 ms after the last frame";
+  EXPECT_LE(longest_gap_ns, 300'000'000) << "NO_DATA at 10 Hz, never silent";
+}
+
 // Ground-station exports of the demo flight (the rig hovering at Pisa): KML from the live stream,
 // GeoJSON from a file of `stevi watch --json` lines; both hold the tracks where they are.
 TEST_F(ServerProcessTest, ExportWritesKmlAndGeoJsonAtTheRightPlace) {

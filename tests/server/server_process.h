@@ -42,6 +42,7 @@ class ServerProcess {
   // Starts the server with `args` after the program name; fails the test when it does not say
   // "serving" within 60 s. Call with ASSERT_NO_FATAL_FAILURE.
   void Start(std::vector<std::string> args, bool default_data_dir = true) {
+    args_ = args;
     args.insert(args.begin(), {BinaryPath("stevi-server"), "--listen", "127.0.0.1:0"});
     if (default_data_dir) {
       data_dir_ = MakeTempDir("stevi-server-data");
@@ -64,6 +65,19 @@ class ServerProcess {
     return Run(args, timeout);
   }
 
+  // Starts the server again with the same arguments on the same address and data directory (a
+  // restart, as systemd does it). Call with ASSERT_NO_FATAL_FAILURE.
+  void Restart() {
+    server_.reset();
+    std::vector<std::string> args = args_;
+    args.insert(args.begin(), {BinaryPath("stevi-server"), "--listen", address_});
+    if (!data_dir_.empty()) args.insert(args.end(), {"--data-dir", data_dir_});
+    server_ = std::make_unique<Subprocess>(args);
+    const std::optional<std::string> line =
+        server_->WaitForStderrLine("serving", std::chrono::seconds(60));
+    ASSERT_TRUE(line.has_value()) << "the server did not restart: " << server_->DrainStderr();
+  }
+
   void Stop() { server_.reset(); }
   Subprocess* process() { return server_.get(); }
   const std::string& address() const { return address_; }
@@ -71,6 +85,7 @@ class ServerProcess {
 
  private:
   std::unique_ptr<Subprocess> server_;
+  std::vector<std::string> args_;
   std::string address_;
   std::string data_dir_;
 };

@@ -10,6 +10,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
+#include <future>
+#include <mutex>
 #include <numeric>
 #include <thread>
 #include <tuple>
@@ -633,6 +636,123 @@ TEST(FilterTracks, DropsTentativeAndLowScoringTracksKeepingTheOrder) {
     request.set_min_score(bad);
     EXPECT_EQ(ValidateStreamTracksRequest(request).error_code(), grpc::StatusCode::INVALID_ARGUMENT)
         << bad;
+  }
+}
+
+// The client library's reconnection across a server that stops gracefully and comes back on the
+// same port: the stream is reported lost with the server's status, then resumed, and the frames
+// go on; nothing ends the call. (A graceful stop ends a stream with UNAVAILABLE or, when the
+// transport is torn down first, CANCELLED: both are transient.)
+TEST(ClientReconnect, AStreamSurvivesAServerRestartOnTheSamePort) {
+  v1::ServerConfig config = TestConfig();
+  Result<std::unique_ptr<Server>> first = Server::Start(config);
+  ASSERT_TRUE(first.ok()) << first.error().message;
+  const int port = (*first)->port();
+  client::Client c(LoopbackOptions(**first, std::chrono::seconds(5)));
+
+  std::mutex mu;
+  std::condition_variable cv;
+  std::vector<client::StreamEvent> events;
+  uint64_t frames = 0;
+  uint64_t frames_at_loss = 0;
+  client::StreamOptions options;
+  options.reconnect = true;
+  options.persist_once_streaming = true;
+  options.max_reconnect_attempts = 1;  // only before the first frame
+  options.on_event = [&](const client::StreamEvent& e) {
+    std::lock_guard lock(mu);
+    events.push_back(e);
+    if (e.kind == client::StreamEvent::Kind::kLost) frames_at_loss = frames;
+    cv.notify_all();
+  };
+  grpc::Status status;
+  std::thread streamer([&] {
+    status = c.StreamTracks(
+        [&](const v1::TrackFrame&) {
+          std::lock_guard lock(mu);
+          ++frames;
+          cv.notify_all();
+          return true;
+        },
+        options);
+  });
+  const auto wait_for = [&](const auto& done) {
+    std::unique_lock lock(mu);
+    return cv.wait_for(lock, std::chrono::seconds(30), done);
+  };
+  ASSERT_TRUE(wait_for([&] { return frames >= 5; }));
+  (*first)->Shutdown();
+  ASSERT_TRUE(wait_for([&] { return !events.empty(); }));
+  first->reset();
+  config.set_listen("127.0.0.1:" + std::to_string(port));
+  Result<std::unique_ptr<Server>> second = Server::Start(config);
+  ASSERT_TRUE(second.ok()) << second.error().message;
+  ASSERT_TRUE(wait_for([&] { return events.size() >= 2 && frames >= frames_at_loss + 5; }));
+  c.Cancel();
+  streamer.join();
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  ASSERT_GE(events.size(), 2u);
+  EXPECT_EQ(events[0].kind, client::StreamEvent::Kind::kLost);
+  EXPECT_TRUE(client::IsTransientStreamEnd(events[0].status))
+      << client::StatusCodeName(events[0].status.error_code());
+  EXPECT_EQ(events[1].kind, client::StreamEvent::Kind::kResumed);
+  EXPECT_GE(events[1].reconnects, 1u);
+  std::cout << "lost with " << client::StatusCodeName(events[0].status.error_code()) << " ("
+            << events[0].status.error_message() << "), resumed after " << events[1].gap.count()
+            << " ms and " << events[1].reconnects << " reconnects\n";
+}
+
+// Without a server the same options give up before the first frame, after the attempts asked;
+// Cancel() ends a call that is waiting to reconnect.
+TEST(ClientReconnect, GivesUpBeforeTheFirstFrameAndCancelEndsTheWait) {
+  client::ClientOptions unreachable;
+  unreachable.address = "127.0.0.1:1";
+  unreachable.timeout = std::chrono::milliseconds(200);
+  client::Client c(unreachable);
+  client::StreamOptions options;
+  options.reconnect = true;
+  options.persist_once_streaming = true;
+  options.max_reconnect_attempts = 2;
+  bool event_seen = false;
+  options.on_event = [&](const client::StreamEvent&) { event_seen = true; };
+  const grpc::Status gave_up = c.StreamTracks([](const v1::TrackFrame&) { return true; }, options);
+  EXPECT_EQ(gave_up.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_FALSE(event_seen) << "no events before the first frame";
+
+  options.max_reconnect_attempts = 0;  // for ever: only Cancel() ends it
+  grpc::Status cancelled(grpc::StatusCode::UNKNOWN, "not returned");
+  std::promise<void> returned;
+  std::future<void> done = returned.get_future();
+  std::thread streamer([&] {
+    cancelled = c.StreamTracks([](const v1::TrackFrame&) { return true; }, options);
+    returned.set_value();
+  });
+  // A Cancel() before the call begins is forgotten (each call starts afresh): repeat it until the
+  // call returns, each time waiting for that return, within 5 s in all.
+  bool ended = false;
+  for (int i = 0; i < 50 && !ended; ++i) {
+    c.Cancel();
+    ended = done.wait_for(std::chrono::milliseconds(100)) == std::future_status::ready;
+  }
+  EXPECT_TRUE(ended) << "Cancel() did not end a call waiting to reconnect";
+  streamer.join();
+  EXPECT_TRUE(cancelled.ok()) << cancelled.error_message();
+}
+
+TEST(ClientReconnect, OnlyRefusalsThatRetryingCannotChangeAreFinal) {
+  for (const grpc::StatusCode code :
+       {grpc::StatusCode::OK, grpc::StatusCode::CANCELLED, grpc::StatusCode::UNAVAILABLE,
+        grpc::StatusCode::DEADLINE_EXCEEDED, grpc::StatusCode::ABORTED, grpc::StatusCode::INTERNAL,
+        grpc::StatusCode::UNKNOWN, grpc::StatusCode::RESOURCE_EXHAUSTED}) {
+    EXPECT_TRUE(client::IsTransientStreamEnd(grpc::Status(code, "")))
+        << client::StatusCodeName(code);
+  }
+  for (const grpc::StatusCode code :
+       {grpc::StatusCode::UNAUTHENTICATED, grpc::StatusCode::PERMISSION_DENIED,
+        grpc::StatusCode::INVALID_ARGUMENT, grpc::StatusCode::UNIMPLEMENTED,
+        grpc::StatusCode::FAILED_PRECONDITION, grpc::StatusCode::NOT_FOUND}) {
+    EXPECT_FALSE(client::IsTransientStreamEnd(grpc::Status(code, "")))
+        << client::StatusCodeName(code);
   }
 }
 

@@ -64,21 +64,36 @@ Subprocess::~Subprocess() {
 
 std::optional<std::string> Subprocess::WaitForStderrLine(const std::string& needle,
                                                          std::chrono::milliseconds timeout) {
+  return WaitForLine(/*from_stdout=*/false, needle, timeout);
+}
+
+std::optional<std::string> Subprocess::WaitForStdoutLine(const std::string& needle,
+                                                         std::chrono::milliseconds timeout) {
+  return WaitForLine(/*from_stdout=*/true, needle, timeout);
+}
+
+std::optional<std::string> Subprocess::WaitForLine(bool from_stdout, const std::string& needle,
+                                                   std::chrono::milliseconds timeout) {
   const auto deadline = Clock::now() + timeout;
+  std::string& text = from_stdout ? out_ : err_;
+  size_t& scanned = from_stdout ? out_scanned_ : err_scanned_;
+  const int fd = from_stdout ? out_fd_ : err_fd_;
+  const int other_fd = from_stdout ? err_fd_ : out_fd_;
+  std::string& other_text = from_stdout ? err_ : out_;
   while (true) {
     // Complete lines not yet scanned.
     size_t end;
-    while ((end = err_.find('\n', err_scanned_)) != std::string::npos) {
-      std::string line = err_.substr(err_scanned_, end - err_scanned_);
-      err_scanned_ = end + 1;
+    while ((end = text.find('\n', scanned)) != std::string::npos) {
+      std::string line = text.substr(scanned, end - scanned);
+      scanned = end + 1;
       if (line.find(needle) != std::string::npos) return line;
     }
-    // Keep stdout flowing too, so the child never blocks on a full pipe.
-    pollfd fds[2] = {{err_fd_, POLLIN, 0}, {out_fd_, POLLIN, 0}};
+    // Keep the other pipe flowing too, so the child never blocks on a full pipe.
+    pollfd fds[2] = {{fd, POLLIN, 0}, {other_fd, POLLIN, 0}};
     const int ready = poll(fds, 2, RemainingMs(deadline));
     if (ready <= 0) return std::nullopt;
-    if ((fds[1].revents & POLLIN) != 0) ReadSome(out_fd_, out_);
-    if ((fds[0].revents & (POLLIN | POLLHUP)) != 0 && !ReadSome(err_fd_, err_)) return std::nullopt;
+    if ((fds[1].revents & POLLIN) != 0) ReadSome(other_fd, other_text);
+    if ((fds[0].revents & (POLLIN | POLLHUP)) != 0 && !ReadSome(fd, text)) return std::nullopt;
   }
 }
 

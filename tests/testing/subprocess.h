@@ -23,6 +23,9 @@ class Subprocess {
   // Reads stderr until a line containing `needle` arrives (returned), EOF, or the timeout.
   std::optional<std::string> WaitForStderrLine(const std::string& needle,
                                                std::chrono::milliseconds timeout);
+  // The same for stdout (the lines scanned by each are their own).
+  std::optional<std::string> WaitForStdoutLine(const std::string& needle,
+                                               std::chrono::milliseconds timeout);
   void Signal(int signal_number);
   // Waits for the exit (bounded); returns the exit code, or nullopt on timeout or a signal death.
   std::optional<int> Wait(std::chrono::milliseconds timeout);
@@ -31,10 +34,13 @@ class Subprocess {
   std::string DrainStderr();
 
  private:
+  std::optional<std::string> WaitForLine(bool from_stdout, const std::string& needle,
+                                         std::chrono::milliseconds timeout);
+
   pid_t pid_ = -1;
   int out_fd_ = -1, err_fd_ = -1;
   std::string out_, err_;
-  size_t err_scanned_ = 0;
+  size_t out_scanned_ = 0, err_scanned_ = 0;
   bool reaped_ = false;
 };
 
