@@ -101,6 +101,27 @@ grpc::Status Client::PublishVehicleStates(const std::vector<v1::VehicleState>& s
   return writer->Finish();
 }
 
+std::unique_ptr<VehicleStatePublisher> Client::OpenVehicleStatePublisher() {
+  auto publisher = std::make_unique<VehicleStatePublisher>();
+  AddCredentials(publisher->context_);
+  publisher->writer_ = stub_->PublishVehicleState(&publisher->context_, &publisher->response_);
+  return publisher;
+}
+
+bool VehicleStatePublisher::Write(const v1::VehicleState& state) {
+  return !done_ && writer_->Write(state);
+}
+
+grpc::Status VehicleStatePublisher::Finish(v1::PublishVehicleStateResponse* response) {
+  if (!done_) {
+    writer_->WritesDone();
+    done_ = true;
+  }
+  grpc::Status status = writer_->Finish();
+  if (response != nullptr) *response = response_;
+  return status;
+}
+
 grpc::Status Client::ListCalibrations(v1::ListCalibrationsResponse* response) {
   grpc::ClientContext context;
   Prepare(context);

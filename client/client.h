@@ -75,6 +75,25 @@ struct StreamOptions {
 // opened again (see StreamOptions::reconnect).
 bool IsTransientStreamEnd(const grpc::Status& status);
 
+// A long-lived PublishVehicleState stream: an autopilot bridge's feed of vehicle states, with the
+// client's credentials and no deadline. Write() from one thread; Cancel() from any.
+class VehicleStatePublisher {
+ public:
+  // False when the stream broke (the server went away or refused the call): Finish() tells why,
+  // and a new publisher goes on.
+  bool Write(const v1::VehicleState& state);
+  // Ends the stream and returns the server's status, and its counts in `response`.
+  grpc::Status Finish(v1::PublishVehicleStateResponse* response);
+  void Cancel() { context_.TryCancel(); }
+
+ private:
+  friend class Client;
+  grpc::ClientContext context_;
+  v1::PublishVehicleStateResponse response_;
+  std::unique_ptr<grpc::ClientWriter<v1::VehicleState>> writer_;
+  bool done_ = false;
+};
+
 // Thread-safe, except that one StreamTracks() runs at a time per Client.
 class Client {
  public:
@@ -107,6 +126,8 @@ class Client {
   // Streams vehicle states to the server (an autopilot's feed) and returns its counts.
   grpc::Status PublishVehicleStates(const std::vector<v1::VehicleState>& states,
                                     v1::PublishVehicleStateResponse* response);
+  // Opens a PublishVehicleState stream to write states one by one as they come.
+  std::unique_ptr<VehicleStatePublisher> OpenVehicleStatePublisher();
   // Recording on the server (DATA_DIR/recordings/NAME).
   grpc::Status StartRecording(const v1::StartRecordingRequest& request,
                               v1::RecordingStatus* status);

@@ -66,6 +66,15 @@ Commands:
   calibration list [--json]    stored calibrations and the active one
   calibration get ID [--yaml]  one calibration: report, or its YAML file
   calibration activate ID      switch the running server to it (between two frames)
+  mavlink --link URL [--adsb] [--geoid-undulation M] [--no-pose] [--rate HZ]
+          [--component-id N] [--system-id N] [--icao-base N] [--status-every S]
+                               the autopilot bridge (MAVLink 2): OBSTACLE_DISTANCE at --rate
+                               (10 Hz) from the range scan and the tracks, with --adsb an
+                               ADSB_VEHICLE per confirmed georeferenced track; the autopilot's
+                               pose back to the server as VehicleStates (not with --no-pose).
+                               URL: udp://HOST:PORT (send there), udpin://ADDR:PORT (listen;
+                               answer whoever spoke last), serial://DEVICE:BAUD. Nothing older
+                               than 400 ms is sent; status lines (logfmt) on stderr
 
 --server defaults to 127.0.0.1:50051; --timeout (seconds, default 5) bounds each call.
 Exit status: 0 on success, 1 when the server fails or cannot be reached, 2 on bad usage.
@@ -86,6 +95,7 @@ constexpr Command kCommands[] = {
     {"record", commands::Record},
     {"export", commands::Export},
     {"calibration", commands::Calibration},
+    {"mavlink", commands::Mavlink},
 };
 
 }  // namespace

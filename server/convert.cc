@@ -54,6 +54,18 @@ void SetPoint(const cv::Vec3d& p, v1::PointCam* point) {
   point->set_y_m(p[1]);
   point->set_z_m(p[2]);
 }
+void SetPoint(const cv::Vec3d& p, v1::PointBody* point) {
+  point->set_x_m(p[0]);
+  point->set_y_m(p[1]);
+  point->set_z_m(p[2]);
+}
+void SetScan(const detection::RangeScan& scan, v1::RangeScan* out) {
+  out->set_start_azimuth_deg(scan.start_azimuth_deg);
+  out->set_bin_width_deg(scan.bin_width_deg);
+  out->mutable_range_m()->Assign(scan.range_m.begin(), scan.range_m.end());
+  out->set_min_range_m(scan.min_range_m);
+  out->set_max_range_m(scan.max_range_m);
+}
 }  // namespace
 
 v1::TruthFrame ToTruthFrame(const drivers::FrameTruth& truth, int64_t capture_time_ns) {
@@ -140,6 +152,9 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
     t->set_valid_fraction(d.valid_fraction);
     t->set_disparity_sigma_px(d.disparity_sigma_px);
     SetPoint(track.position_cam_m, t->mutable_position_cam());
+    if (i < result.track_position_body_m.size()) {
+      SetPoint(result.track_position_body_m[i], t->mutable_position_body());
+    }
     t->set_disparity_px(d.disparity_px);
     t->set_score(d.score);
     t->set_extractor(d.extractor);
@@ -174,6 +189,7 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
       t->mutable_position_sigma_m()->set_vertical_m(g.sigma.vertical_m);
     }
   }
+  if (result.range_scan) SetScan(*result.range_scan, f.mutable_range_scan());
   if (result.pose) {
     f.set_geo_status(ToProto(result.pose->status));
     f.set_geo_message(result.pose->message);

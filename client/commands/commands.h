@@ -20,6 +20,7 @@ int Calibrate(Client& client, const Args& args);    // calibrate.cc
 int Avoid(Client& client, const Args& args);        // avoid.cc
 int Export(Client& client, const Args& args);       // export.cc
 int Calibration(Client& client, const Args& args);  // calibration.cc
+int Mavlink(Client& client, const Args& args);      // mavlink.cc
 
 // The options before the command (global_options.cc).
 struct GlobalOptions {

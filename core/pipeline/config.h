@@ -11,6 +11,7 @@
 #include "core/common/error.h"
 #include "core/common/fields.h"
 #include "core/detection/canonical.h"
+#include "core/detection/range_scan.h"
 #include "core/detection/stevie.h"
 #include "core/detection/stevis.h"
 #include "core/geometry/range.h"
@@ -47,6 +48,9 @@ struct PipelineConfig {
   // How the camera sits on the vehicle, for georeferencing the tracks (core/geo/mount.h). Can
   // change while serving.
   geo::MountOptions mount;
+  // The nearest range per azimuth bin in the body frame, from the disparity alone
+  // (core/detection/README.md, "The range scan"). Can change while serving.
+  detection::RangeScanOptions range_scan;
 
   // Every problem of every stage, each as "field.path: problem".
   std::vector<std::string> Validate() const;
@@ -69,6 +73,7 @@ struct PipelineConfig {
     v.Nested(s.stevis, Field("stevis"));
     v.Nested(s.tracking, Field("tracking"));
     v.Nested(s.mount, Field("mount"));
+    v.Nested(s.range_scan, Field("range_scan"));
   }
 };
 

@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/detection/canonical.h"
+#include "core/geo/mount.h"
 
 namespace stevi::pipeline {
 namespace {
@@ -47,14 +48,21 @@ struct FrameImages {
 
 namespace {
 
+// The range options of the processed (binned) images: the disparity floor (camera pixels) divided
+// by the binning.
+geometry::RangeOptions ProcessedRange(const PipelineConfig& config, int factor) {
+  geometry::RangeOptions range = config.range;
+  range.min_disparity_px /= factor;
+  return range;
+}
+
 // Stage: extract. The detectors work on the processed (binned) images, where the disparity floor
 // (camera pixels) is divided by the binning; each hypothesis is then ranged on the camera's own
 // images.
 void Extract(const PipelineConfig& config, int factor, const FrameImages& images,
              FrameResult& result) {
   const geometry::StereoRig& work_rig = *result.rig;
-  geometry::RangeOptions range = config.range;
-  range.min_disparity_px /= factor;
+  const geometry::RangeOptions range = ProcessedRange(config, factor);
   detection::FullResolutionPair full;
   if (factor > 1) {
     full.left = images.full_left;
@@ -80,6 +88,18 @@ void Extract(const PipelineConfig& config, int factor, const FrameImages& images
                                                   config.stevis, &full);
       break;
   }
+}
+
+// Stage: scan. The range scan of the processed disparity, leaving out the ground plane it fits
+// (the detectors' v-disparity line is not reused: core/detection/README.md, "The range scan").
+detection::RangeScan Scan(const PipelineConfig& config, int factor, const FrameResult& result) {
+  const geometry::RangeOptions range = ProcessedRange(config, factor);
+  const Eigen::Isometry3d body_from_cam = geo::BodyFromCam(config.mount);
+  const Eigen::Vector3d down_in_cam = body_from_cam.linear().transpose() * Eigen::Vector3d::UnitZ();
+  const std::optional<detection::GroundPlane> ground = detection::FitGroundPlane(
+      result.disparity, *result.rig, down_in_cam, range.min_disparity_px, config.range_scan.ground);
+  return detection::ComputeRangeScan(result.disparity, *result.rig, range, body_from_cam, ground,
+                                     config.range_scan);
 }
 
 }  // namespace
@@ -222,7 +242,7 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
   result.pair_skew_ns = frame.pair_skew_ns;
   result.algorithm = config.algorithm;
   result.rig = snapshot.rig;
-  result.timings.reserve(6);
+  result.timings.reserve(7);
 
   Clock::time_point t = Clock::now();
   const int factor =
@@ -240,6 +260,12 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
   t = Clock::now();
   Extract(config, factor, images, result);
   result.timings.push_back({"extract", MsSince(t)});
+
+  if (config.range_scan.enabled) {
+    t = Clock::now();
+    result.range_scan = Scan(config, factor, result);
+    result.timings.push_back({"scan", MsSince(t)});
+  }
   result.rectified_left = std::move(images.rect_left);
   prepared.ms = MsSince(start);
   return prepared;
@@ -277,6 +303,17 @@ Result<FrameResult> Pipeline::Finish(PreparedFrame prepared, const Snapshot& sna
                                      rig.image_size().height};
   result.tracks = state_->tracker->Update(result.detections, result.capture_time_ns, camera);
   result.timings.push_back({"track", MsSince(t)});
+
+  // The tracks in the body frame (the mount alone: no pose needed).
+  const Eigen::Isometry3d body_from_cam = geo::BodyFromCam(config.mount);
+  result.track_position_body_m.clear();
+  result.track_position_body_m.reserve(result.tracks.size());
+  for (const tracking::Track& track : result.tracks) {
+    const Eigen::Vector3d p =
+        body_from_cam *
+        Eigen::Vector3d(track.position_cam_m[0], track.position_cam_m[1], track.position_cam_m[2]);
+    result.track_position_body_m.emplace_back(p.x(), p.y(), p.z());
+  }
 
   // Stage: geo.
   if (snapshot.pose_at) {

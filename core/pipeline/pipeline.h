@@ -1,4 +1,5 @@
-// Assembles the stages: rectify -> disparity -> extract -> detections -> tracks.
+// Assembles the stages: rectify -> disparity -> extract -> detections (and the range scan) ->
+// tracks.
 #pragma once
 
 #include <cstdint>
@@ -13,6 +14,7 @@
 #include "core/common/error.h"
 #include "core/common/stereo_frame.h"
 #include "core/detection/detection.h"
+#include "core/detection/range_scan.h"
 #include "core/geo/georeferencer.h"
 #include "core/geo/pose_buffer.h"
 #include "core/geometry/stereo_rig.h"
@@ -24,7 +26,7 @@
 namespace stevi::pipeline {
 
 struct StageTiming {
-  std::string stage;  // "rectify", "disparity", "extract", "track", "geo", "total"
+  std::string stage;  // "rectify", "disparity", "extract", "scan", "track", "geo", "total"
   double ms = 0;
 };
 
@@ -39,6 +41,12 @@ struct FrameResult {
   std::vector<detection::Detection> detections;
   // Every live track after this frame's detections (tentative, confirmed, coasting), by id.
   std::vector<tracking::Track> tracks;
+  // Per track, in the order of `tracks`: its position_cam_m in the body frame (x forward, y right,
+  // z down, metres from the vehicle's reference point) through PipelineConfig::mount.
+  std::vector<cv::Vec3d> track_position_body_m;
+  // The nearest range per azimuth bin in the body frame (PipelineConfig::range_scan); absent when
+  // the scan is disabled.
+  std::optional<detection::RangeScan> range_scan;
   // Georeferencing: the vehicle pose looked up at the capture time (absent when there is no pose
   // source), and per track, in the order of `tracks`, its WGS84 position, NED velocity and sigma
   // (absent when the pose was not found or the track could not be georeferenced).
@@ -64,16 +72,18 @@ struct Snapshot {
   std::function<geo::PoseLookup(int64_t t_ns, int64_t unix_time_ns)> pose_at = {};
 };
 
-// What a frame gives on its own (checks, rectify, disparity, extract), for Pipeline::Finish().
+// What a frame gives on its own (checks, rectify, disparity, extract, scan), for
+// Pipeline::Finish().
 struct PreparedFrame {
   FrameResult result;  // the capture fields, rig, algorithm, rectified_left, disparity,
-                       // detections, timings
+                       // detections, range_scan, timings
   double ms = 0;       // time spent in Prepare()
 };
 
-// The part of the pipeline that needs no other frame: checks, rectification, disparity and
-// extraction. Its state is the matcher and its buffers. Thread-compatible: one Prepare() at a
-// time; several FrontEnds may work on different frames at once (the engine runs one per core).
+// The part of the pipeline that needs no other frame: checks, rectification, disparity,
+// extraction and the range scan. Its state is the matcher and its buffers. Thread-compatible: one
+// Prepare() at a time; several FrontEnds may work on different frames at once (the engine runs one
+// per core).
 class FrontEnd {
  public:
   FrontEnd();

@@ -23,6 +23,8 @@
 
 #include "core/detection/canonical.h"
 #include "core/detection/ground.h"
+#include "core/detection/ground_plane.h"
+#include "core/detection/range_scan.h"
 #include "core/detection/regions.h"
 #include "core/detection/stevie.h"
 #include "core/detection/stevis.h"
@@ -30,6 +32,7 @@
 #include "core/extraction/morphology.h"
 #include "core/extraction/saliency.h"
 #include "core/extraction/segmentation.h"
+#include "core/geo/mount.h"
 #include "core/pipeline/pipeline.h"
 #include "core/stereo/block_matcher.h"
 #include "core/stereo/matcher.h"
@@ -264,6 +267,46 @@ void BM_SteViESteps(benchmark::State& state) {
   state.SetLabel(Label(0, kSteps[step]));
 }
 BENCHMARK(BM_SteViESteps)->ArgName("step")->DenseRange(0, 6)->Unit(benchmark::kMillisecond);
+
+// The range scan on the block-matching disparity of the frame (issue 17). step: 0 the ground plane
+// fit, 1 the scan of the pixels with that plane, 2 both (the pipeline's "scan" stage); row_step 1
+// reads every row, 2 every other one.
+void BM_RangeScan(benchmark::State& state) {
+  const int64_t step = state.range(0), size = state.range(1);
+  const Scene& scene = SceneAt(size);
+  pipeline::PipelineConfig config = ConfigFor(1, 0, 64);
+  config.range_scan.row_step = static_cast<int>(state.range(2));
+  std::unique_ptr<stereo::DisparityMatcher> matcher = stereo::MakeMatcher(config.matcher);
+  const stereo::DisparityMap disparity = matcher->Compute(scene.frame.left, scene.frame.right);
+  const Eigen::Isometry3d body_from_cam = geo::BodyFromCam(config.mount);
+  const Eigen::Vector3d down = body_from_cam.linear().transpose() * Eigen::Vector3d::UnitZ();
+  const auto fit = [&] {
+    return detection::FitGroundPlane(disparity, *scene.rig, down, config.range.min_disparity_px,
+                                     config.range_scan.ground);
+  };
+  const std::optional<detection::GroundPlane> plane = fit();
+  detection::RangeScan scan;
+  for (auto _ : state) {
+    if (step == 0) {
+      benchmark::DoNotOptimize(fit());
+    } else {
+      scan = detection::ComputeRangeScan(disparity, *scene.rig, config.range, body_from_cam,
+                                         step == 1 ? plane : fit(), config.range_scan);
+      benchmark::DoNotOptimize(scan);
+    }
+  }
+  static const char* const kSteps[] = {"ground plane", "scan with the plane", "plane + scan"};
+  state.counters["ground"] = plane ? 1 : 0;
+  state.counters["bins"] = static_cast<double>(scan.range_m.size());
+  state.counters["returns"] = static_cast<double>(
+      std::count_if(scan.range_m.begin(), scan.range_m.end(), [](float r) { return r > 0; }));
+  state.SetLabel(Label(size, kSteps[step]) + ", row step " + std::to_string(state.range(2)));
+}
+BENCHMARK(BM_RangeScan)
+    ->ArgNames({"step", "size", "row_step"})
+    ->ArgsProduct({{0, 1, 2}, {0, 1}, {1}})
+    ->ArgsProduct({{2}, {0, 1}, {2}})
+    ->Unit(benchmark::kMillisecond);
 
 // Kept from the first version of this file: canonical extraction at 640x480 with default options.
 void BM_Canonical(benchmark::State& state) {

@@ -342,6 +342,41 @@ TEST(ToTrackFrame, NamesTheImageTheBoxesAreIn) {
   EXPECT_EQ(f.binning(), 1);
 }
 
+// The range scan and each track's body-frame position, computed in core, are copied as they are.
+TEST(ToTrackFrame, CopiesTheRangeScanAndTheTracksBodyPositions) {
+  pipeline::FrameResult result;
+  tracking::Track a, b;
+  a.id = 1;
+  b.id = 2;
+  result.tracks = {a, b};
+  result.track_position_body_m = {cv::Vec3d(10, -2, 0.5), cv::Vec3d(30, 4, -1)};
+  detection::RangeScan scan;
+  scan.start_azimuth_deg = -25;
+  scan.bin_width_deg = 1;
+  scan.range_m = {0.0F, 12.5F, 13.0F, 0.0F};
+  scan.min_range_m = 6.67;
+  scan.max_range_m = 168;
+  result.range_scan = scan;
+  v1::TrackFrame f = ToTrackFrame(result);
+  ASSERT_TRUE(f.has_range_scan());
+  EXPECT_DOUBLE_EQ(f.range_scan().start_azimuth_deg(), -25);
+  EXPECT_DOUBLE_EQ(f.range_scan().bin_width_deg(), 1);
+  EXPECT_THAT(f.range_scan().range_m(), ::testing::ElementsAre(0.0F, 12.5F, 13.0F, 0.0F));
+  EXPECT_DOUBLE_EQ(f.range_scan().min_range_m(), 6.67);
+  EXPECT_DOUBLE_EQ(f.range_scan().max_range_m(), 168);
+  ASSERT_EQ(f.tracks_size(), 2);
+  EXPECT_DOUBLE_EQ(f.tracks(0).position_body().x_m(), 10);
+  EXPECT_DOUBLE_EQ(f.tracks(0).position_body().y_m(), -2);
+  EXPECT_DOUBLE_EQ(f.tracks(1).position_body().z_m(), -1);
+
+  // Without a scan (disabled) or body positions (a result built by hand), neither is set.
+  result.range_scan.reset();
+  result.track_position_body_m.clear();
+  f = ToTrackFrame(result);
+  EXPECT_FALSE(f.has_range_scan());
+  EXPECT_FALSE(f.tracks(0).has_position_body());
+}
+
 TEST(ToJsonLine, UsesProtoFieldNamesOnOneLine) {
   v1::TrackFrame f;
   f.set_frame_id(3);
