@@ -49,12 +49,9 @@ void SetBox(const cv::Rect& r, v1::BoundingBox* box) {
   box->set_width(r.width);
   box->set_height(r.height);
 }
-void SetPoint(const cv::Vec3d& p, v1::PointCam* point) {
-  point->set_x_m(p[0]);
-  point->set_y_m(p[1]);
-  point->set_z_m(p[2]);
-}
-void SetPoint(const cv::Vec3d& p, v1::PointBody* point) {
+// A 3-D point into a PointCam or PointBody (both x_m, y_m, z_m).
+template <class Point>
+void SetPoint(const cv::Vec3d& p, Point* point) {
   point->set_x_m(p[0]);
   point->set_y_m(p[1]);
   point->set_z_m(p[2]);

@@ -19,6 +19,7 @@
 #include <condition_variable>
 #include <map>
 #include <mutex>
+#include <regex>
 #include <set>
 #include <thread>
 #include <vector>
@@ -352,6 +353,25 @@ TEST_F(MavlinkBridgeTest, TheAutopilotsPosesGeoreferenceTheFramesAndObstaclesRea
     requested.insert(static_cast<uint32_t>(c.param1));
   }
   EXPECT_EQ(requested, (std::set<uint32_t>{2, 24, 30, 33}));
+  // ... at 1 Hz.
+  ASSERT_GE(heartbeats.size(), 3u);
+  const double heartbeat_hz =
+      (heartbeats.size() - 1) /
+      std::chrono::duration<double>(heartbeats.back().second - heartbeats.front().second).count();
+  std::cout << "HEARTBEAT: " << heartbeats.size() << " at " << heartbeat_hz << " Hz\n";
+  EXPECT_NEAR(heartbeat_hz, 1.0, 0.15);
+  // Its status line (logfmt) counts what went out and says the pose flows.
+  const std::optional<std::string> status = bridge_->WaitForStderrLine("event=status", 10s);
+  ASSERT_TRUE(status) << bridge_->DrainStderr();
+  std::cout << *status << "\n";
+  EXPECT_THAT(*status, HasSubstr("autopilot=ok"));
+  EXPECT_THAT(*status, HasSubstr("obstacles=flowing"));
+  EXPECT_THAT(*status, HasSubstr("pose=ok"));
+  EXPECT_THAT(*status, HasSubstr("time_source=autopilot"));
+  EXPECT_THAT(*status, HasSubstr("geo=GEO_STATUS_OK"));
+  std::smatch sent;
+  ASSERT_TRUE(std::regex_search(*status, sent, std::regex("obstacle_distance_sent=(\\d+)")));
+  EXPECT_GT(std::stoll(sent[1].str()), 0);
 
   // The frames: georeferenced from the published states, the vehicle where the autopilot said.
   drivers::SyntheticOptions synthetic;
