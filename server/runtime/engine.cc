@@ -138,8 +138,10 @@ void Engine::Start(size_t workers, int opencv_threads) {
     std::lock_guard order(order_mu_);
     workers_running_ = workers;
   }
+  // Every front end exists before any worker starts: a worker reads fronts_, which must not grow
+  // (and move) under it.
+  for (size_t i = 0; i < workers; ++i) fronts_.push_back(std::make_unique<pipeline::FrontEnd>());
   for (size_t i = 0; i < workers; ++i) {
-    fronts_.push_back(std::make_unique<pipeline::FrontEnd>());
     worker_threads_.emplace_back([this, i] { WorkerLoop(i); });
   }
   finish_thread_ = std::thread([this] { FinishLoop(); });
