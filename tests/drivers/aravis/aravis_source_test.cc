@@ -572,6 +572,10 @@ void ExpectRecoveryAfterOutage(FakeGvCamera& left, double outage_s) {
   AravisStereoSource& s = **source;
   Result<StereoFrame> first = s.Next();
   ASSERT_TRUE(first.ok()) << first.error().message;
+  // The rate before the outage, the reference for the rate after it (a ratio measured in the same
+  // run: a busy machine slows both).
+  const Acquisition before = Collect(s, 2.0, options.PairToleranceNs(), cv::Size(640, 480));
+  ASSERT_EQ(before.errors, 0) << before.last_error;
 
   left.Kill();
   const auto killed = Clock::now();
@@ -621,9 +625,10 @@ void ExpectRecoveryAfterOutage(FakeGvCamera& left, double outage_s) {
 
   // And they flow as before.
   const Acquisition run = Collect(s, 2.0, options.PairToleranceNs(), cv::Size(640, 480));
-  std::cout << "[ measured ] after recovery: " << run.fps() << " fps\n";
+  std::cout << "[ measured ] before the outage: " << before.fps()
+            << " fps; after recovery: " << run.fps() << " fps\n";
   EXPECT_EQ(run.errors, 0) << run.last_error;
-  EXPECT_GE(run.fps(), 25.0);
+  EXPECT_GE(run.fps(), 0.85 * before.fps());
 }
 
 TEST_F(AravisGigE, ReportsALostCameraAndRecoversAfterItsRestart) {
