@@ -34,6 +34,12 @@ Client::Client(ClientOptions options) : options_(std::move(options)) {
   args.SetMaxSendMessageSize(options_.max_message_bytes);
   const std::shared_ptr<grpc::ChannelCredentials> credentials =
       options_.credentials ? options_.credentials : grpc::InsecureChannelCredentials();
+  // After a server restart every call works again within a second: gRPC's own reconnection
+  // backoff (1 s growing to 120 s by default) would otherwise fail calls for minutes, or hold a
+  // stream's consumer silent as long.
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
   channel_ = grpc::CreateCustomChannel(options_.address, credentials, args);
   stub_ = v1::ObstacleService::NewStub(channel_);
   calibration_stub_ = v1::CalibrationService::NewStub(channel_);
@@ -44,13 +50,14 @@ Client::Client(ClientOptions options) : options_(std::move(options)) {
   // The unary calls keep the default window: a snapshot download over a radio link needs it.
   args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
   args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, kStreamLookaheadBytes);
-  // After a server restart the stream comes back within a second: gRPC's own reconnection
-  // backoff (1 s growing to 120 s by default) would otherwise hold a consumer silent for minutes.
-  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
   stream_channel_ = grpc::CreateCustomChannel(options_.address, credentials, args);
   stream_stub_ = v1::ObstacleService::NewStub(stream_channel_);
+  // StreamPreview: the same on a connection of its own, with a window of a few JPEGs (a preview
+  // stream does not hold back the tracks, nor the tracks' window the previews). Channels connect
+  // on first use: none is opened without a StreamPreview() call.
+  args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, kPreviewLookaheadBytes);
+  preview_channel_ = grpc::CreateCustomChannel(options_.address, credentials, args);
+  preview_stub_ = v1::ObstacleService::NewStub(preview_channel_);
 }
 
 grpc::Status Client::Calibrate(const v1::CalibrationSettings& settings,
@@ -212,8 +219,9 @@ bool IsTransientStreamEnd(const grpc::Status& status) {
   }
 }
 
-Client::Attempt Client::StreamOnce(const v1::StreamTracksRequest& request,
-                                   const std::function<bool(const v1::TrackFrame&)>& on_frame,
+template <typename Message>
+Client::Attempt Client::StreamOnce(grpc::Channel& channel, const OpenStream<Message>& open,
+                                   const std::function<bool(const Message&)>& on_message,
                                    const StreamOptions& options, uint64_t& received) {
   Attempt attempt;
   grpc::ClientContext context;
@@ -227,18 +235,17 @@ Client::Attempt Client::StreamOnce(const v1::StreamTracksRequest& request,
     stream_context_ = &context;
   }
   // Fail fast when the server cannot be reached within the timeout.
-  if (!WaitForStreamChannel()) {
+  if (!WaitForStreamChannel(channel)) {
     attempt.status = grpc::Status(grpc::StatusCode::UNAVAILABLE,
                                   "cannot connect to " + options_.address + " within " +
                                       std::to_string(options_.timeout.count()) + " ms");
   } else {
-    std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader =
-        stream_stub_->StreamTracks(&context, request);
-    v1::TrackFrame frame;
-    while (reader->Read(&frame)) {
+    std::unique_ptr<grpc::ClientReader<Message>> reader = open(context);
+    Message message;
+    while (reader->Read(&message)) {
       attempt.got_frames = true;
       ++received;
-      if (!on_frame(frame) || (options.max_frames > 0 && received >= options.max_frames)) {
+      if (!on_message(message) || (options.max_frames > 0 && received >= options.max_frames)) {
         attempt.stop = true;
         context.TryCancel();
         break;
@@ -255,13 +262,13 @@ Client::Attempt Client::StreamOnce(const v1::StreamTracksRequest& request,
   return attempt;
 }
 
-bool Client::WaitForStreamChannel() {
+bool Client::WaitForStreamChannel(grpc::Channel& channel) {
   // In slices, so that Cancel() is heard while the server is away.
   const auto deadline = std::chrono::system_clock::now() + options_.timeout;
   while (true) {
     const auto slice =
         std::min(deadline, std::chrono::system_clock::now() + std::chrono::milliseconds(100));
-    if (stream_channel_->WaitForConnected(slice)) return true;
+    if (channel.WaitForConnected(slice)) return true;
     std::lock_guard lock(stream_mu_);
     if (cancelled_ || std::chrono::system_clock::now() >= deadline) return false;
   }
@@ -272,15 +279,14 @@ bool Client::WaitToReconnect(std::chrono::milliseconds delay) {
   return !stream_cv_.wait_for(lock, delay, [this] { return cancelled_; });
 }
 
-grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,
-                                  const StreamOptions& options) {
+template <typename Message>
+grpc::Status Client::StreamWithReconnect(grpc::Channel& channel, const OpenStream<Message>& open,
+                                         const std::function<bool(const Message&)>& on_message,
+                                         const StreamOptions& options) {
   {
     std::lock_guard lock(stream_mu_);
     cancelled_ = false;
   }
-  v1::StreamTracksRequest request;
-  request.set_confirmed_only(options.confirmed_only);
-  request.set_min_score(options.min_score);
   uint64_t received = 0;
   int failures = 0;
   bool streaming = false;  // frames arrived since the call began
@@ -289,7 +295,7 @@ grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&
   constexpr auto kFirstBackoff = std::chrono::milliseconds(100);
   auto backoff = kFirstBackoff;
   // Frames after a loss: the resume is reported before the first of them is handed on.
-  const auto on_frame_after_loss = [&](const v1::TrackFrame& frame) {
+  const std::function<bool(const Message&)> on_message_after_loss = [&](const Message& message) {
     if (lost_since) {
       if (options.on_event) {
         StreamEvent event;
@@ -301,10 +307,10 @@ grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&
       }
       lost_since.reset();
     }
-    return on_frame(frame);
+    return on_message(message);
   };
   while (true) {
-    const Attempt attempt = StreamOnce(request, on_frame_after_loss, options, received);
+    const Attempt attempt = StreamOnce(channel, open, on_message_after_loss, options, received);
     if (attempt.stop) return grpc::Status::OK;
     if (attempt.got_frames) {
       streaming = true;
@@ -328,6 +334,26 @@ grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&
     backoff = std::min(backoff * 2, options.max_backoff);
     ++reconnects;
   }
+}
+
+grpc::Status Client::StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,
+                                  const StreamOptions& options) {
+  v1::StreamTracksRequest request;
+  request.set_confirmed_only(options.confirmed_only);
+  request.set_min_score(options.min_score);
+  return StreamWithReconnect<v1::TrackFrame>(
+      *stream_channel_,
+      [&](grpc::ClientContext& context) { return stream_stub_->StreamTracks(&context, request); },
+      on_frame, options);
+}
+
+grpc::Status Client::StreamPreview(const v1::StreamPreviewRequest& request,
+                                   const std::function<bool(const v1::Preview&)>& on_preview,
+                                   const StreamOptions& options) {
+  return StreamWithReconnect<v1::Preview>(
+      *preview_channel_,
+      [&](grpc::ClientContext& context) { return preview_stub_->StreamPreview(&context, request); },
+      on_preview, options);
 }
 
 void Client::Cancel() {

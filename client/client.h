@@ -21,6 +21,10 @@ namespace stevi::client {
 // behind before the server starts dropping frames for it. 16 KiB holds about 7 TrackFrames of ten
 // tracks. Other clients of the API should do the same (see README, "Slow readers").
 inline constexpr int kStreamLookaheadBytes = 16 << 10;
+// The same for StreamPreview, on a connection of its own: a few JPEGs (a 640-pixel preview is
+// 20-60 KiB), so that a reader who falls behind loses previews at the server, where they are
+// counted (Preview.dropped_previews), rather than in this process's buffers.
+inline constexpr int kPreviewLookaheadBytes = 256 << 10;
 
 struct ClientOptions {
   std::string address = "127.0.0.1:50051";
@@ -46,6 +50,8 @@ struct StreamEvent {
   uint64_t reconnects = 0;           // streams opened again so far in this call
 };
 
+// Options of a streaming call (StreamTracks, StreamPreview): "frames" are its messages
+// (TrackFrames, or Previews).
 struct StreamOptions {
   // Stop after this many frames (0 = until cancelled or the server ends the stream).
   uint64_t max_frames = 0;
@@ -66,7 +72,8 @@ struct StreamOptions {
   // Called on the streaming thread when a stream that delivered frames breaks and when frames
   // resume; never for the attempts before the first frame.
   std::function<void(const StreamEvent&)> on_event;
-  // Server-side filters: no TENTATIVE tracks; only tracks scoring at least min_score (0..1).
+  // StreamTracks' server-side filters: no TENTATIVE tracks; only tracks scoring at least
+  // min_score (0..1).
   bool confirmed_only = false;
   double min_score = 0.0;
 };
@@ -94,7 +101,8 @@ class VehicleStatePublisher {
   bool done_ = false;
 };
 
-// Thread-safe, except that one StreamTracks() runs at a time per Client.
+// Thread-safe, except that one streaming call (StreamTracks() or StreamPreview()) runs at a time
+// per Client.
 class Client {
  public:
   explicit Client(ClientOptions options);
@@ -112,6 +120,12 @@ class Client {
   // the stream").
   grpc::Status StreamTracks(const std::function<bool(const v1::TrackFrame&)>& on_frame,
                             const StreamOptions& options = {});
+  // JPEG previews of the processed frames (see StreamPreviewRequest), on a connection of its own,
+  // with the same ending, reconnection and events as StreamTracks(); options.max_frames counts
+  // previews. A bad request is INVALID_ARGUMENT naming the field (never retried).
+  grpc::Status StreamPreview(const v1::StreamPreviewRequest& request,
+                             const std::function<bool(const v1::Preview&)>& on_preview,
+                             const StreamOptions& options = {});
   // Calibration (CalibrationService). Calibrate() streams `settings` then every pair; the
   // deadline is `calibrate_timeout` (calibrating 25 pairs takes seconds).
   grpc::Status Calibrate(const v1::CalibrationSettings& settings,
@@ -135,7 +149,8 @@ class Client {
   grpc::Status GetCalibration(const std::string& id, v1::CalibrationRecord* record);
   grpc::Status ActivateCalibration(const std::string& id, v1::CalibrationRecord* record);
 
-  // Ends a running StreamTracks() from another thread, also while it waits to reconnect.
+  // Ends a running StreamTracks() or StreamPreview() from another thread, also while it waits to
+  // reconnect.
   void Cancel();
 
   const ClientOptions& options() const { return options_; }
@@ -152,17 +167,30 @@ class Client {
   std::unique_ptr<v1::CalibrationService::Stub> calibration_stub_;
   std::shared_ptr<grpc::Channel> stream_channel_;  // StreamTracks only: a small receive window
   std::unique_ptr<v1::ObstacleService::Stub> stream_stub_;
-  // One attempt of StreamTracks: opens the stream and reads it until it ends.
+  std::shared_ptr<grpc::Channel> preview_channel_;  // StreamPreview only
+  std::unique_ptr<v1::ObstacleService::Stub> preview_stub_;
+  // Opens one server stream of `Message` with `context` (the stub's call, on `channel`).
+  template <typename Message>
+  using OpenStream =
+      std::function<std::unique_ptr<grpc::ClientReader<Message>>(grpc::ClientContext& context)>;
+  // The body of every streaming call: attempts (StreamOnce) with reconnection, backoff, the
+  // events and the end of the call (see StreamTracks()).
+  template <typename Message>
+  grpc::Status StreamWithReconnect(grpc::Channel& channel, const OpenStream<Message>& open,
+                                   const std::function<bool(const Message&)>& on_message,
+                                   const StreamOptions& options);
+  // One attempt: opens the stream and reads it until it ends.
   struct Attempt {
     grpc::Status status;
     bool stop = false;        // the caller's on_frame, max_frames or Cancel() ended it
     bool got_frames = false;  // at least one frame arrived on this stream
   };
-  Attempt StreamOnce(const v1::StreamTracksRequest& request,
-                     const std::function<bool(const v1::TrackFrame&)>& on_frame,
+  template <typename Message>
+  Attempt StreamOnce(grpc::Channel& channel, const OpenStream<Message>& open,
+                     const std::function<bool(const Message&)>& on_message,
                      const StreamOptions& options, uint64_t& received);
-  // Waits until the stream's channel is connected: false after options_.timeout or on Cancel().
-  bool WaitForStreamChannel();
+  // Waits until `channel` is connected: false after options_.timeout or on Cancel().
+  bool WaitForStreamChannel(grpc::Channel& channel);
   // Waits `delay` or until Cancel(); false when cancelled.
   bool WaitToReconnect(std::chrono::milliseconds delay);
 

@@ -75,6 +75,16 @@ Commands:
                                URL: udp://HOST:PORT (send there), udpin://ADDR:PORT (listen;
                                answer whoever spoke last), serial://DEVICE:BAUD. Nothing older
                                than 400 ms is sent; status lines (logfmt) on stderr
+  station [--server A,B] [--listen HOST:PORT] [--token-file FILE | --allow-insecure]
+          [--site GEOJSON] [--max-clients N] [--preview-rate HZ] [--preview-width PX]
+          [--preview-quality Q]
+                               the ground station for one or more servers (--server after
+                               `station` takes a comma-separated list): a web page with each
+                               rig's live video, disparity, plan view, map, tracks, status and
+                               controls, and a Foxglove WebSocket (Foxglove, Lichtblick), both on
+                               --listen (127.0.0.1:8080). Another address needs --token-file
+                               (the page asks for that token) or --allow-insecure. The page's
+                               control calls carry the operator token typed into the page
 
 --server defaults to 127.0.0.1:50051; --timeout (seconds, default 5) bounds each call.
 Exit status: 0 on success, 1 when the server fails or cannot be reached, 2 on bad usage.
@@ -96,6 +106,7 @@ constexpr Command kCommands[] = {
     {"export", commands::Export},
     {"calibration", commands::Calibration},
     {"mavlink", commands::Mavlink},
+    {"station", commands::Station},
 };
 
 }  // namespace

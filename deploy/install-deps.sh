@@ -11,6 +11,7 @@ packages=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libgeographiclib-dev
   libaravis-dev libusb-1.0-0-dev aravis-tools iproute2 util-linux openssl
+  libcivetweb-dev civetweb nlohmann-json3-dev libjs-leaflet chromium
   libgtest-dev libgmock-dev libbenchmark-dev systemd
   clang-format clang-tidy
 )

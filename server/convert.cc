@@ -195,6 +195,58 @@ v1::TrackFrame ToTrackFrame(const pipeline::FrameResult& result) {
   return f;
 }
 
+Result<PreviewRequest> ToPreviewRequest(const v1::StreamPreviewRequest& request) {
+  PreviewRequest out;
+  std::vector<std::string> problems;
+  for (int i = 0; i < request.kinds_size(); ++i) {
+    const std::string field = "kinds[" + std::to_string(i) + "]";
+    switch (request.kinds(i)) {
+      case v1::PREVIEW_KIND_ANNOTATED_LEFT: out.kinds.push_back(PreviewKind::kAnnotatedLeft); break;
+      case v1::PREVIEW_KIND_DISPARITY: out.kinds.push_back(PreviewKind::kDisparity); break;
+      case v1::PREVIEW_KIND_LEFT: out.kinds.push_back(PreviewKind::kLeft); break;
+      case v1::PREVIEW_KIND_UNSPECIFIED:
+        problems.push_back(field + ": PREVIEW_KIND_UNSPECIFIED is not a kind");
+        break;
+      default: problems.push_back(field + ": unknown kind " + std::to_string(request.kinds(i)));
+    }
+  }
+  if (request.rate_hz() != 0) out.rate_hz = request.rate_hz();
+  if (request.max_width_px() != 0) out.max_width_px = request.max_width_px();
+  if (request.jpeg_quality() != 0) out.jpeg_quality = request.jpeg_quality();
+  std::vector<std::string> invalid = out.Validate();
+  // With an unknown kind, the kinds' own problems are those above (the indices of `out.kinds`
+  // are not the request's).
+  if (!problems.empty()) {
+    std::erase_if(invalid, [](const std::string& p) { return p.rfind("kinds", 0) == 0; });
+  }
+  problems.insert(problems.end(), invalid.begin(), invalid.end());
+  if (!problems.empty()) return Error::Invalid(problems);
+  return out;
+}
+
+v1::PreviewKind ToProto(PreviewKind kind) {
+  switch (kind) {
+    case PreviewKind::kAnnotatedLeft: return v1::PREVIEW_KIND_ANNOTATED_LEFT;
+    case PreviewKind::kDisparity: return v1::PREVIEW_KIND_DISPARITY;
+    case PreviewKind::kLeft: return v1::PREVIEW_KIND_LEFT;
+  }
+  return v1::PREVIEW_KIND_UNSPECIFIED;
+}
+
+v1::Preview ToProto(const Preview& preview) {
+  v1::Preview p;
+  p.set_frame_id(preview.frame_id);
+  p.set_capture_time_ns(preview.capture_time_ns);
+  p.set_capture_unix_time_ns(preview.capture_unix_time_ns);
+  p.set_kind(ToProto(preview.kind));
+  p.set_jpeg(preview.jpeg);
+  p.set_width(preview.width);
+  p.set_height(preview.height);
+  p.set_scale(preview.scale);
+  p.set_calibration_id(preview.calibration_id);
+  return p;
+}
+
 Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result, bool annotated) {
   v1::DisparitySnapshot s;
   s.set_frame_id(result.frame_id);

@@ -7,6 +7,7 @@
 #include "core/pipeline/config.h"
 #include "core/pipeline/pipeline.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "server/runtime/preview_hub.h"
 #include "stevi/v1/config.pb.h"
 #include "stevi/v1/obstacle_service.pb.h"
 #include "stevi/v1/truth.pb.h"
@@ -35,6 +36,13 @@ v1::VehicleState ToProto(const geo::VehicleState& state);
 // PNG images and the rig's geometry. Fails (kInternal) only when PNG encoding fails.
 // With `annotated`, also the left image with the detections drawn on it.
 Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result, bool annotated);
+
+// StreamPreview's request with its defaults applied (0 = rate 5 Hz, width 640, quality 80),
+// validated: kInvalidArgument naming every bad field ("kinds[1]: unknown kind 7").
+Result<PreviewRequest> ToPreviewRequest(const v1::StreamPreviewRequest& request);
+v1::PreviewKind ToProto(PreviewKind kind);
+// dropped_previews is left 0: it is the subscriber's.
+v1::Preview ToProto(const Preview& preview);
 
 // The synthetic source's truth for one frame.
 v1::TruthFrame ToTruthFrame(const drivers::FrameTruth& truth, int64_t capture_time_ns);

@@ -1,5 +1,6 @@
 #include "server/server.h"
 
+#include <algorithm>
 #include <chrono>
 #include <optional>
 
@@ -116,11 +117,18 @@ Status Server::BuildRuntime(const v1::ServerConfig& config,
   const uint32_t max_streams = config.has_max_streams() ? config.max_streams() : kDefaultMaxStreams;
   broadcaster_ = std::make_unique<FrameBroadcaster>(queue, max_streams);
   FrameBroadcaster* broadcaster = broadcaster_.get();
+  PreviewHubOptions preview_options;
+  preview_options.max_subscribers = std::min<size_t>(max_streams, kMaxPreviewStreams);
+  previews_ = std::make_unique<PreviewHub>(preview_options);
+  PreviewHub* previews = previews_.get();
   Result<std::unique_ptr<Engine>> engine = Engine::Create(
       std::move(source), std::move(pipeline_config),
-      [broadcaster](const std::shared_ptr<const pipeline::FrameResult>& result) {
+      [broadcaster, previews](const std::shared_ptr<const pipeline::FrameResult>& result) {
         // Converted once per frame, shared by every subscriber.
         broadcaster->Publish(std::make_shared<const v1::TrackFrame>(ToTrackFrame(*result)));
+        // A pointer handed over (nothing at all without preview subscribers): the JPEGs are
+        // made on the hub's thread.
+        previews->Offer(result);
       });
   if (!engine.ok()) return engine.error();
   engine_ = std::move(engine).value();
@@ -137,8 +145,8 @@ Status Server::BuildRuntime(const v1::ServerConfig& config,
   recording_ = std::make_unique<RecordingManager>(data_dir, *engine_, *poses_);
   const Status recording = StartConfiguredRecording(config.record(), *recording_);
   if (!recording.ok()) return recording;
-  service_ =
-      std::make_unique<ObstacleServiceImpl>(*engine_, *broadcaster, *poses_, *recording_, auth_);
+  service_ = std::make_unique<ObstacleServiceImpl>(*engine_, *broadcaster, *previews_, *poses_,
+                                                   *recording_, auth_);
   calibration_service_ = std::make_unique<CalibrationServiceImpl>(*calibration_, auth_);
   return Status::Ok();
 }
@@ -218,11 +226,16 @@ void Server::Shutdown() {
   }
   // 2. End the streams, each with a final status (UNAVAILABLE "server shutting down": a client
   //    reconnects to the next server), so that the calls in progress finish without waiting.
+  //    The preview streams likewise; the hub's thread is joined.
   const size_t streams = broadcaster_ ? broadcaster_->Close() : 0;
+  const size_t preview_streams = previews_ ? previews_->Close() : 0;
   if (stop_accepting.joinable()) stop_accepting.join();
   if (grpc_server_) grpc_server_->Wait();
   Log(LogLevel::kInfo, "shutdown",
-      {{"step", "streams_ended"}, {"streams", std::to_string(streams)}, {"ms", elapsed_ms()}});
+      {{"step", "streams_ended"},
+       {"streams", std::to_string(streams)},
+       {"preview_streams", std::to_string(preview_streams)},
+       {"ms", elapsed_ms()}});
   // 3. Stop the cameras (the source and the pipeline) and the calibration worker.
   if (calibration_) calibration_->Stop();
   if (engine_) engine_->Stop();

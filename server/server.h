@@ -1,5 +1,5 @@
-// stevi-server's body: source, engine, broadcaster and the gRPC server, started and stopped in
-// order. main() only parses flags and waits for a signal.
+// stevi-server's body: source, engine, broadcaster, preview hub and the gRPC server, started and
+// stopped in order. main() only parses flags and waits for a signal.
 #pragma once
 
 #include <condition_variable>
@@ -32,6 +32,7 @@ class Server {
   Engine& engine() { return *engine_; }
   CalibrationManager& calibration() { return *calibration_; }
   RecordingManager& recording() { return *recording_; }
+  PreviewHub& previews() { return *previews_; }
 
   // Graceful shutdown: stop accepting, end every stream with a final status, stop the source and
   // the pipeline. Idempotent.
@@ -39,8 +40,8 @@ class Server {
 
  private:
   Server() = default;
-  // Start()'s steps: the broadcaster, engine, calibration store, recorder and services; then the
-  // gRPC server listening with them.
+  // Start()'s steps: the broadcaster, preview hub, engine, calibration store, recorder and
+  // services; then the gRPC server listening with them.
   Status BuildRuntime(const v1::ServerConfig& config, std::unique_ptr<drivers::StereoSource> source,
                       pipeline::PipelineConfig pipeline_config);
   Status BuildGrpcServer(const v1::ServerConfig& config,
@@ -52,6 +53,7 @@ class Server {
   std::string listen_;
   int port_ = 0;
   std::unique_ptr<FrameBroadcaster> broadcaster_;
+  std::unique_ptr<PreviewHub> previews_;  // before the engine, whose sink offers it frames
   std::unique_ptr<PoseSource> poses_;
   std::unique_ptr<Engine> engine_;
   std::unique_ptr<CalibrationManager> calibration_;

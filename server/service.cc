@@ -1,6 +1,8 @@
 #include "server/service.h"
 
 #include <algorithm>
+#include <functional>
+#include <string>
 #include <utility>
 
 #include "server/convert.h"
@@ -19,28 +21,24 @@ v1::SourceState ToProto(SourceState state) {
   return v1::SOURCE_STATE_UNSPECIFIED;
 }
 
-// One StreamTracks call: writes the subscriber's queue, one write in flight at a time.
-// Lifetime: deleted in OnDone(), after detaching from the subscription.
-class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame> {
+// One streaming call over a subscriber's queue (StreamTracks, StreamPreview): writes the queue,
+// one write in flight at a time. Lifetime: deleted in OnDone(), after detaching from the
+// subscription and calling `on_done` (the unsubscribe).
+template <typename Item, typename Message>
+class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
  public:
+  // Fills the message to write from a queued item and the subscriber's drops so far.
+  using ToMessage = std::function<void(const Item& item, uint64_t dropped, Message& out)>;
+
   // A refusal: finishes at once with `status`.
-  explicit TrackStreamReactor(FrameBroadcaster& broadcaster, const grpc::Status& status)
-      : broadcaster_(broadcaster) {
+  explicit QueueStreamReactor(const grpc::Status& status) {
     finished_ = true;
-    Finish(status);
+    this->Finish(status);
   }
 
-  TrackStreamReactor(FrameBroadcaster& broadcaster, std::shared_ptr<Subscription<FramePtr>> sub,
-                     v1::StreamTracksRequest filter)
-      : broadcaster_(broadcaster), sub_(std::move(sub)), filter_(std::move(filter)) {
-    if (sub_ == nullptr) {
-      finished_ = true;
-      Finish(broadcaster_.closed()
-                 ? ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down")
-                 : ToGrpcStatus(ErrorCode::kResourceExhausted,
-                                "too many StreamTracks subscribers (see max_streams)"));
-      return;
-    }
+  QueueStreamReactor(std::shared_ptr<Subscription<Item>> sub, ToMessage to_message,
+                     std::function<void()> on_done)
+      : sub_(std::move(sub)), to_message_(std::move(to_message)), on_done_(std::move(on_done)) {
     sub_->SetNotify([this] { WriteNext(); });
     WriteNext();
   }
@@ -64,16 +62,14 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
   }
 
   void OnDone() override {
-    if (sub_ != nullptr) {
-      sub_->Detach();
-      broadcaster_.Unsubscribe(sub_->id());
-    }
+    if (sub_ != nullptr) sub_->Detach();
+    if (on_done_) on_done_();
     delete this;
   }
 
  private:
   // Starts the next write when idle: from the constructor, from OnWriteDone and from the
-  // subscription's notify (on the broadcaster's thread). Never two at once (see Subscription).
+  // subscription's notify (on the producer's thread). Never two at once (see Subscription).
   void WriteNext() {
     std::lock_guard lock(mu_);
     if (finished_ || writing_) return;
@@ -81,18 +77,17 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
       FinishLocked(grpc::Status::CANCELLED);
       return;
     }
-    Subscription<FramePtr>::Popped popped = sub_->Pop();
+    typename Subscription<Item>::Popped popped = sub_->Pop();
     switch (popped.state) {
-      case Subscription<FramePtr>::PopState::kEmpty: return;  // notified at the next frame
-      case Subscription<FramePtr>::PopState::kEnded:
+      case Subscription<Item>::PopState::kEmpty: return;  // notified at the next item
+      case Subscription<Item>::PopState::kEnded:
         FinishLocked(ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
         return;
-      case Subscription<FramePtr>::PopState::kItem:
-        current_ = **popped.item;
-        FilterTracks(filter_, current_);
-        current_.set_dropped_frames(popped.dropped);
+      case Subscription<Item>::PopState::kItem:
+        current_.Clear();
+        to_message_(*popped.item, popped.dropped, current_);
         writing_ = true;
-        StartWrite(&current_);
+        this->StartWrite(&current_);
         return;
     }
   }
@@ -100,18 +95,28 @@ class TrackStreamReactor final : public grpc::ServerWriteReactor<v1::TrackFrame>
   void FinishLocked(const grpc::Status& status) {
     if (finished_) return;
     finished_ = true;
-    Finish(status);
+    this->Finish(status);
   }
 
-  FrameBroadcaster& broadcaster_;
-  std::shared_ptr<Subscription<FramePtr>> sub_;
-  const v1::StreamTracksRequest filter_;
+  std::shared_ptr<Subscription<Item>> sub_;
+  const ToMessage to_message_;
+  const std::function<void()> on_done_;
   std::mutex mu_;
   bool writing_ = false;
   bool finished_ = false;
   bool cancelled_ = false;
-  v1::TrackFrame current_;
+  Message current_;
 };
+
+using TrackStreamReactor = QueueStreamReactor<FramePtr, v1::TrackFrame>;
+using PreviewStreamReactor = QueueStreamReactor<PreviewPtr, v1::Preview>;
+
+// A subscription refused: UNAVAILABLE while shutting down, else RESOURCE_EXHAUSTED naming the
+// limit.
+grpc::Status Refusal(bool closed, const std::string& limit) {
+  return closed ? ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down")
+                : ToGrpcStatus(ErrorCode::kResourceExhausted, limit);
+}
 
 // PublishVehicleState: each state into the pose source; refusals are counted, the stream goes on.
 class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleState> {
@@ -174,7 +179,8 @@ void FilterTracks(const v1::StreamTracksRequest& request, v1::TrackFrame& frame)
 }
 
 grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadcaster,
-                           const RecordingManager* recording, v1::GetStatusResponse* response) {
+                           const RecordingManager* recording, const PreviewHub* previews,
+                           v1::GetStatusResponse* response) {
   const EngineStatus s = engine.Status();
   response->set_source_state(ToProto(s.source_state));
   response->set_source(s.source);
@@ -205,6 +211,10 @@ grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadca
   pairing->set_max_abs_skew_ns(s.pairing.max_abs_skew_ns);
   pairing->set_mean_abs_skew_ns(s.pairing.mean_abs_skew_ns);
   if (recording != nullptr) *response->mutable_recording() = recording->Status();
+  if (previews != nullptr) {
+    response->set_preview_streams(static_cast<uint32_t>(previews->size()));
+    response->set_preview_encodes(previews->stats().encodes);
+  }
   for (const auto& sub : broadcaster.Stats()) {
     v1::SubscriberStatus* out = response->add_subscribers();
     out->set_subscriber_id(sub.id);
@@ -256,15 +266,49 @@ grpc::Status GetDisparitySnapshotImpl(const Engine& engine,
 grpc::ServerWriteReactor<v1::TrackFrame>* ObstacleServiceImpl::StreamTracks(
     grpc::CallbackServerContext* context, const v1::StreamTracksRequest* request) {
   if (grpc::Status status = ValidateStreamTracksRequest(*request); !status.ok()) {
-    return new TrackStreamReactor(broadcaster_, status);
+    return new TrackStreamReactor(status);
   }
-  return new TrackStreamReactor(broadcaster_, broadcaster_.Subscribe(context->peer()), *request);
+  std::shared_ptr<Subscription<FramePtr>> sub = broadcaster_.Subscribe(context->peer());
+  if (sub == nullptr) {
+    return new TrackStreamReactor(
+        Refusal(broadcaster_.closed(), "too many StreamTracks subscribers (see max_streams)"));
+  }
+  const uint64_t id = sub->id();
+  return new TrackStreamReactor(
+      std::move(sub),
+      [filter = *request](const FramePtr& frame, uint64_t dropped, v1::TrackFrame& out) {
+        out = *frame;
+        FilterTracks(filter, out);
+        out.set_dropped_frames(dropped);
+      },
+      [this, id] { broadcaster_.Unsubscribe(id); });
+}
+
+grpc::ServerWriteReactor<v1::Preview>* ObstacleServiceImpl::StreamPreview(
+    grpc::CallbackServerContext* context, const v1::StreamPreviewRequest* request) {
+  Result<PreviewRequest> valid = ToPreviewRequest(*request);
+  if (!valid.ok()) return new PreviewStreamReactor(ToGrpcStatus(valid.error()));
+  std::shared_ptr<PreviewSubscription> sub =
+      previews_.Subscribe(context->peer(), std::move(valid).value());
+  if (sub == nullptr) {
+    return new PreviewStreamReactor(Refusal(
+        previews_.closed(), "too many StreamPreview subscribers (see max_streams; at most " +
+                                std::to_string(kMaxPreviewStreams) + ")"));
+  }
+  const uint64_t id = sub->id();
+  return new PreviewStreamReactor(
+      std::move(sub),
+      [](const PreviewPtr& preview, uint64_t dropped, v1::Preview& out) {
+        out = ToProto(*preview);
+        out.set_dropped_previews(dropped);
+      },
+      [this, id] { previews_.Unsubscribe(id); });
 }
 
 grpc::ServerUnaryReactor* ObstacleServiceImpl::GetStatus(grpc::CallbackServerContext* context,
                                                          const v1::GetStatusRequest* /*request*/,
                                                          v1::GetStatusResponse* response) {
-  return Reply(context, GetStatusImpl(engine_, broadcaster_, &recording_, response));
+  return Reply(context, GetStatusImpl(engine_, broadcaster_, &recording_, &previews_, response));
 }
 
 grpc::ServerUnaryReactor* ObstacleServiceImpl::GetPipelineConfig(

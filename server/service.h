@@ -11,6 +11,7 @@
 #include "server/runtime/broadcaster.h"
 #include "server/runtime/engine.h"
 #include "server/runtime/pose_source.h"
+#include "server/runtime/preview_hub.h"
 #include "server/recording_manager.h"
 #include "stevi/v1/obstacle_service.grpc.pb.h"
 
@@ -19,15 +20,20 @@ namespace stevi::server {
 using FramePtr = std::shared_ptr<const v1::TrackFrame>;
 using FrameBroadcaster = Broadcaster<FramePtr>;
 
+// StreamPreview subscribers at most: ServerConfig.max_streams, and never more than this (each
+// holds up to two JPEGs per kind, and the encodings of distinct requests add up).
+inline constexpr size_t kMaxPreviewStreams = 16;
+
 // StreamTracks' request: INVALID_ARGUMENT naming the bad field (min_score outside [0, 1]).
 grpc::Status ValidateStreamTracksRequest(const v1::StreamTracksRequest& request);
 // Drops, in place and keeping the order, the tracks the request's filters exclude: TENTATIVE ones
 // with confirmed_only, and those scoring below min_score.
 void FilterTracks(const v1::StreamTracksRequest& request, v1::TrackFrame& frame);
 
-// `recording` may be null (no recorder).
+// `recording` and `previews` may be null (no recorder, no preview hub).
 grpc::Status GetStatusImpl(const Engine& engine, const FrameBroadcaster& broadcaster,
-                           const RecordingManager* recording, v1::GetStatusResponse* response);
+                           const RecordingManager* recording, const PreviewHub* previews,
+                           v1::GetStatusResponse* response);
 grpc::Status GetPipelineConfigImpl(Engine& engine, v1::PipelineConfig* response);
 // Merges, validates, swaps in. Serialised by `mu` so that concurrent updates do not lose fields.
 grpc::Status SetPipelineConfigImpl(Engine& engine, std::mutex& mu,
@@ -39,16 +45,20 @@ grpc::Status GetDisparitySnapshotImpl(const Engine& engine,
 
 class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
  public:
-  ObstacleServiceImpl(Engine& engine, FrameBroadcaster& broadcaster, PoseSource& poses,
-                      RecordingManager& recording, const Authorizer& auth)
+  ObstacleServiceImpl(Engine& engine, FrameBroadcaster& broadcaster, PreviewHub& previews,
+                      PoseSource& poses, RecordingManager& recording, const Authorizer& auth)
       : engine_(engine),
         broadcaster_(broadcaster),
+        previews_(previews),
         poses_(poses),
         recording_(recording),
         auth_(auth) {}
 
   grpc::ServerWriteReactor<v1::TrackFrame>* StreamTracks(
       grpc::CallbackServerContext* context, const v1::StreamTracksRequest* request) override;
+  // Read access, as StreamTracks: no operator token.
+  grpc::ServerWriteReactor<v1::Preview>* StreamPreview(
+      grpc::CallbackServerContext* context, const v1::StreamPreviewRequest* request) override;
   grpc::ServerUnaryReactor* GetStatus(grpc::CallbackServerContext* context,
                                       const v1::GetStatusRequest* request,
                                       v1::GetStatusResponse* response) override;
@@ -73,6 +83,7 @@ class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
  private:
   Engine& engine_;
   FrameBroadcaster& broadcaster_;
+  PreviewHub& previews_;
   PoseSource& poses_;
   RecordingManager& recording_;
   const Authorizer& auth_;

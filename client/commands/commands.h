@@ -21,6 +21,7 @@ int Avoid(Client& client, const Args& args);        // avoid.cc
 int Export(Client& client, const Args& args);       // export.cc
 int Calibration(Client& client, const Args& args);  // calibration.cc
 int Mavlink(Client& client, const Args& args);      // mavlink.cc
+int Station(Client& client, const Args& args);      // station.cc
 
 // The options before the command (global_options.cc).
 struct GlobalOptions {

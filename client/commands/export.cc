@@ -12,6 +12,7 @@
 
 #include "client/commands/commands.h"
 #include "client/flags.h"
+#include "client/track_points.h"
 
 namespace stevi::client::commands {
 namespace {
@@ -38,21 +39,6 @@ std::string ParseArgs(const Args& args, ExportArgs& a) {
       .Real("--geoid-undulation", {.lo = -120, .hi = 100, .unit = "metres"},
             [&a](double m) { a.kml.geoid_undulation_m = m; })
       .Parse(args);
-}
-
-// The track points of one frame: tracks that are not tentative and have a geodetic position.
-void CollectTrackPoints(const v1::TrackFrame& frame, std::vector<TrackPoint>& points) {
-  for (const v1::Track& t : frame.tracks()) {
-    if (!t.has_geodetic() || t.state() == v1::TRACK_STATE_TENTATIVE) continue;
-    TrackPoint p;
-    p.track_id = t.track_id();
-    p.unix_time_ns = frame.capture_unix_time_ns();
-    p.lat_deg = t.geodetic().lat_deg();
-    p.lon_deg = t.geodetic().lon_deg();
-    p.alt_m = t.geodetic().alt_m();
-    if (t.has_position_sigma_m()) p.horizontal_sigma_m = t.position_sigma_m().horizontal_m();
-    points.push_back(p);
-  }
 }
 
 // The track points of a file of TrackFrame JSON lines; false (after saying so) when it cannot be

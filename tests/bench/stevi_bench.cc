@@ -19,9 +19,13 @@
 //      rate sustained and the server's CPU per frame.
 //   7. Targets: PASS or MISS against the figures measured above (N/A when the measurement failed).
 //      The exit status is 3 unless every target passes, so a script can gate on it.
+//   8. Preview cost: one server as in 5 (SteViE + BM, 640x480), its frame rate measured in
+//      windows without and with two StreamPreview clients (annotated and disparity JPEGs at 5 Hz,
+//      640 wide, quality 80), interleaved in one run; the ratio is judged in 7, and the hub
+//      thread's CPU is printed beside it.
 //
 // Usage: stevi-bench [--seconds N] [--json FILE|-] [--quick] [--latency-fps F]
-//                    [--latency-algorithm NAME]
+//                    [--latency-algorithm NAME] [--preview-only]
 // With --json - the JSON goes to stdout and the table to stderr.
 //
 // Nothing here is a fixed figure: every number printed is measured in this run.
@@ -254,6 +258,7 @@ struct Flags {
   // possible": a capture loop spinning at 1000 Hz takes CPU from the pipeline that no camera
   // would.)
   double source_fps = 120.0;
+  bool preview_only = false;  // only table 8 (and its target)
 };
 
 constexpr const char* kUsage =
@@ -269,7 +274,8 @@ constexpr const char* kUsage =
     "  --latency-fps F       source rate of the latency and client runs (default 30, 0 < F <= "
     "1000)\n"
     "  --latency-algorithm A algorithm of the latency and client runs (default stevie)\n"
-    "  --source-fps F        source rate of the throughput runs (default 120, 0 < F <= 1000)\n";
+    "  --source-fps F        source rate of the throughput runs (default 120, 0 < F <= 1000)\n"
+    "  --preview-only        only the preview cost (table 8) and its target\n";
 
 std::optional<Flags> ParseFlags(int argc, char** argv) {
   Flags flags;
@@ -281,6 +287,8 @@ std::optional<Flags> ParseFlags(int argc, char** argv) {
     };
     if (arg == "--quick") {
       flags.quick = true;
+    } else if (arg == "--preview-only") {
+      flags.preview_only = true;
     } else if (arg == "--seconds" || arg == "--json" || arg == "--latency-fps" ||
                arg == "--latency-algorithm" || arg == "--source-fps") {
       const std::optional<std::string> v = value();
@@ -1176,6 +1184,229 @@ int RunClientWorker(const std::string& address, int clients, double seconds) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// 8. Preview cost
+// ---------------------------------------------------------------------------------------------
+
+// The issue's case: annotated and disparity previews at 5 Hz for two viewers, 640x480 frames.
+constexpr double kPreviewRateHz = 5.0;
+constexpr int kPreviewClients = 2;
+constexpr int kPreviewWindowPairs = 4;  // windows without and with previews
+
+struct PreviewCostRun {
+  std::string variant = "stevie";
+  double source_fps = kNaN;
+  double seconds = 0;  // per window
+  uint32_t workers = 0;
+  std::vector<double> fps_off, fps_on;  // frames processed per second, per window
+  double mean_fps_off = kNaN, mean_fps_on = kNaN;
+  double ratio = kNaN;             // mean_fps_on / mean_fps_off
+  double previews_per_s = kNaN;    // received per client, both kinds (the "on" windows)
+  double encodes_per_s = kNaN;     // the server's JPEG encodings per second
+  double hub_cpu_ms_per_s = kNaN;  // CPU of the preview hub's thread per second
+  double hub_cpu_share = kNaN;     // the same as a fraction of the machine's cores
+  double mean_jpeg_bytes = kNaN;
+  uint64_t dropped_previews = 0;  // for the clients, at the end of the last window
+  std::string error;
+};
+
+// Frames processed per second over `seconds` (GetStatus before and after).
+std::optional<double> ProcessedFps(client::Client& control, double seconds) {
+  const std::optional<ServerSnapshot> a = Snap(control);
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  const std::optional<ServerSnapshot> b = Snap(control);
+  if (!a || !b) return std::nullopt;
+  return static_cast<double>(b->status.frames_processed() - a->status.frames_processed()) /
+         std::chrono::duration<double>(b->at - a->at).count();
+}
+
+PreviewCostRun MeasurePreviewCost(double seconds, double source_fps) {
+  PreviewCostRun run;
+  run.source_fps = source_fps;
+  run.seconds = seconds;
+  std::fprintf(stderr,
+               "  preview cost: %s + bm at source.fps %.0f, %d windows of %.1f s, %d clients\n",
+               run.variant.c_str(), source_fps, 2 * kPreviewWindowPairs, seconds, kPreviewClients);
+  std::unique_ptr<RunningServer> s =
+      StartServer(ProtoConfigFor(VariantNamed(run.variant), stereo::MatcherKind::kBlockMatching),
+                  SyntheticSourceAt(source_fps));
+  if (!s->error.empty()) {
+    run.error = s->error;
+    return run;
+  }
+  WaitPastTheFirstLap(*s->control);
+  server::PreviewHub& hub = s->server->previews();
+  v1::StreamPreviewRequest request;
+  request.add_kinds(v1::PREVIEW_KIND_ANNOTATED_LEFT);
+  request.add_kinds(v1::PREVIEW_KIND_DISPARITY);
+  request.set_rate_hz(kPreviewRateHz);
+  request.set_max_width_px(640);
+  request.set_jpeg_quality(80);
+  struct Viewer {
+    std::unique_ptr<client::Client> client;
+    std::thread thread;
+    std::atomic<uint64_t> previews{0}, bytes{0}, dropped{0};
+  };
+  double received = 0, received_bytes = 0, on_seconds = 0, encodes = 0, hub_cpu_ns = 0;
+  // A window without previews.
+  const auto off_window = [&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));  // settle
+    const std::optional<double> off = ProcessedFps(*s->control, seconds);
+    if (!off) {
+      run.error = "GetStatus failed";
+      return;
+    }
+    run.fps_off.push_back(*off);
+  };
+  // A window with the preview clients, which connect before it and leave after it.
+  const auto on_window = [&] {
+    std::vector<std::unique_ptr<Viewer>> viewers;
+    for (int i = 0; i < kPreviewClients; ++i) {
+      auto v = std::make_unique<Viewer>();
+      client::ClientOptions options;
+      options.address = s->address;
+      options.timeout = std::chrono::seconds(20);
+      options.max_message_bytes = (64 << 20) + i;  // a connection each, as separate programs
+      v->client = std::make_unique<client::Client>(options);
+      Viewer* raw = v.get();
+      v->thread = std::thread([raw, &request] {
+        raw->client->StreamPreview(request, [raw](const v1::Preview& p) {
+          raw->bytes += p.jpeg().size();
+          raw->dropped = p.dropped_previews();
+          ++raw->previews;
+          return true;
+        });
+      });
+      viewers.push_back(std::move(v));
+    }
+    // Every viewer receiving before the window opens (a bounded poll: 30 s).
+    const Clock::time_point deadline = Clock::now() + std::chrono::seconds(30);
+    bool all = false;
+    while (!all && Clock::now() < deadline) {
+      all = true;
+      for (const auto& v : viewers) all = all && v->previews.load() >= 2;
+      if (!all) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    if (!all) run.error = "not every preview client received previews within 30 s";
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));  // settle
+    uint64_t previews0 = 0, bytes0 = 0;
+    for (const auto& v : viewers) {
+      previews0 += v->previews.load();
+      bytes0 += v->bytes.load();
+    }
+    const server::PreviewHub::Stats hub0 = hub.stats();
+    const Clock::time_point t0 = Clock::now();
+    const std::optional<double> on = ProcessedFps(*s->control, seconds);
+    const double window = SecondsSince(t0);
+    const server::PreviewHub::Stats hub1 = hub.stats();
+    encodes += static_cast<double>(hub1.encodes - hub0.encodes);
+    hub_cpu_ns += static_cast<double>(hub1.cpu_ns - hub0.cpu_ns);
+    uint64_t previews1 = 0, bytes1 = 0;
+    run.dropped_previews = 0;
+    for (const auto& v : viewers) {
+      previews1 += v->previews.load();
+      bytes1 += v->bytes.load();
+      run.dropped_previews += v->dropped.load();
+    }
+    received += static_cast<double>(previews1 - previews0);
+    received_bytes += static_cast<double>(bytes1 - bytes0);
+    on_seconds += window;
+    for (auto& v : viewers) v->client->Cancel();
+    for (auto& v : viewers) v->thread.join();
+    if (!on) {
+      if (run.error.empty()) run.error = "GetStatus failed";
+      return;
+    }
+    run.fps_on.push_back(*on);
+    // The server lets the streams go (a bounded poll of its hub: 10 s).
+    const Clock::time_point gone = Clock::now() + std::chrono::seconds(10);
+    while (hub.size() > 0 && Clock::now() < gone) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+  };
+  // Without, with, with, without, without, with, ...: a drift of the machine's load over the run
+  // falls on both alike.
+  for (int w = 0; w < 2 * kPreviewWindowPairs && run.error.empty(); ++w) {
+    if (w % 4 == 1 || w % 4 == 2) {
+      on_window();
+    } else {
+      off_window();
+    }
+  }
+  v1::GetStatusResponse status;
+  if (s->control->GetStatus(&status).ok()) run.workers = status.pipeline_workers();
+  s->server->Shutdown();
+  if (!run.error.empty() || run.fps_on.empty()) return run;
+  run.mean_fps_off = bench::Mean(run.fps_off);
+  run.mean_fps_on = bench::Mean(run.fps_on);
+  run.ratio = run.mean_fps_on / run.mean_fps_off;
+  run.previews_per_s = received / on_seconds / kPreviewClients;
+  run.encodes_per_s = encodes / on_seconds;
+  run.hub_cpu_ms_per_s = hub_cpu_ns / 1e6 / on_seconds;
+  run.hub_cpu_share =
+      run.hub_cpu_ms_per_s / 1000.0 / static_cast<double>(std::max(1, cv::getNumberOfCPUs()));
+  if (received > 0) run.mean_jpeg_bytes = received_bytes / received;
+  return run;
+}
+
+Json PreviewCostJson(const PreviewCostRun& run) {
+  Json off = Json::Array(), on = Json::Array();
+  for (double f : run.fps_off) off.Push(f);
+  for (double f : run.fps_on) on.Push(f);
+  Json j = Json::Object();
+  j.Set("algorithm", run.variant)
+      .Set("matcher", "bm")
+      .Set("size", "640x480")
+      .Set("source_fps_setting", run.source_fps)
+      .Set("pipeline_workers", static_cast<uint64_t>(run.workers))
+      .Set("clients", kPreviewClients)
+      .Set("kinds", "annotated_left+disparity")
+      .Set("rate_hz", kPreviewRateHz)
+      .Set("max_width_px", 640)
+      .Set("jpeg_quality", 80)
+      .Set("seconds_per_window", run.seconds)
+      .Set("fps_without_previews", std::move(off))
+      .Set("fps_with_previews", std::move(on))
+      .Set("mean_fps_without", run.mean_fps_off)
+      .Set("mean_fps_with", run.mean_fps_on)
+      .Set("ratio", run.ratio)
+      .Set("previews_per_s_per_client", run.previews_per_s)
+      .Set("encodes_per_s", run.encodes_per_s)
+      .Set("hub_cpu_ms_per_s", run.hub_cpu_ms_per_s)
+      .Set("hub_cpu_share_of_cores", run.hub_cpu_share)
+      .Set("mean_jpeg_bytes", run.mean_jpeg_bytes)
+      .Set("dropped_previews", run.dropped_previews);
+  if (!run.error.empty()) j.Set("error", run.error);
+  return j;
+}
+
+void PrintPreviewCost(FILE* table, const PreviewCostRun& run) {
+  std::fprintf(table,
+               "\n8. Preview cost (%s + BM, 640x480, source.fps %.0f, %u workers; %d StreamPreview "
+               "clients, annotated + disparity JPEGs at %.0f Hz, 640 wide, quality 80; windows of "
+               "%.1f s, four without and four with them, ABBA)\n",
+               run.variant.c_str(), run.source_fps, run.workers, kPreviewClients, kPreviewRateHz,
+               run.seconds);
+  if (!run.error.empty()) {
+    std::fprintf(table, "   error: %s\n", run.error.c_str());
+    return;
+  }
+  std::string off, on;
+  for (double f : run.fps_off) off += Format(" %.1f", f);
+  for (double f : run.fps_on) on += Format(" %.1f", f);
+  std::fprintf(table, "   fps without previews:%s (mean %.1f)\n", off.c_str(), run.mean_fps_off);
+  std::fprintf(table, "   fps with previews:   %s (mean %.1f)\n", on.c_str(), run.mean_fps_on);
+  std::fprintf(table,
+               "   ratio %.3f; %.1f previews/s per client, %.1f encodings/s, mean JPEG %.0f "
+               "bytes, %llu previews dropped for the clients\n",
+               run.ratio, run.previews_per_s, run.encodes_per_s, run.mean_jpeg_bytes,
+               static_cast<unsigned long long>(run.dropped_previews));
+  std::fprintf(table,
+               "   the hub's thread (render, scale, encode): %.1f ms of CPU a second, %.2f %% of "
+               "the %d cores: the most encoding can take from a pipeline that saturates them\n",
+               run.hub_cpu_ms_per_s, 100.0 * run.hub_cpu_share, cv::getNumberOfCPUs());
+}
+
+// ---------------------------------------------------------------------------------------------
 // Machine and build
 // ---------------------------------------------------------------------------------------------
 
@@ -1255,6 +1486,16 @@ struct Target {
   }
 };
 
+Target PreviewTarget(const PreviewCostRun& run) {
+  return {"preview cost",
+          ">= 0.90",
+          run.ratio,
+          "x",
+          true,
+          0.90,
+          "fps with / without 2 preview clients (annotated + disparity, 5 Hz, 640x480), table 8"};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -1271,6 +1512,32 @@ int main(int argc, char** argv) {
   if (!parsed) return 2;
   const Flags flags = *parsed;
   FILE* table = flags.json == "-" ? stderr : stdout;
+  if (flags.preview_only) {
+    const PreviewCostRun run = MeasurePreviewCost(flags.seconds, flags.source_fps);
+    PrintPreviewCost(table, run);
+    const Target target = PreviewTarget(run);
+    std::fprintf(table, "\n%-22s %-10s %10s  %-4s  %s\n", target.name.c_str(), target.rule.c_str(),
+                 (Ms(target.measured, "%.3f") + " " + target.unit).c_str(),
+                 target.Verdict().c_str(), target.note.c_str());
+    if (!flags.json.empty()) {
+      std::string text;
+      Json::Object()
+          .Set("tool", "stevi-bench")
+          .Set("schema", 1)
+          .Set("started_utc", UtcNow())
+          .Set("build", BuildJson())
+          .Set("machine", MachineJson())
+          .Set("preview_cost", PreviewCostJson(run))
+          .Dump(text);
+      text += "\n";
+      if (flags.json == "-") {
+        std::fputs(text.c_str(), stdout);
+      } else {
+        std::ofstream(flags.json) << text;
+      }
+    }
+    return target.Verdict() == "PASS" ? 0 : 3;
+  }
 
   const std::vector<cv::Size> sizes = {{640, 480}, {1280, 1024}};
   const std::vector<stereo::MatcherKind> matchers = {stereo::MatcherKind::kBlockMatching,
@@ -1382,6 +1649,8 @@ int main(int argc, char** argv) {
       s->server->Shutdown();
     }
   }
+  // 8. Preview cost, against the same server setup as 5.
+  const PreviewCostRun preview_cost = MeasurePreviewCost(flags.seconds, flags.source_fps);
   machine.Set("loadavg_at_end", ReadFirstLine("/proc/loadavg"));
   root.Set("machine", std::move(machine));
 
@@ -1419,6 +1688,7 @@ int main(int argc, char** argv) {
                            .append(Format("%.0f", flags.latency_fps))
                            .append(" fps")});
   }
+  targets.push_back(PreviewTarget(preview_cost));
   for (const TrackerRun& run : tracker_runs) {
     if (run.targets != 100) continue;
     targets.push_back({"tracking, 100 tracks", "<= 0.5 ms", run.update_ms.mean, "ms", false, 0.5,
@@ -1576,16 +1846,16 @@ int main(int argc, char** argv) {
                  Ms(run.client_cpu_cores).c_str());
   }
 
+  PrintPreviewCost(table, preview_cost);
+
   std::fprintf(table, "\n7. Targets\n");
   std::fprintf(table, "%-22s %-10s %10s  %-4s  %s\n", "target", "rule", "measured", "", "how");
   bool missed = false;
   for (const Target& t : targets) {
     missed = missed || t.Verdict() != "PASS";
-    std::fprintf(
-        table, "%-22s %-10s %10s  %-4s  %s\n", t.name.c_str(), t.rule.c_str(),
-        (Ms(t.measured, t.unit == "ms" && t.threshold < 1 ? "%.3f" : "%.1f") + " " + t.unit)
-            .c_str(),
-        t.Verdict().c_str(), t.note.c_str());
+    std::fprintf(table, "%-22s %-10s %10s  %-4s  %s\n", t.name.c_str(), t.rule.c_str(),
+                 (Ms(t.measured, t.threshold < 1 ? "%.3f" : "%.1f") + " " + t.unit).c_str(),
+                 t.Verdict().c_str(), t.note.c_str());
   }
   std::fflush(table);
 
@@ -1635,6 +1905,7 @@ int main(int argc, char** argv) {
                             .Set("source_fps", flags.latency_fps)
                             .Set("error", clients_error.empty() ? Json() : Json(clients_error))
                             .Set("runs", std::move(clients)))
+        .Set("preview_cost", PreviewCostJson(preview_cost))
         .Set("targets", std::move(target_json));
     std::string text;
     root.Dump(text);

@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <condition_variable>
+#include <map>
 #include <future>
 #include <mutex>
 #include <numeric>
@@ -639,11 +640,14 @@ TEST(FilterTracks, DropsTentativeAndLowScoringTracksKeepingTheOrder) {
   }
 }
 
-// The client library's reconnection across a server that stops gracefully and comes back on the
-// same port: the stream is reported lost with the server's status, then resumed, and the frames
-// go on; nothing ends the call. (A graceful stop ends a stream with UNAVAILABLE or, when the
-// transport is torn down first, CANCELLED: both are transient.)
-TEST(ClientReconnect, AStreamSurvivesAServerRestartOnTheSamePort) {
+// Opens a stream on `c` with `options`, calling `on_item` for each message it delivers.
+using OpenStream = std::function<grpc::Status(
+    client::Client& c, const std::function<void()>& on_item, const client::StreamOptions& options)>;
+
+// Streams from a server that stops gracefully and comes back on the same port (after 5 messages,
+// until 5 more arrived from the new server); returns the stream's events and its final status.
+void StreamThroughARestart(const OpenStream& open, std::vector<client::StreamEvent>& events,
+                           grpc::Status& status) {
   v1::ServerConfig config = TestConfig();
   Result<std::unique_ptr<Server>> first = Server::Start(config);
   ASSERT_TRUE(first.ok()) << first.error().message;
@@ -652,27 +656,25 @@ TEST(ClientReconnect, AStreamSurvivesAServerRestartOnTheSamePort) {
 
   std::mutex mu;
   std::condition_variable cv;
-  std::vector<client::StreamEvent> events;
-  uint64_t frames = 0;
-  uint64_t frames_at_loss = 0;
+  uint64_t items = 0;
+  uint64_t items_at_loss = 0;
   client::StreamOptions options;
   options.reconnect = true;
   options.persist_once_streaming = true;
-  options.max_reconnect_attempts = 1;  // only before the first frame
+  options.max_reconnect_attempts = 1;  // only before the first message
   options.on_event = [&](const client::StreamEvent& e) {
     std::lock_guard lock(mu);
     events.push_back(e);
-    if (e.kind == client::StreamEvent::Kind::kLost) frames_at_loss = frames;
+    if (e.kind == client::StreamEvent::Kind::kLost) items_at_loss = items;
     cv.notify_all();
   };
-  grpc::Status status;
   std::thread streamer([&] {
-    status = c.StreamTracks(
-        [&](const v1::TrackFrame&) {
+    status = open(
+        c,
+        [&] {
           std::lock_guard lock(mu);
-          ++frames;
+          ++items;
           cv.notify_all();
-          return true;
         },
         options);
   });
@@ -680,16 +682,40 @@ TEST(ClientReconnect, AStreamSurvivesAServerRestartOnTheSamePort) {
     std::unique_lock lock(mu);
     return cv.wait_for(lock, std::chrono::seconds(30), done);
   };
-  ASSERT_TRUE(wait_for([&] { return frames >= 5; }));
+  const bool before = wait_for([&] { return items >= 5; });
   (*first)->Shutdown();
-  ASSERT_TRUE(wait_for([&] { return !events.empty(); }));
+  const bool lost = before && wait_for([&] { return !events.empty(); });
   first->reset();
   config.set_listen("127.0.0.1:" + std::to_string(port));
   Result<std::unique_ptr<Server>> second = Server::Start(config);
-  ASSERT_TRUE(second.ok()) << second.error().message;
-  ASSERT_TRUE(wait_for([&] { return events.size() >= 2 && frames >= frames_at_loss + 5; }));
+  const bool resumed = second.ok() && lost &&
+                       wait_for([&] { return events.size() >= 2 && items >= items_at_loss + 5; });
   c.Cancel();
   streamer.join();
+  ASSERT_TRUE(second.ok()) << second.error().message;
+  ASSERT_TRUE(before) << "no messages from the first server";
+  ASSERT_TRUE(lost) << "the loss was not reported";
+  ASSERT_TRUE(resumed) << "the stream did not resume";
+}
+
+// The client library's reconnection across a server that stops gracefully and comes back on the
+// same port: the stream is reported lost with the server's status, then resumed, and the frames
+// go on; nothing ends the call. (A graceful stop ends a stream with UNAVAILABLE or, when the
+// transport is torn down first, CANCELLED: both are transient.)
+TEST(ClientReconnect, AStreamSurvivesAServerRestartOnTheSamePort) {
+  std::vector<client::StreamEvent> events;
+  grpc::Status status;
+  ASSERT_NO_FATAL_FAILURE(StreamThroughARestart(
+      [](client::Client& c, const std::function<void()>& on_item,
+         const client::StreamOptions& options) {
+        return c.StreamTracks(
+            [&](const v1::TrackFrame&) {
+              on_item();
+              return true;
+            },
+            options);
+      },
+      events, status));
   EXPECT_TRUE(status.ok()) << status.error_message();
   ASSERT_GE(events.size(), 2u);
   EXPECT_EQ(events[0].kind, client::StreamEvent::Kind::kLost);
@@ -783,6 +809,289 @@ TEST(ServerStart, RefusesABadConfigBeforeOpeningAnything) {
   ASSERT_FALSE(refused.ok());
   EXPECT_THAT(refused.error().message,
               AllOf(HasSubstr("geo.fixed_pose.lat_deg"), HasSubstr("geo.max_age_s")));
+}
+
+// ---- StreamPreview ----
+
+// StreamTracks in the background, recording each frame's capture time by frame id.
+struct TrackRecorder {
+  std::mutex mu;
+  std::condition_variable cv;
+  std::map<uint64_t, v1::TrackFrame> frames;  // without their tracks
+  std::vector<uint64_t> ids;
+  uint64_t dropped = 0;
+  grpc::Status status;
+  std::thread thread;
+
+  void Start(client::Client& c) {
+    thread = std::thread([this, &c] {
+      status = c.StreamTracks([this](const v1::TrackFrame& f) {
+        std::lock_guard lock(mu);
+        v1::TrackFrame kept = f;
+        kept.clear_tracks();
+        frames[f.frame_id()] = kept;
+        ids.push_back(f.frame_id());
+        dropped = f.dropped_frames();
+        cv.notify_all();
+        return true;
+      });
+    });
+  }
+  // Waits (at most 60 s) until `done()` holds under the lock.
+  template <typename Done>
+  bool WaitFor(const Done& done) {
+    std::unique_lock lock(mu);
+    return cv.wait_for(lock, std::chrono::seconds(60), done);
+  }
+  void Stop(client::Client& c) {
+    c.Cancel();
+    if (thread.joinable()) thread.join();
+  }
+};
+
+cv::Mat DecodeJpeg(const std::string& bytes) {
+  return cv::imdecode(std::vector<uchar>(bytes.begin(), bytes.end()), cv::IMREAD_UNCHANGED);
+}
+
+// Previews of both kinds, for frames StreamTracks delivered with the same capture time, at the
+// size asked for; nothing is encoded before someone asks.
+TEST(ServerPreview, PreviewsOfBothKindsMatchFramesOfStreamTracks) {
+  Result<std::unique_ptr<Server>> server = Server::Start(TestConfig());
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  const client::ClientOptions options = LoopbackOptions(**server, std::chrono::seconds(20));
+  client::Client tracks_client(options);
+  TrackRecorder tracks;
+  tracks.Start(tracks_client);
+  ASSERT_TRUE(tracks.WaitFor([&] { return tracks.ids.size() >= 5; }));
+  EXPECT_EQ((*server)->previews().stats().encodes, 0u) << "no preview subscriber, no encoding";
+  EXPECT_EQ((*server)->previews().stats().frames_offered, 0u);
+
+  client::Client viewer(options);
+  v1::StreamPreviewRequest request;
+  request.add_kinds(v1::PREVIEW_KIND_ANNOTATED_LEFT);
+  request.add_kinds(v1::PREVIEW_KIND_DISPARITY);
+  request.set_rate_hz(10);
+  request.set_max_width_px(320);
+  std::vector<v1::Preview> previews;
+  client::StreamOptions stream;
+  stream.max_frames = 12;  // 6 frames, both kinds
+  const grpc::Status status = viewer.StreamPreview(
+      request,
+      [&](const v1::Preview& p) {
+        previews.push_back(p);
+        return true;
+      },
+      stream);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_EQ(previews.size(), 12u);
+  uint64_t newest = 0;
+  for (const v1::Preview& p : previews) newest = std::max(newest, p.frame_id());
+  ASSERT_TRUE(tracks.WaitFor([&] { return !tracks.ids.empty() && tracks.ids.back() >= newest; }));
+  tracks.Stop(tracks_client);
+
+  std::map<v1::PreviewKind, int> per_kind;
+  for (size_t i = 0; i < previews.size(); ++i) {
+    const v1::Preview& p = previews[i];
+    SCOPED_TRACE("preview " + std::to_string(i) + " of frame " + std::to_string(p.frame_id()));
+    ++per_kind[p.kind()];
+    // In the order asked for, both kinds of a frame together.
+    EXPECT_EQ(p.kind(), i % 2 == 0 ? v1::PREVIEW_KIND_ANNOTATED_LEFT : v1::PREVIEW_KIND_DISPARITY);
+    if (i % 2 == 1) {
+      EXPECT_EQ(p.frame_id(), previews[i - 1].frame_id());
+    }
+    std::lock_guard lock(tracks.mu);
+    const auto frame = tracks.frames.find(p.frame_id());
+    ASSERT_NE(frame, tracks.frames.end()) << "a frame StreamTracks delivered";
+    EXPECT_EQ(p.capture_time_ns(), frame->second.capture_time_ns());
+    EXPECT_EQ(p.capture_unix_time_ns(), frame->second.capture_unix_time_ns());
+    EXPECT_EQ(p.calibration_id(), "synthetic");
+    EXPECT_EQ(p.width(), 320);
+    EXPECT_EQ(p.height(), 240);
+    EXPECT_DOUBLE_EQ(p.scale(), 320.0 / frame->second.image_width());
+    const cv::Mat image = DecodeJpeg(p.jpeg());
+    EXPECT_EQ(image.size(), cv::Size(320, 240));
+    EXPECT_EQ(image.channels(), 3);
+  }
+  EXPECT_EQ(per_kind[v1::PREVIEW_KIND_ANNOTATED_LEFT], 6);
+  EXPECT_EQ(per_kind[v1::PREVIEW_KIND_DISPARITY], 6);
+  // 10 Hz on capture time: the first preview at once, then one per 100 ms slot of capture time
+  // (the first slot may begin a frame later), so the six frames span at least 0.45 s.
+  EXPECT_GE(previews.back().capture_time_ns() - previews.front().capture_time_ns(), 450'000'000);
+  (*server)->Shutdown();
+}
+
+TEST(ServerPreview, BadRequestsAreRefusedNamingTheField) {
+  Result<std::unique_ptr<Server>> server = Server::Start(TestConfig());
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  client::Client viewer(LoopbackOptions(**server, std::chrono::seconds(20)));
+  const auto with = [](std::vector<int> kinds, double rate, int width, int quality) {
+    v1::StreamPreviewRequest r;
+    for (int k : kinds) r.add_kinds(static_cast<v1::PreviewKind>(k));
+    r.set_rate_hz(rate);
+    r.set_max_width_px(width);
+    r.set_jpeg_quality(quality);
+    return r;
+  };
+  const std::vector<std::pair<v1::StreamPreviewRequest, std::vector<std::string>>> cases = {
+      {with({}, 0, 0, 0), {"kinds: at least one"}},
+      {with({0}, 0, 0, 0), {"kinds[0]: PREVIEW_KIND_UNSPECIFIED"}},
+      {with({1, 9}, 0, 0, 0), {"kinds[1]: unknown kind 9"}},
+      {with({2, 1, 2}, 0, 0, 0), {"kinds[2]: listed twice"}},
+      {with({1}, 31, 0, 0), {"rate_hz"}},
+      {with({1}, -1, 0, 0), {"rate_hz"}},
+      {with({1}, 0, 63, 0), {"max_width_px"}},
+      {with({1}, 0, 0, 101), {"jpeg_quality"}},
+      {with({3}, 45, 5000, 9), {"rate_hz", "max_width_px", "jpeg_quality"}}};
+  for (const auto& [request, fields] : cases) {
+    const grpc::Status status =
+        viewer.StreamPreview(request, [](const v1::Preview&) { return true; });
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << request.ShortDebugString();
+    for (const std::string& field : fields) {
+      EXPECT_THAT(status.error_message(), HasSubstr(field)) << request.ShortDebugString();
+    }
+  }
+  EXPECT_EQ((*server)->previews().size(), 0u);
+  (*server)->Shutdown();
+}
+
+// A viewer that stops reading (its callback blocks) loses previews at the server, counted, while
+// a StreamTracks client keeps getting every frame, consecutive ids, none dropped.
+TEST(ServerPreview, AViewerReadingNothingDoesNotReduceTheTracks) {
+  Result<std::unique_ptr<Server>> server = Server::Start(TestConfig());
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  const client::ClientOptions options = LoopbackOptions(**server, std::chrono::seconds(20));
+  client::Client viewer(options);
+  v1::StreamPreviewRequest request;
+  request.add_kinds(v1::PREVIEW_KIND_ANNOTATED_LEFT);
+  request.add_kinds(v1::PREVIEW_KIND_DISPARITY);
+  request.add_kinds(v1::PREVIEW_KIND_LEFT);
+  request.set_rate_hz(30);
+  request.set_jpeg_quality(100);  // large JPEGs: the connection's window fills within frames
+  std::mutex mu;
+  std::condition_variable cv;
+  bool blocked = false, release = false;
+  std::vector<v1::Preview> after;
+  std::thread viewing([&] {
+    client::StreamOptions stream;
+    stream.max_frames = 1 + 30;  // the blocked one, then 30 more
+    viewer.StreamPreview(
+        request,
+        [&](const v1::Preview& p) {
+          std::unique_lock lock(mu);
+          if (!blocked) {
+            blocked = true;
+            cv.notify_all();
+            cv.wait_for(lock, std::chrono::seconds(120), [&] { return release; });
+            return true;
+          }
+          after.push_back(p);
+          return true;
+        },
+        stream);
+    std::lock_guard lock(mu);
+    release = true;  // however it ended
+    cv.notify_all();
+  });
+  {
+    std::unique_lock lock(mu);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(60), [&] { return blocked; }));
+  }
+  const uint64_t encodes_before = (*server)->previews().stats().encodes;
+  client::Client tracks_client(options);
+  TrackRecorder tracks;
+  tracks.Start(tracks_client);
+  constexpr size_t kFrames = 60;  // 3 s at 20 fps
+  ASSERT_TRUE(tracks.WaitFor([&] { return tracks.ids.size() >= kFrames; }));
+  tracks.Stop(tracks_client);
+  const uint64_t encodes_during = (*server)->previews().stats().encodes - encodes_before;
+  {
+    std::lock_guard lock(mu);
+    release = true;
+  }
+  cv.notify_all();
+  viewing.join();
+
+  for (size_t i = 1; i < tracks.ids.size(); ++i) {
+    EXPECT_EQ(tracks.ids[i], tracks.ids[i - 1] + 1) << "consecutive frame ids";
+  }
+  EXPECT_EQ(tracks.dropped, 0u);
+  ASSERT_EQ(after.size(), 30u);
+  std::printf(
+      "tracks: %zu consecutive frames while a viewer read nothing; %llu encodings meanwhile; the "
+      "viewer then found %llu previews dropped\n",
+      tracks.ids.size(), static_cast<unsigned long long>(encodes_during),
+      static_cast<unsigned long long>(after.back().dropped_previews()));
+  EXPECT_GT(encodes_during, 0u) << "the hub went on encoding for the blocked viewer";
+  EXPECT_GT(after.back().dropped_previews(), 0u) << "its losses are counted";
+  (*server)->Shutdown();
+}
+
+// Preview streams beyond max_streams are refused (RESOURCE_EXHAUSTED naming the setting) apart
+// from the StreamTracks ones, and a server shutdown ends them like track streams.
+TEST(ServerPreview, PreviewStreamsAreBoundedAndEndWithTheServer) {
+  v1::ServerConfig config = TestConfig();
+  config.set_max_streams(1);
+  Result<std::unique_ptr<Server>> server = Server::Start(config);
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  const client::ClientOptions options = LoopbackOptions(**server, std::chrono::seconds(20));
+  client::Client viewer(options);
+  v1::StreamPreviewRequest request;
+  request.add_kinds(v1::PREVIEW_KIND_LEFT);
+  std::mutex mu;
+  std::condition_variable cv;
+  int received = 0;
+  grpc::Status ended;
+  std::thread viewing([&] {
+    ended = viewer.StreamPreview(request, [&](const v1::Preview&) {
+      std::lock_guard lock(mu);
+      ++received;
+      cv.notify_all();
+      return true;
+    });
+  });
+  {
+    std::unique_lock lock(mu);
+    ASSERT_TRUE(cv.wait_for(lock, std::chrono::seconds(60), [&] { return received > 0; }));
+  }
+  client::Client second(options);
+  const grpc::Status refused =
+      second.StreamPreview(request, [](const v1::Preview&) { return true; });
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_THAT(refused.error_message(), HasSubstr("max_streams"));
+  // The track stream has a place of its own.
+  EXPECT_EQ(CollectFrames(second, 2).size(), 2u);
+
+  (*server)->Shutdown();
+  viewing.join();
+  EXPECT_EQ(ended.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_THAT(ended.error_message(), HasSubstr("shutting down"));
+}
+
+// StreamPreview rides through a server restart like StreamTracks (the same reconnection code):
+// lost, resumed, previews again from the new server.
+TEST(ClientReconnect, APreviewStreamSurvivesAServerRestart) {
+  std::vector<client::StreamEvent> events;
+  grpc::Status status;
+  ASSERT_NO_FATAL_FAILURE(StreamThroughARestart(
+      [](client::Client& c, const std::function<void()>& on_item,
+         const client::StreamOptions& options) {
+        v1::StreamPreviewRequest request;
+        request.add_kinds(v1::PREVIEW_KIND_LEFT);
+        request.set_rate_hz(20);
+        return c.StreamPreview(
+            request,
+            [&](const v1::Preview&) {
+              on_item();
+              return true;
+            },
+            options);
+      },
+      events, status));
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[0].kind, client::StreamEvent::Kind::kLost);
+  EXPECT_EQ(events[1].kind, client::StreamEvent::Kind::kResumed);
 }
 
 }  // namespace

@@ -1,0 +1,436 @@
+// `stevi station` against a real stevi-server on the synthetic rig, through its Foxglove WebSocket
+// and its HTTP API (tests/testing/ws_client.h): each channel carries what the server streams, in
+// the schema it advertises; previews are asked for only while somebody watches; the access token
+// guards the socket and the API; bad flags are refused naming the problem.
+#include "client/station/station.h"
+
+#include <gmock/gmock.h>
+#include <google/protobuf/util/message_differencer.h>
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <set>
+#include <thread>
+
+#include "foxglove/CompressedImage.pb.h"
+#include "foxglove/ImageAnnotations.pb.h"
+#include "foxglove/LocationFix.pb.h"
+#include "foxglove/SceneUpdate.pb.h"
+#include "stevi/v1/station.pb.h"
+#include "tests/server/server_process.h"
+#include "tests/testing/data.h"
+#include "tests/testing/ws_client.h"
+
+namespace stevi {
+namespace {
+
+using namespace std::chrono_literals;
+using ::testing::HasSubstr;
+using testing::ServerProcess;
+using testing::WsClient;
+using testing::WsMessage;
+
+constexpr auto kWait = 60s;
+constexpr char kStationToken[] = "station-access-token-0123456789";
+
+// The server's own stream, read by the test: the reference for what the channels carry.
+class Reference {
+ public:
+  explicit Reference(const std::string& address) {
+    client::ClientOptions options;
+    options.address = address;
+    client_ = std::make_unique<client::Client>(options);
+    thread_ = std::thread([this] {
+      client::StreamOptions stream;
+      stream.reconnect = true;
+      stream.persist_once_streaming = true;
+      stream.max_reconnect_attempts = 0;
+      (void)client_->StreamTracks(
+          [this](const v1::TrackFrame& frame) {
+            std::lock_guard lock(mu_);
+            by_time_[frame.capture_unix_time_ns()] = frame;
+            while (by_time_.size() > 3000) by_time_.erase(by_time_.begin());
+            return true;
+          },
+          stream);
+    });
+  }
+  ~Reference() {
+    client_->Cancel();
+    thread_.join();
+  }
+  std::optional<v1::TrackFrame> AtTime(int64_t unix_ns) const {
+    std::lock_guard lock(mu_);
+    const auto it = by_time_.find(unix_ns);
+    if (it == by_time_.end()) return std::nullopt;
+    return it->second;
+  }
+  client::Client& client() { return *client_; }
+
+ private:
+  std::unique_ptr<client::Client> client_;
+  mutable std::mutex mu_;
+  std::map<int64_t, v1::TrackFrame> by_time_;
+  std::thread thread_;
+};
+
+int64_t Nanos(const google::protobuf::Timestamp& t) {
+  return t.seconds() * 1'000'000'000 + t.nanos();
+}
+
+// A Foxglove client of the station: the channels it advertised, by topic.
+struct FoxgloveSession {
+  std::unique_ptr<WsClient> ws;
+  std::map<std::string, nlohmann::json> channels;  // topic -> advertised channel
+  nlohmann::json server_info;
+  std::map<uint32_t, std::string> subscriptions;  // subscription id -> topic
+
+  // Connects and reads serverInfo and the advertise; fails the test otherwise.
+  void Open(int port, const std::string& path = "/") {
+    std::string error;
+    testing::WsOptions options;
+    options.path = path;
+    options.subprotocols = {"foxglove.sdk.v1", "foxglove.websocket.v1"};
+    ws = WsClient::Connect("127.0.0.1", port, options, error);
+    ASSERT_TRUE(ws != nullptr) << error;
+    ASSERT_TRUE(ws->open()) << ws->status() << " " << ws->response_body();
+    EXPECT_EQ(ws->subprotocol(), "foxglove.sdk.v1");
+    while (channels.empty()) {
+      std::optional<WsMessage> m = ws->Receive(kWait);
+      ASSERT_TRUE(m && m->opcode == WsMessage::kText) << "no serverInfo and advertise";
+      const nlohmann::json j = nlohmann::json::parse(m->payload);
+      if (j["op"] == "serverInfo") server_info = j;
+      if (j["op"] == "advertise") {
+        for (const auto& c : j["channels"]) channels[c["topic"].get<std::string>()] = c;
+      }
+    }
+  }
+  void Subscribe(uint32_t id, const std::string& topic) {
+    ASSERT_TRUE(channels.count(topic)) << topic << " is not advertised";
+    subscriptions[id] = topic;
+    const nlohmann::json op = {
+        {"op", "subscribe"},
+        {"subscriptions", {{{"id", id}, {"channelId", channels[topic]["id"]}}}}};
+    ASSERT_TRUE(ws->SendText(op.dump()));
+  }
+  void Unsubscribe(uint32_t id) {
+    ASSERT_TRUE(
+        ws->SendText(nlohmann::json{{"op", "unsubscribe"}, {"subscriptionIds", {id}}}.dump()));
+    subscriptions.erase(id);
+  }
+  // The next message data frame: its topic and payload (skipping JSON messages).
+  std::optional<std::pair<std::string, std::string>> Next(std::chrono::milliseconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+      std::optional<WsMessage> m =
+          ws->Receive(std::chrono::duration_cast<std::chrono::milliseconds>(
+              deadline - std::chrono::steady_clock::now()));
+      if (!m || m->opcode == WsMessage::kEnd || m->opcode == WsMessage::kClose) return std::nullopt;
+      if (m->opcode != WsMessage::kBinary || m->payload.size() < 13 || m->payload[0] != 0x01) {
+        continue;
+      }
+      uint32_t id = 0;
+      for (int i = 0; i < 4; ++i)
+        id |= static_cast<uint32_t>(static_cast<uint8_t>(m->payload[1 + i])) << (8 * i);
+      const auto it = subscriptions.find(id);
+      if (it == subscriptions.end()) continue;  // in flight before an unsubscribe
+      return std::pair{it->second, m->payload.substr(13)};
+    }
+    return std::nullopt;
+  }
+};
+
+class StationTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ASSERT_NO_FATAL_FAILURE(server_.Start({}));
+    reference_ = std::make_unique<Reference>(server_.address());
+  }
+  void StartStation(const std::string& access_token = "") {
+    station::StationOptions options;
+    options.servers = {server_.address()};
+    options.web.listen = "127.0.0.1:0";
+    options.web.access_token = access_token;
+    std::string error;
+    station_ = station::Station::Start(options, &error);
+    ASSERT_TRUE(station_ != nullptr) << error;
+  }
+  // The server's preview subscribers, from its status.
+  size_t PreviewSubscribers() {
+    v1::GetStatusResponse status;
+    EXPECT_TRUE(reference_->client().GetStatus(&status).ok());
+    return status.preview_streams();
+  }
+
+  ServerProcess server_;
+  std::unique_ptr<Reference> reference_;
+  std::unique_ptr<station::Station> station_;
+};
+
+TEST_F(StationTest, EachChannelCarriesWhatTheServerStreamsInTheSchemaItAdvertises) {
+  ASSERT_NO_FATAL_FAILURE(StartStation());
+  FoxgloveSession s;
+  ASSERT_NO_FATAL_FAILURE(s.Open(station_->port()));
+  EXPECT_EQ(s.server_info["capabilities"], nlohmann::json::array());
+  const std::map<std::string, std::string> expected_schemas = {
+      {"/rig1/tracks", "stevi.v1.TrackFrame"},
+      {"/rig1/status", "stevi.v1.StationRigStatus"},
+      {"/rig1/image/annotated", "foxglove.CompressedImage"},
+      {"/rig1/image/disparity", "foxglove.CompressedImage"},
+      {"/rig1/image/left", "foxglove.CompressedImage"},
+      {"/rig1/annotations", "foxglove.ImageAnnotations"},
+      {"/rig1/scene", "foxglove.SceneUpdate"},
+      {"/rig1/vehicle", "foxglove.LocationFix"}};
+  for (const auto& [topic, schema] : expected_schemas) {
+    ASSERT_TRUE(s.channels.count(topic)) << topic;
+    EXPECT_EQ(s.channels[topic]["schemaName"], schema) << topic;
+    EXPECT_EQ(s.channels[topic]["encoding"], "protobuf") << topic;
+  }
+  uint32_t id = 0;
+  for (const std::string topic : {"/rig1/tracks", "/rig1/status", "/rig1/image/left",
+                                  "/rig1/annotations", "/rig1/scene", "/rig1/vehicle"}) {
+    ASSERT_NO_FATAL_FAILURE(s.Subscribe(id++, topic));
+  }
+
+  std::map<std::string, int> checked;
+  double left_scale = 0;  // the left preview's pixels per TrackFrame pixel
+  const auto enough = [&checked] {
+    for (const std::string topic : {"/rig1/tracks", "/rig1/status", "/rig1/image/left",
+                                    "/rig1/annotations", "/rig1/scene", "/rig1/vehicle"}) {
+      if (checked[topic] < 5) return false;
+    }
+    return true;
+  };
+  int tracks_compared = 0;
+  const auto deadline = std::chrono::steady_clock::now() + kWait;
+  while (!enough() && std::chrono::steady_clock::now() < deadline) {
+    std::optional<std::pair<std::string, std::string>> m = s.Next(kWait);
+    ASSERT_TRUE(m) << "no message data";
+    const auto& [topic, payload] = *m;
+    if (topic == "/rig1/tracks") {
+      v1::TrackFrame frame;
+      ASSERT_TRUE(frame.ParseFromString(payload));
+      const std::optional<v1::TrackFrame> ref = reference_->AtTime(frame.capture_unix_time_ns());
+      if (!ref) continue;  // not (yet) in the reference's window
+      v1::TrackFrame a = frame, b = *ref;
+      a.clear_dropped_frames();  // per subscriber
+      b.clear_dropped_frames();
+      EXPECT_TRUE(google::protobuf::util::MessageDifferencer::Equals(a, b))
+          << "frame " << frame.frame_id() << " differs from the server's";
+      tracks_compared += frame.tracks_size();
+    } else if (topic == "/rig1/status") {
+      v1::StationRigStatus status;
+      ASSERT_TRUE(status.ParseFromString(payload));
+      EXPECT_EQ(status.rig(), "rig1");
+      EXPECT_EQ(status.address(), server_.address());
+      // Counted once the server is up and its source runs (it may still be starting at first).
+      if (status.connection() != v1::StationRigStatus::CONNECTION_UP ||
+          status.server().source_state() != v1::SOURCE_STATE_RUNNING) {
+        continue;
+      }
+      EXPECT_GT(status.track_frames(), 0u);
+    } else if (topic == "/rig1/image/left") {
+      foxglove::CompressedImage image;
+      ASSERT_TRUE(image.ParseFromString(payload));
+      EXPECT_EQ(image.format(), "jpeg");
+      EXPECT_EQ(image.frame_id(), "rig1_camera");
+      const cv::Mat decoded = cv::imdecode(
+          std::vector<uchar>(image.data().begin(), image.data().end()), cv::IMREAD_UNCHANGED);
+      ASSERT_FALSE(decoded.empty()) << "not a JPEG";
+      EXPECT_LE(decoded.cols, 640);
+      const std::optional<v1::TrackFrame> ref = reference_->AtTime(Nanos(image.timestamp()));
+      if (ref) {
+        left_scale = static_cast<double>(decoded.cols) / ref->image_width();
+        EXPECT_NEAR(decoded.rows, ref->image_height() * left_scale, 1.0);
+      }
+    } else if (topic == "/rig1/annotations") {
+      if (left_scale == 0) continue;  // its boxes are in the left preview's pixels
+      foxglove::ImageAnnotations annotations;
+      ASSERT_TRUE(annotations.ParseFromString(payload));
+      if (annotations.points_size() == 0) continue;
+      const std::optional<v1::TrackFrame> ref =
+          reference_->AtTime(Nanos(annotations.points(0).timestamp()));
+      if (!ref) continue;
+      ASSERT_EQ(annotations.points_size(), ref->tracks_size());
+      ASSERT_EQ(annotations.texts_size(), ref->tracks_size());
+      for (int i = 0; i < ref->tracks_size(); ++i) {
+        const v1::BoundingBox& box = ref->tracks(i).bbox();
+        const foxglove::PointsAnnotation& p = annotations.points(i);
+        EXPECT_EQ(p.type(), foxglove::PointsAnnotation::LINE_LOOP);
+        ASSERT_EQ(p.points_size(), 4);
+        EXPECT_NEAR(p.points(0).x(), box.x() * left_scale, 1e-6);
+        EXPECT_NEAR(p.points(0).y(), box.y() * left_scale, 1e-6);
+        EXPECT_NEAR(p.points(2).x(), (box.x() + box.width()) * left_scale, 1e-6);
+        EXPECT_NEAR(p.points(2).y(), (box.y() + box.height()) * left_scale, 1e-6);
+        EXPECT_THAT(annotations.texts(i).text(),
+                    HasSubstr("#" + std::to_string(ref->tracks(i).track_id()) + " "));
+      }
+    } else if (topic == "/rig1/scene") {
+      foxglove::SceneUpdate scene;
+      ASSERT_TRUE(scene.ParseFromString(payload));
+      ASSERT_EQ(scene.deletions_size(), 1);
+      EXPECT_EQ(scene.deletions(0).type(), foxglove::SceneEntityDeletion::ALL);
+      const std::optional<v1::TrackFrame> ref =
+          reference_->AtTime(Nanos(scene.deletions(0).timestamp()));
+      if (!ref) continue;
+      ASSERT_EQ(scene.entities_size(), ref->tracks_size());
+      for (int i = 0; i < ref->tracks_size(); ++i) {
+        const foxglove::SceneEntity& e = scene.entities(i);
+        EXPECT_EQ(e.id(), "track-" + std::to_string(ref->tracks(i).track_id()));
+        EXPECT_EQ(e.frame_id(), "rig1_camera");
+        ASSERT_EQ(e.cubes_size(), 1);
+        EXPECT_DOUBLE_EQ(e.cubes(0).pose().position().z(), ref->tracks(i).position_cam().z_m());
+      }
+    } else if (topic == "/rig1/vehicle") {
+      foxglove::LocationFix fix;
+      ASSERT_TRUE(fix.ParseFromString(payload));
+      EXPECT_EQ(fix.frame_id(), "rig1_vehicle");
+      // The vehicle state of the frame it came with (the synthetic rig's pose at capture time).
+      const std::optional<v1::TrackFrame> ref = reference_->AtTime(Nanos(fix.timestamp()));
+      if (!ref) continue;
+      EXPECT_DOUBLE_EQ(fix.latitude(), ref->vehicle().position().lat_deg());
+      EXPECT_DOUBLE_EQ(fix.longitude(), ref->vehicle().position().lon_deg());
+      EXPECT_DOUBLE_EQ(fix.altitude(), ref->vehicle().position().alt_m());
+      if (ref->vehicle().position_sigma_horizontal_m() > 0) {
+        ASSERT_EQ(fix.position_covariance_size(), 9);
+        EXPECT_EQ(fix.position_covariance_type(), foxglove::LocationFix::DIAGONAL_KNOWN);
+      } else {
+        EXPECT_EQ(fix.position_covariance_type(), foxglove::LocationFix::UNKNOWN);
+      }
+    }
+    ++checked[topic];
+  }
+  for (const auto& [topic, n] : checked) EXPECT_GE(n, 5) << topic;
+  EXPECT_GT(tracks_compared, 0);
+  std::cout << "[ figures ] checked: tracks " << checked["/rig1/tracks"] << " frames ("
+            << tracks_compared << " tracks equal to the server's), annotations "
+            << checked["/rig1/annotations"] << ", scenes " << checked["/rig1/scene"] << ", fixes "
+            << checked["/rig1/vehicle"] << ", left previews " << checked["/rig1/image/left"]
+            << " (scale " << left_scale << "), status " << checked["/rig1/status"] << "\n";
+}
+
+// The station asks the server for previews only while a client subscribes to an image channel.
+TEST_F(StationTest, PreviewsAreAskedForOnlyWhileSomebodyWatches) {
+  ASSERT_NO_FATAL_FAILURE(StartStation());
+  FoxgloveSession s;
+  ASSERT_NO_FATAL_FAILURE(s.Open(station_->port()));
+  ASSERT_NO_FATAL_FAILURE(s.Subscribe(1, "/rig1/tracks"));
+  // Tracks flow, and no preview stream is open.
+  for (int i = 0; i < 10; ++i) ASSERT_TRUE(s.Next(kWait)) << "no track frames";
+  EXPECT_EQ(PreviewSubscribers(), 0u);
+  ASSERT_NO_FATAL_FAILURE(s.Subscribe(2, "/rig1/image/disparity"));
+  int images = 0;
+  const auto deadline = std::chrono::steady_clock::now() + kWait;
+  while (images < 3 && std::chrono::steady_clock::now() < deadline) {
+    std::optional<std::pair<std::string, std::string>> m = s.Next(kWait);
+    ASSERT_TRUE(m);
+    images += m->first == "/rig1/image/disparity" ? 1 : 0;
+  }
+  ASSERT_EQ(images, 3);
+  EXPECT_EQ(PreviewSubscribers(), 1u);
+  // Unsubscribed: the station ends its preview stream (the server sees it go).
+  ASSERT_NO_FATAL_FAILURE(s.Unsubscribe(2));
+  size_t subscribers = 1;
+  for (int i = 0; i < 600 && subscribers != 0; ++i) {
+    ASSERT_TRUE(s.Next(kWait));  // paced by the track frames, about 10 Hz
+    subscribers = PreviewSubscribers();
+  }
+  EXPECT_EQ(subscribers, 0u) << "the station kept its preview stream";
+}
+
+TEST_F(StationTest, TheAccessTokenGuardsTheSocketAndTheApiButNotThePage) {
+  ASSERT_NO_FATAL_FAILURE(StartStation(kStationToken));
+  const int port = station_->port();
+  std::string error;
+  const auto get = [&](const std::string& target, const std::string& token) {
+    std::vector<std::pair<std::string, std::string>> headers;
+    if (!token.empty()) headers.emplace_back("Authorization", "Bearer " + token);
+    std::optional<testing::HttpReply> r =
+        testing::HttpRequestOnce("127.0.0.1", port, "GET", target, headers, "", error);
+    EXPECT_TRUE(r) << error;
+    return r ? r->status : 0;
+  };
+  EXPECT_EQ(get("/", ""), 200) << "the page itself is open (it asks for the token)";
+  EXPECT_EQ(get("/app.js", ""), 200);
+  EXPECT_EQ(get("/api/rigs", ""), 401);
+  EXPECT_EQ(get("/api/rigs", "wrong-token-wrong-token"), 403);
+  EXPECT_EQ(get("/api/rigs", kStationToken), 200);
+
+  testing::WsOptions options;
+  options.subprotocols = {"foxglove.websocket.v1"};
+  std::unique_ptr<WsClient> refused = WsClient::Connect("127.0.0.1", port, options, error);
+  ASSERT_TRUE(refused) << error;
+  EXPECT_FALSE(refused->open());
+  EXPECT_EQ(refused->status(), 401);
+  FoxgloveSession s;
+  ASSERT_NO_FATAL_FAILURE(s.Open(port, std::string("/?token=") + kStationToken));
+}
+
+TEST_F(StationTest, TheApiPassesControlOnAndNamesTheBadField) {
+  ASSERT_NO_FATAL_FAILURE(StartStation());
+  const int port = station_->port();
+  std::string error;
+  std::optional<testing::HttpReply> r = testing::HttpRequestOnce(
+      "127.0.0.1", port, "POST", "/api/rigs/rig1/config", {{"Content-Type", "application/json"}},
+      R"({"matcher":{"block_matching":{"num_disparities":20}}})", error);
+  ASSERT_TRUE(r) << error;
+  EXPECT_EQ(r->status, 400);
+  const nlohmann::json body = nlohmann::json::parse(r->body);
+  EXPECT_EQ(body["code"], "INVALID_ARGUMENT");
+  ASSERT_EQ(body["problems"].size(), 1u) << r->body;
+  EXPECT_EQ(body["problems"][0]["field"], "matcher.block_matching.num_disparities");
+  r = testing::HttpRequestOnce("127.0.0.1", port, "POST", "/api/rigs/rig1/config", {}, "{not json",
+                               error);
+  ASSERT_TRUE(r) << error;
+  EXPECT_EQ(r->status, 400);
+  EXPECT_THAT(r->body, HasSubstr("not a PipelineConfig"));
+  r = testing::HttpRequestOnce("127.0.0.1", port, "POST", "/api/rigs/rig1/config", {},
+                               R"({"algorithm":"ALGORITHM_STEVIS"})", error);
+  ASSERT_TRUE(r) << error;
+  EXPECT_EQ(r->status, 200) << r->body;
+  v1::PipelineConfig active;
+  ASSERT_TRUE(reference_->client().GetPipelineConfig(&active).ok());
+  EXPECT_EQ(active.algorithm(), v1::ALGORITHM_STEVIS);
+  r = testing::HttpRequestOnce("127.0.0.1", port, "GET", "/api/rigs/rig9/config", {}, "", error);
+  ASSERT_TRUE(r) << error;
+  EXPECT_EQ(r->status, 404);
+  r = testing::HttpRequestOnce("127.0.0.1", port, "GET", "/leaflet/../../etc/passwd", {}, "",
+                               error);
+  ASSERT_TRUE(r) << error;
+  EXPECT_EQ(r->status, 404);
+}
+
+TEST(StationCommand, RefusesUnsafeOrBadFlagsNamingTheProblem) {
+  const std::string dir = testing::MakeTempDir("stevi-station-flags");
+  std::ofstream(dir + "/short") << "short\n";
+  std::ofstream(dir + "/bad.geojson") << R"({"type":"Nonsense"})";
+  const struct {
+    std::vector<std::string> args;
+    std::string says;
+  } cases[] = {
+      {{"--listen", "0.0.0.0:0"}, "--token-file"},
+      {{"--token-file", dir + "/short"}, "at least 16 characters"},
+      {{"--token-file", dir + "/missing"}, "cannot read"},
+      {{"--site", dir + "/bad.geojson"}, "unknown GeoJSON type"},
+      {{"--preview-rate", "0"}, "--preview-rate"},
+      {{"--max-clients", "0"}, "--max-clients"},
+      {{"--server", ","}, "at least one"},
+  };
+  for (const auto& c : cases) {
+    std::vector<std::string> argv = {testing::BinaryPath("stevi"), "station"};
+    argv.insert(argv.end(), c.args.begin(), c.args.end());
+    testing::Subprocess p(argv);
+    const std::optional<int> code = p.Wait(30s);
+    ASSERT_TRUE(code.has_value());
+    EXPECT_EQ(*code, 2) << c.args[0];
+    EXPECT_THAT(p.DrainStderr(), HasSubstr(c.says)) << c.args[0];
+  }
+}
+
+}  // namespace
+}  // namespace stevi
