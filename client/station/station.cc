@@ -375,7 +375,8 @@ HttpResponse Station::Api(const HttpRequest& request) {
     for (const auto& rig : rigs_) {
       rigs.push_back({{"rig", rig->link->name()}, {"address", rig->link->address()}});
     }
-    return JsonResponse(200, nlohmann::json{{"rigs", rigs}}.dump());
+    return JsonResponse(
+        200, nlohmann::json{{"rigs", rigs}, {"site", !options_.site_geojson.empty()}}.dump());
   }
   static const std::regex kRigPath(R"(^/api/rigs/(rig[0-9]+)/([a-z_./]+)$)");
   std::smatch m;

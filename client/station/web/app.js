@@ -214,7 +214,6 @@
 
   // ---------------------------------------------------------------- rigs from /api/rigs
 
-  let controlNeedsToken = undefined;
   let rigsRetry = null;
   let site = undefined;  // the site GeoJSON: undefined = not asked yet, null = none
 
@@ -237,15 +236,15 @@
     clearProblem('rigs');
     tokenForm.hidden = true;
     tokenMessage.textContent = '';
-    controlNeedsToken = res.json.control_needs_token === true;
-    operatorInput.placeholder = controlNeedsToken ? 'required for control' : 'not needed';
-    operatorInput.dataset.required = String(controlNeedsToken);
+    // The station cannot tell whether a server wants a token: its refusal says so, beside the
+    // control that was refused.
+    operatorInput.placeholder = 'for control calls';
     for (const r of res.json.rigs) {
       if (!r || typeof r.rig !== 'string' || !RIG_RE.test(r.rig)) continue;
       const rig = ensureRig(r.rig);
       if (typeof r.address === 'string') rig.setAddress(r.address);
     }
-    if (site === undefined) loadSite();
+    if (site === undefined && res.json.site === true) loadSite();
   }
 
   async function loadSite() {

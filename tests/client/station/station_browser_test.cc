@@ -71,9 +71,14 @@ class StationBrowser : public ::testing::Test {
     second_ = new ServerProcess();
     second_->Start({"--scene", "head_on"});
     if (::testing::Test::HasFatalFailure()) return;
-    station_ =
-        new Subprocess({BinaryPath("stevi"), "station", "--server",
-                        server_->address() + "," + second_->address(), "--listen", "127.0.0.1:0"});
+    // A site overlay: the outline of Pisa's runway 04R/22L around the synthetic rig's hover.
+    std::ofstream(token_dir_ + "/site.geojson") << R"({"type": "FeatureCollection", "features": [
+      {"type": "Feature", "properties": {"name": "runway 04R"}, "geometry": {"type": "Polygon",
+       "coordinates": [[[10.3905, 43.6825], [10.3912, 43.6822], [10.4010, 43.6902],
+                        [10.4003, 43.6905], [10.3905, 43.6825]]]}}]})";
+    station_ = new Subprocess({BinaryPath("stevi"), "station", "--server",
+                               server_->address() + "," + second_->address(), "--listen",
+                               "127.0.0.1:0", "--site", token_dir_ + "/site.geojson"});
     const std::optional<std::string> line = station_->WaitForStdoutLine("serving", kWait);
     ASSERT_TRUE(line.has_value()) << "the station did not start: " << station_->DrainStderr();
     std::smatch m;
@@ -308,6 +313,20 @@ TEST_F(StationBrowser, ASnapshotAndTheCalibrationsComeFromTheServer) {
   EXPECT_EQ(png["status"], 200);
   EXPECT_EQ(png["type"], "image/png");
   EXPECT_GT(png["size"].get<int>(), 1000);
+}
+
+// The map draws the --site overlay (in the local metres around the vehicle) and the tracks'
+// geodetic positions.
+TEST_F(StationBrowser, TheMapDrawsTheSiteAndTheTracks) {
+  const std::string map = "section.rig[data-rig=\"rig1\"] div.map";
+  ASSERT_TRUE(browser_->WaitFor("document.querySelector('" + map +
+                                    "')?.dataset.geo === 'ok' && document.querySelectorAll('" +
+                                    map + " path[stroke=\"#a371f7\"]').length >= 1",
+                                kWait))
+      << "no site overlay on the map";
+  ASSERT_TRUE(browser_->WaitFor(
+      "document.querySelectorAll('" + map + " [data-track-id]').length >= 1", kWait))
+      << "no track on the map";
 }
 
 TEST_F(StationBrowser, EachRigHasItsOwnPanel) {
