@@ -667,7 +667,15 @@ struct FoxgloveServer::Impl {
     const int opcode = bits & 0x0f;
     const bool fin = (bits & 0x80) != 0;
     switch (opcode) {
-      case MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE: return 0;
+      case MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE: {
+        // The closing handshake (RFC 6455 5.5.1): answer with a Close frame echoing the client's
+        // status code, then let civetweb close the connection. The sender stops first; a write
+        // in flight finishes before ours (civetweb locks the connection for each frame).
+        Close(*client, 0, "");
+        mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, bytes,
+                           std::min<size_t>(size, 2));
+        return 0;
+      }
       case MG_WEBSOCKET_OPCODE_PING:
       case MG_WEBSOCKET_OPCODE_PONG: return 1;
       case MG_WEBSOCKET_OPCODE_TEXT:

@@ -604,6 +604,24 @@ TEST(FoxgloveServer, ReassemblesFragmentedMessages) {
   EXPECT_THAT(NextWarning(*client), HasSubstr("unknown op \"frobnicate\""));
 }
 
+// The closing handshake (RFC 6455 5.5.1): a client's Close is answered with a Close echoing its
+// status code, so that browsers and Foxglove see a clean close (1000), not 1006.
+TEST(FoxgloveServer, AnswersTheClientsCloseWithACloseEchoingItsCode) {
+  std::unique_ptr<FoxgloveServer> server = StartServer({});
+  for (const uint16_t code : {1000, 1001}) {
+    std::unique_ptr<WsClient> client = ConnectAndGreet(*server, false);
+    ASSERT_TRUE(client->SendClose(code));
+    std::optional<WsMessage> answer;
+    do {
+      answer = client->Receive(kTimeout);
+    } while (answer && answer->opcode != WsMessage::kClose && answer->opcode != WsMessage::kEnd);
+    ASSERT_TRUE(answer.has_value());
+    EXPECT_EQ(answer->opcode, WsMessage::kClose) << "the connection ended without a Close";
+    EXPECT_EQ(answer->close_code(), code);
+  }
+  EXPECT_TRUE(Eventually([&] { return server->stats().clients == 0; }));
+}
+
 TEST(FoxgloveServer, ClosesAConnectionThatSendsAnOversizeMessage) {
   FoxgloveServerOptions options;
   options.max_incoming_message_bytes = 1024;
