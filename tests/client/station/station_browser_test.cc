@@ -244,9 +244,12 @@ TEST_F(StationBrowser, ControlsReachTheServerAndShowItsErrorsBesideTheField) {
   Eval("(() => { const s = document.querySelector('" + rig + "select.algorithm'); s.value = '" +
        target_name + "'; s.dispatchEvent(new Event('change')); document.querySelector('" + rig +
        "button.apply-algorithm').click(); })()");
-  ASSERT_TRUE(browser_->WaitFor("/UNAUTHENTICATED|token/i.test(document.querySelector('" + rig +
-                                    "details.controls').textContent)",
-                                kWait));
+  // The refusal shows where the page puts a control's error (its message names the code).
+  ASSERT_TRUE(browser_->WaitFor(
+      "[...document.querySelectorAll('" + rig + "span.field-error[data-field=\"algorithm\"], " +
+          rig + "div.config-error, " + rig +
+          ".control-result')].some(e => /UNAUTHENTICATED/.test(e.textContent))",
+      kWait));
   EXPECT_EQ(ServerConfig().algorithm(), before.algorithm());
 
   // With it, the switch reaches the server.
