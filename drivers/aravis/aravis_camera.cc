@@ -171,7 +171,8 @@ int OpenCvBayerToGrey(PixelFormat format) {
 bool IsBayer(PixelFormat format) { return format != PixelFormat::kMono8; }
 
 void OnControlLost(ArvDevice* /*device*/, gpointer data) {
-  // Runs on Aravis's heartbeat thread.
+  // Runs on the thread of the failing USB3 Vision transfer: ours, or the stream's (which the
+  // destructor joins by releasing the stream before the device).
   static_cast<std::shared_ptr<std::atomic<bool>>*>(data)->get()->store(true);
 }
 
@@ -255,6 +256,19 @@ void SetAravisInterfaceEnabled(const std::string& interface_id, bool enabled) {
 struct AravisCamera::Handles {
   ArvCamera* camera = nullptr;
   ArvStream* stream = nullptr;
+  // GigE Vision: the camera's device (not owned), whose heartbeat thread clears its controller
+  // flag when the control channel is lost. No "control-lost" handler is connected to it: Aravis's
+  // heartbeat emits that signal without holding a reference to the device, and GLib references
+  // the device for an emission that finds a handler, after dropping its signal lock. When that
+  // emission races the release of the device's last reference (a lost camera released while its
+  // heartbeat gives up), GLib revives the finalizing device (GLib-GObject-CRITICAL
+  // "g_object_ref: assertion '!object_already_finalized' failed") and finalizes it a second time
+  // on the heartbeat thread (a segfault). With no handler, the emission returns under GLib's lock
+  // without touching the device's reference count, and the device's finalize joins the heartbeat
+  // thread before freeing anything.
+  ArvGvDevice* gv_device = nullptr;
+  // Other devices: the flag of a "control-lost" handler (see OnControlLost; the fake device never
+  // emits it).
   gulong lost_handler = 0;
   // Shared with the signal closure, which may outlive this object by an in-flight emission.
   std::shared_ptr<std::atomic<bool>> lost = std::make_shared<std::atomic<bool>>(false);
@@ -278,7 +292,12 @@ AravisCamera::~AravisCamera() {
   }
 }
 
-bool AravisCamera::control_lost() const { return handles_->lost->load(); }
+bool AravisCamera::control_lost() const {
+  const Handles& h = *handles_;
+  // The heartbeat thread writes this flag (a plain gboolean) once, after it gave up.
+  if (h.gv_device != nullptr) return arv_gv_device_is_controller(h.gv_device) == FALSE;
+  return h.lost->load();
+}
 
 namespace {
 
@@ -289,11 +308,11 @@ struct ConfigureStep {
   ArvCamera* camera;
   const std::string& name;
   GErrorSlot& error;
-  const std::atomic<bool>& lost;
+  const AravisCamera& owner;
 
   // Any failing call names the camera and the step.
   Error Failed(const std::string& what) const {
-    return Error{lost.load() ? ErrorCode::kUnavailable : error.code(),
+    return Error{owner.control_lost() ? ErrorCode::kUnavailable : error.code(),
                  name + ": " + what + " failed: " + error.message()};
   }
   bool Available(const char* feature) const {
@@ -630,12 +649,16 @@ Result<std::unique_ptr<AravisCamera>> AravisCamera::Open(const CameraSettings& s
   const std::string name = "camera " + info.device.id;
 
   // From here on the destructor releases what was acquired.
-  auto* flag = new std::shared_ptr<std::atomic<bool>>(h.lost);
-  h.lost_handler = g_signal_connect_data(arv_camera_get_device(h.camera), "control-lost",
-                                         G_CALLBACK(OnControlLost), flag, DeleteLostFlag,
-                                         static_cast<GConnectFlags>(0));
+  ArvDevice* device = arv_camera_get_device(h.camera);
+  if (ARV_IS_GV_DEVICE(device)) {
+    h.gv_device = ARV_GV_DEVICE(device);  // see Handles::gv_device: no handler on it
+  } else {
+    auto* flag = new std::shared_ptr<std::atomic<bool>>(h.lost);
+    h.lost_handler = g_signal_connect_data(device, "control-lost", G_CALLBACK(OnControlLost), flag,
+                                           DeleteLostFlag, static_cast<GConnectFlags>(0));
+  }
 
-  ConfigureStep step{h.camera, name, error, *h.lost};
+  ConfigureStep step{h.camera, name, error, *cam};
   Status done = ConfigurePixelFormat(step, settings, info, h.pixel_format);
   if (done.ok()) done = ConfigureRoi(step, settings, info);
   if (done.ok()) {

@@ -149,7 +149,9 @@ class AravisCamera {
   // camera).
   Status Ping();
 
-  // Set (from Aravis's heartbeat thread) when the device reported "control-lost".
+  // Whether the device lost its control channel: for GigE Vision, Aravis's heartbeat thread found
+  // the camera gone or controlled by another host (and cleared the device's controller flag);
+  // for other devices, the device emitted "control-lost".
   bool control_lost() const;
   // Marks the device as gone, so that the destructor skips the AcquisitionStop it cannot send.
   void MarkLost() { lost_ = true; }

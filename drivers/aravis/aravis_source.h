@@ -95,10 +95,10 @@ struct AravisOptions {
 // Rig(), NominalFps() and the per-camera accessors are safe from any thread.
 //
 // Each camera has its own acquisition thread: it pops frames, feeds the pairer, notices the
-// loss of its camera (the device's "control-lost" signal, or no frame for the loss time) and
-// reopens it with a backoff of 250 ms doubling to 1 s, independently of how often Next() is
-// called. Next() hands out the newest completed pair; when the caller falls behind, older pairs
-// are skipped (they still count in Counters().pairs).
+// loss of its camera (AravisCamera::control_lost(), or no frame for the loss time) and reopens it
+// with a backoff of 250 ms doubling to 1 s, independently of how often Next() is called. Next()
+// hands out the newest completed pair; when the caller falls behind, older pairs are skipped (they
+// still count in Counters().pairs).
 class AravisStereoSource : public StereoSource {
  public:
   // Validates the options, opens and configures both cameras (errors name the camera and the
