@@ -409,6 +409,53 @@ TEST_F(StationTest, TheApiPassesControlOnAndNamesTheBadField) {
   EXPECT_EQ(r->status, 404);
 }
 
+// The exports hold the georeferenced tracks the station received: the same tracks, as
+// `stevi export` writes them.
+TEST_F(StationTest, ExportsTheGeoreferencedTracksItReceived) {
+  ASSERT_NO_FATAL_FAILURE(StartStation());
+  FoxgloveSession s;
+  ASSERT_NO_FATAL_FAILURE(s.Open(station_->port()));
+  ASSERT_NO_FATAL_FAILURE(s.Subscribe(1, "/rig1/tracks"));
+  // A frame on the socket was collected before it was published.
+  std::set<uint64_t> confirmed_geo;  // tracks the exports must hold
+  for (int i = 0; i < 20; ++i) {
+    std::optional<std::pair<std::string, std::string>> m = s.Next(kWait);
+    ASSERT_TRUE(m);
+    v1::TrackFrame frame;
+    ASSERT_TRUE(frame.ParseFromString(m->second));
+    for (const v1::Track& t : frame.tracks()) {
+      if (t.has_geodetic() && t.state() != v1::TRACK_STATE_TENTATIVE) {
+        confirmed_geo.insert(t.track_id());
+      }
+    }
+  }
+  ASSERT_FALSE(confirmed_geo.empty()) << "no georeferenced confirmed track in 20 frames";
+  std::string error;
+  std::optional<testing::HttpReply> r = testing::HttpRequestOnce(
+      "127.0.0.1", station_->port(), "GET", "/api/rigs/rig1/export.geojson", {}, "", error);
+  ASSERT_TRUE(r) << error;
+  ASSERT_EQ(r->status, 200);
+  const nlohmann::json geojson = nlohmann::json::parse(r->body);
+  EXPECT_EQ(geojson["type"], "FeatureCollection");
+  std::set<uint64_t> exported;
+  for (const auto& f : geojson["features"]) {
+    exported.insert(f["properties"]["track_id"].get<uint64_t>());
+  }
+  // Every track seen is there; later frames may have added more.
+  for (const uint64_t id : confirmed_geo) EXPECT_TRUE(exported.count(id)) << "track " << id;
+  r = testing::HttpRequestOnce("127.0.0.1", station_->port(), "GET", "/api/rigs/rig1/export.kml",
+                               {}, "", error);
+  ASSERT_TRUE(r) << error;
+  ASSERT_EQ(r->status, 200);
+  EXPECT_THAT(r->body, HasSubstr("<kml"));
+  size_t placemarks = 0;
+  for (size_t at = r->body.find("<Placemark"); at != std::string::npos;
+       at = r->body.find("<Placemark", at + 1)) {
+    ++placemarks;
+  }
+  EXPECT_GE(placemarks, confirmed_geo.size());
+}
+
 TEST(StationCommand, RefusesUnsafeOrBadFlagsNamingTheProblem) {
   const std::string dir = testing::MakeTempDir("stevi-station-flags");
   std::ofstream(dir + "/short") << "short\n";
