@@ -8,6 +8,7 @@
 
 #include "core/common/allocator.h"
 #include "core/pipeline/pipeline.h"
+#include "drivers/synthetic/scenarios.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/app_config.h"
 #include "server/convert.h"
@@ -123,6 +124,21 @@ int main(int argc, char** argv) {
     if (!created.ok()) return Fail(created.error().message, 1);
     poses = std::move(created).value();
     poses->SetRecordedStates(recorded);
+  }
+  // The synthetic rig georeferences (and carries its tracks through its ego-motion) with its own
+  // pose and flight, as the server does: the same frames give the same tracks offline and live.
+  if (!poses && synthetic) {
+    const v1::SourceConfig& src = config.source();
+    const std::optional<geo::VehicleState> start = drivers::SceneRigPose(src.synthetic().scene());
+    Result<std::unique_ptr<server::PoseSource>> created =
+        server::MakePoseSource(config.geo(), start);
+    if (!created.ok()) return Fail(created.error().message, 1);
+    poses = std::move(created).value();
+    if (start) {
+      if (auto path = drivers::SceneRigPath(src.synthetic().scene(), *start)) {
+        poses->SetSyntheticPath(std::move(path));
+      }
+    }
   }
   pipeline::Pipeline pipe;
   pipeline::Snapshot snapshot{

@@ -22,6 +22,11 @@ struct RangeOptions {
   // 1-sigma disparity error used for range_sigma_m (pixels). Block matching with sub-pixel
   // interpolation is good to about a quarter pixel on textured surfaces.
   double disparity_sigma_px = 0.25;
+  // Disparities whose confidence (DisparityMap::confidence, the matcher's P(inlier), where it
+  // gives one) is below this are not trusted by the consumers that read no confidence: the
+  // ground plane, the range scan and the thesis detectors. The stixel world weighs every value by
+  // its confidence instead.
+  double min_confidence = 0.5;
 
   // Lists every problem ("min_disparity_px: must be > 0 pixels (got -1)", ...).
   std::vector<std::string> Validate() const;
@@ -38,6 +43,9 @@ struct RangeOptions {
     v.Number(s.disparity_sigma_px,
              Field("disparity_sigma_px", "pixels", "1-sigma disparity error behind range_sigma_m")
                  .Above(0));
+    v.Number(s.min_confidence,
+             Field("min_confidence", "", "least matcher confidence (P(inlier)) that is trusted")
+                 .In(0, 1));
   }
 };
 

@@ -35,6 +35,13 @@ std::optional<Algorithm> AlgorithmFromName(std::string_view name) {
   return std::nullopt;
 }
 
+PipelineConfig ConfigForAlgorithm(Algorithm algorithm) {
+  PipelineConfig config;
+  config.algorithm = algorithm;
+  if (algorithm == Algorithm::kStixels) config.matcher.kind = stereo::MatcherKind::kDense;
+  return config;
+}
+
 // Every stage's options are validated, whichever algorithm runs (the matcher's: the selected
 // kind's only, MatcherOptions::Validate()).
 std::vector<std::string> PipelineConfig::Validate() const { return fields::Check(*this); }

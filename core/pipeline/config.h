@@ -14,6 +14,7 @@
 #include "core/detection/range_scan.h"
 #include "core/detection/stevie.h"
 #include "core/detection/stevis.h"
+#include "core/detection/stixels.h"
 #include "core/geometry/range.h"
 #include "core/stereo/matcher.h"
 #include "core/geo/mount.h"
@@ -21,9 +22,9 @@
 
 namespace stevi::pipeline {
 
-enum class Algorithm { kCanonical, kSteViE, kSteViS };
+enum class Algorithm { kCanonical, kSteViE, kSteViS, kStixels };
 
-// "canonical", "stevie", "stevis".
+// "canonical", "stevie", "stevis", "stixels".
 std::string_view AlgorithmName(Algorithm algorithm);
 std::optional<Algorithm> AlgorithmFromName(std::string_view name);
 
@@ -38,11 +39,16 @@ struct PipelineConfig {
   // pixels and the matcher searches a fixed number of disparities, so binning is also the cheap
   // way to see a wide frame: see the README's configuration section for the figures. 0 = never bin.
   int max_width_px = 800;
+  // The matcher. The stixel world wants matcher.kind = dense (disparities on real surfaces, with a
+  // per-pixel confidence); SteViE and SteViS were tuned on block matching.
   stereo::MatcherOptions matcher;
   geometry::RangeOptions range;
   detection::CanonicalOptions canonical;
   detection::SteViEOptions stevie;
   detection::SteViSOptions stevis;
+  // The stixel world and its obstacles (core/detection/README.md, "The stixel world"). Its ground
+  // is range_scan.ground: one plane per frame serves the obstacles and the range scan.
+  detection::StixelOptions stixels;
   // Tracking of the detections over frames; can change while serving (the tracks are kept).
   tracking::TrackerOptions tracking;
   // How the camera sits on the vehicle, for georeferencing the tracks (core/geo/mount.h). Can
@@ -58,7 +64,8 @@ struct PipelineConfig {
   static constexpr fields::ChoiceName<Algorithm> kAlgorithmNames[] = {
       {Algorithm::kCanonical, "canonical"},
       {Algorithm::kSteViE, "stevie"},
-      {Algorithm::kSteViS, "stevis"}};
+      {Algorithm::kSteViS, "stevis"},
+      {Algorithm::kStixels, "stixels"}};
   template <class Self, class V>
   static void Fields(Self& s, V& v) {
     using fields::Field;
@@ -71,11 +78,17 @@ struct PipelineConfig {
     v.Nested(s.canonical, Field("canonical"));
     v.Nested(s.stevie, Field("stevie"));
     v.Nested(s.stevis, Field("stevis"));
+    v.Nested(s.stixels, Field("stixels"));
     v.Nested(s.tracking, Field("tracking"));
     v.Nested(s.mount, Field("mount"));
     v.Nested(s.range_scan, Field("range_scan"));
   }
 };
+
+// The default configuration with `algorithm` and the matcher it was built for: the dense matcher
+// for the stixel world (it weighs every disparity by its confidence), block matching for the
+// thesis detectors (their gates were tuned on it).
+PipelineConfig ConfigForAlgorithm(Algorithm algorithm);
 
 // Holds the active configuration. Thread-safe. Readers take an immutable snapshot per frame;
 // Set() validates first and leaves the active config untouched when anything is wrong.

@@ -6,10 +6,13 @@
 #include <string>
 #include <utility>
 
+#include <GeographicLib/LocalCartesian.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/detection/canonical.h"
 #include "core/geo/mount.h"
+#include "core/geo/vehicle_state.h"
+#include "core/geo/vehicle_state.h"
 
 namespace stevi::pipeline {
 namespace {
@@ -60,7 +63,8 @@ geometry::RangeOptions ProcessedRange(const PipelineConfig& config, int factor) 
 // (camera pixels) is divided by the binning; each hypothesis is then ranged on the camera's own
 // images.
 void Extract(const PipelineConfig& config, int factor, const FrameImages& images,
-             FrameResult& result) {
+             const stereo::DisparityMap& trusted,
+             const std::optional<detection::GroundPlane>& ground, FrameResult& result) {
   const geometry::StereoRig& work_rig = *result.rig;
   const geometry::RangeOptions range = ProcessedRange(config, factor);
   detection::FullResolutionPair full;
@@ -77,28 +81,58 @@ void Extract(const PipelineConfig& config, int factor, const FrameImages& images
   switch (config.algorithm) {
     case Algorithm::kCanonical:
       result.detections =
-          detection::DetectCanonical(result.disparity, work_rig, range, config.canonical, &full);
+          detection::DetectCanonical(trusted, work_rig, range, config.canonical, &full);
       break;
     case Algorithm::kSteViE:
-      result.detections = detection::DetectSteViE(rect_left, result.disparity, work_rig, range,
-                                                  config.stevie, &full);
+      result.detections =
+          detection::DetectSteViE(rect_left, trusted, work_rig, range, config.stevie, &full);
       break;
     case Algorithm::kSteViS:
-      result.detections = detection::DetectSteViS(rect_left, result.disparity, work_rig, range,
-                                                  config.stevis, &full);
+      result.detections =
+          detection::DetectSteViS(rect_left, trusted, work_rig, range, config.stevis, &full);
+      break;
+    case Algorithm::kStixels:
+      result.stixels = detection::ComputeStixels(result.disparity, ground, range, config.stixels);
+      result.detections = detection::ObstaclesFromStixels(
+          *result.stixels, result.disparity, rect_left, work_rig, ground, range, config.stixels);
       break;
   }
 }
 
-// Stage: scan. The range scan of the processed disparity, leaving out the ground plane it fits
-// (the detectors' v-disparity line is not reused: core/detection/README.md, "The range scan").
-detection::RangeScan Scan(const PipelineConfig& config, int factor, const FrameResult& result) {
+// The vehicle's down axis in the camera frame: from the mount, and from the autopilot's attitude
+// at the capture time when a pose is known (a level vehicle otherwise).
+Eigen::Vector3d DownInCam(const PipelineConfig& config, const Snapshot& snapshot,
+                          const StereoFrame& frame) {
+  const Eigen::Isometry3d body_from_cam = geo::BodyFromCam(config.mount);
+  Eigen::Vector3d down_in_body = Eigen::Vector3d::UnitZ();
+  if (snapshot.pose_at) {
+    const geo::PoseLookup lookup = snapshot.pose_at(frame.t_ns, frame.unix_time_ns);
+    if (lookup.ok()) {
+      down_in_body = geo::NedFromBody(lookup.pose->state).conjugate() * Eigen::Vector3d::UnitZ();
+    }
+  }
+  return body_from_cam.linear().transpose() * down_in_body;
+}
+
+// Stage: ground. One plane per frame, fitted to the processed disparity with the vehicle's down
+// axis as its prior: the stixel world and the range scan share it (core/detection/README.md).
+std::optional<detection::GroundPlane> Ground(const PipelineConfig& config, int factor,
+                                             const Snapshot& snapshot, const StereoFrame& frame,
+                                             const stereo::DisparityMap& trusted,
+                                             const FrameResult& result) {
+  const geometry::RangeOptions range = ProcessedRange(config, factor);
+  return detection::FitGroundPlane(trusted, *result.rig, DownInCam(config, snapshot, frame),
+                                   range.min_disparity_px, config.range_scan.ground);
+}
+
+// Stage: scan. The range scan of the processed disparity, leaving out the frame's ground plane.
+detection::RangeScan Scan(const PipelineConfig& config, int factor,
+                          const stereo::DisparityMap& trusted,
+                          const std::optional<detection::GroundPlane>& ground,
+                          const FrameResult& result) {
   const geometry::RangeOptions range = ProcessedRange(config, factor);
   const Eigen::Isometry3d body_from_cam = geo::BodyFromCam(config.mount);
-  const Eigen::Vector3d down_in_cam = body_from_cam.linear().transpose() * Eigen::Vector3d::UnitZ();
-  const std::optional<detection::GroundPlane> ground = detection::FitGroundPlane(
-      result.disparity, *result.rig, down_in_cam, range.min_disparity_px, config.range_scan.ground);
-  return detection::ComputeRangeScan(result.disparity, *result.rig, range, body_from_cam, ground,
+  return detection::ComputeRangeScan(trusted, *result.rig, range, body_from_cam, ground,
                                      config.range_scan);
 }
 
@@ -203,7 +237,112 @@ struct Pipeline::State {
   std::unique_ptr<tracking::Tracker> tracker;
   // Rebuilt when the mount changes.
   std::unique_ptr<geo::Georeferencer> georeferencer;
+  // The last frame's pose when it was found, and that frame's capture time: with this frame's
+  // pose, the camera's motion between the two for the tracker.
+  std::optional<geo::VehiclePose> previous_pose;
+  int64_t previous_pose_t_ns = 0;
+
+  // The tracker with the config's options (created at the first frame, its options replaced when
+  // they change); kInvalidArgument naming the fields when they are invalid.
+  Status ConfigureTracker(const tracking::TrackerOptions& options);
+  // The georeferencer of the mount (rebuilt when it changes); kInvalidArgument naming the fields
+  // when the mount is invalid.
+  Status ConfigureGeoreferencer(const geo::MountOptions& mount);
+  // The camera's motion from the previous frame to this one (`result`: its capture time and pose),
+  // when both poses were found and the frames are 0 < gap <= tracking.max_dt_s apart; remembers
+  // this frame's pose for the next.
+  std::optional<tracking::EgoMotion> EgoMotionSincePrevious(const FrameResult& result,
+                                                            const PipelineConfig& config);
+  // cam_now_from_cam_prev of two vehicle poses and the mount: both cams into the local NED tangent
+  // plane at the previous pose (GeographicLib::LocalCartesian, whose ENU is turned to NED). The
+  // tangent planes of the two poses differ by their distance over the Earth's radius (1.6e-7 rad
+  // a metre), which is neglected.
+  static Eigen::Isometry3d CamNowFromCamPrev(const geo::VehiclePose& prev,
+                                             const geo::VehiclePose& now,
+                                             const geo::MountOptions& mount);
+  // Stage: geo. Each track's WGS84 position with the frame's pose (result.pose, found).
+  void Georeference(FrameResult& result) const;
 };
+
+Status Pipeline::State::ConfigureTracker(const tracking::TrackerOptions& options) {
+  if (tracker != nullptr && tracker->options() == options) return Status::Ok();
+  const std::vector<std::string> problems = options.Validate();
+  if (!problems.empty()) {
+    std::vector<std::string> prefixed;
+    AppendPrefixed(prefixed, "tracking.", problems);
+    return Error::Invalid(prefixed);
+  }
+  if (tracker == nullptr) {
+    tracker = std::make_unique<tracking::Tracker>(options);
+  } else {
+    tracker->SetOptions(options);
+  }
+  return Status::Ok();
+}
+
+Status Pipeline::State::ConfigureGeoreferencer(const geo::MountOptions& mount) {
+  if (georeferencer != nullptr && georeferencer->mount() == mount) return Status::Ok();
+  const std::vector<std::string> problems = mount.Validate();
+  if (!problems.empty()) {
+    std::vector<std::string> prefixed;
+    AppendPrefixed(prefixed, "mount.", problems);
+    return Error::Invalid(prefixed);
+  }
+  georeferencer = std::make_unique<geo::Georeferencer>(mount);
+  return Status::Ok();
+}
+
+std::optional<tracking::EgoMotion> Pipeline::State::EgoMotionSincePrevious(
+    const FrameResult& result, const PipelineConfig& config) {
+  std::optional<tracking::EgoMotion> ego;
+  const bool found = result.pose.has_value() && result.pose->ok() && result.pose->pose;
+  if (found && previous_pose) {
+    const double gap_s = static_cast<double>(result.capture_time_ns - previous_pose_t_ns) * 1e-9;
+    if (gap_s > 0 && gap_s <= config.tracking.max_dt_s) {
+      ego = tracking::EgoMotion{.cam_now_from_cam_prev = CamNowFromCamPrev(
+                                    *previous_pose, *result.pose->pose, config.mount)};
+    }
+  }
+  if (found) {
+    previous_pose = *result.pose->pose;
+    previous_pose_t_ns = result.capture_time_ns;
+  } else {
+    previous_pose.reset();
+  }
+  return ego;
+}
+
+Eigen::Isometry3d Pipeline::State::CamNowFromCamPrev(const geo::VehiclePose& prev,
+                                                     const geo::VehiclePose& now,
+                                                     const geo::MountOptions& mount) {
+  const GeographicLib::LocalCartesian enu_at_prev(prev.state.lat_deg, prev.state.lon_deg,
+                                                  prev.state.alt_m);
+  double east = 0, north = 0, up = 0;
+  enu_at_prev.Forward(now.state.lat_deg, now.state.lon_deg, now.state.alt_m, east, north, up);
+  Eigen::Isometry3d ned_from_body_prev = Eigen::Isometry3d::Identity();
+  ned_from_body_prev.linear() = geo::NedFromBody(prev.state).toRotationMatrix();
+  Eigen::Isometry3d ned_from_body_now = Eigen::Isometry3d::Identity();
+  ned_from_body_now.linear() = geo::NedFromBody(now.state).toRotationMatrix();
+  ned_from_body_now.translation() = Eigen::Vector3d(north, east, -up);
+  const Eigen::Isometry3d body_from_cam = geo::BodyFromCam(mount);
+  return (ned_from_body_now * body_from_cam).inverse() * ned_from_body_prev * body_from_cam;
+}
+
+void Pipeline::State::Georeference(FrameResult& result) const {
+  result.track_geo.assign(result.tracks.size(), std::nullopt);
+  if (!result.pose || !result.pose->ok() || !result.pose->pose) return;
+  for (size_t i = 0; i < result.tracks.size(); ++i) {
+    const tracking::Track& track = result.tracks[i];
+    geo::PointInCam point;
+    point.position_m =
+        Eigen::Vector3d(track.position_cam_m[0], track.position_cam_m[1], track.position_cam_m[2]);
+    point.velocity_mps = Eigen::Vector3d(track.velocity_cam_mps[0], track.velocity_cam_mps[1],
+                                         track.velocity_cam_mps[2]);
+    point.covariance_m2 = geo::DiagonalCovariance(track.position_sigma_m);
+    Result<geo::GeoPoint> geo_point = georeferencer->Georeference(*result.pose->pose, point);
+    if (geo_point.ok()) result.track_geo[i] = std::move(geo_point).value();
+  }
+}
 
 Pipeline::Pipeline() : state_(std::make_unique<State>()) {}
 Pipeline::~Pipeline() = default;
@@ -257,13 +396,23 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
   if (!status.ok()) return status.error();
   result.timings.push_back({"disparity", MsSince(t)});
 
+  // What the consumers that read no confidence see: the disparities the matcher is sure of.
+  const stereo::DisparityMap trusted =
+      stereo::TrustedOnly(result.disparity, config.range.min_confidence);
+  const bool needs_ground = config.algorithm == Algorithm::kStixels || config.range_scan.enabled;
+  if (needs_ground && config.range_scan.ground.enabled) {
+    t = Clock::now();
+    result.ground = Ground(config, factor, snapshot, frame, trusted, result);
+    result.timings.push_back({"ground", MsSince(t)});
+  }
+
   t = Clock::now();
-  Extract(config, factor, images, result);
+  Extract(config, factor, images, trusted, result.ground, result);
   result.timings.push_back({"extract", MsSince(t)});
 
   if (config.range_scan.enabled) {
     t = Clock::now();
-    result.range_scan = Scan(config, factor, result);
+    result.range_scan = Scan(config, factor, trusted, result.ground, result);
     result.timings.push_back({"scan", MsSince(t)});
   }
   result.rectified_left = std::move(images.rect_left);
@@ -282,27 +431,29 @@ Result<FrameResult> Pipeline::Finish(PreparedFrame prepared, const Snapshot& sna
 
   // Stage: track.
   Clock::time_point t = Clock::now();
-  if (state_->tracker == nullptr || !(state_->tracker->options() == config.tracking)) {
-    const std::vector<std::string> problems = config.tracking.Validate();
-    if (!problems.empty()) {
-      std::vector<std::string> prefixed;
-      AppendPrefixed(prefixed, "tracking.", problems);
-      return Error::Invalid(prefixed);
-    }
-    if (state_->tracker == nullptr) {
-      state_->tracker = std::make_unique<tracking::Tracker>(config.tracking);
-    } else {
-      state_->tracker->SetOptions(config.tracking);
-    }
+  if (Status status = state_->ConfigureTracker(config.tracking); !status.ok()) {
+    return status.error();
   }
+  // The pose at the capture, looked up once, before tracking: with the last frame's, it gives the
+  // tracker the camera's motion. Kept for the geo stage, and timed with it.
+  double geo_ms = 0;
+  if (snapshot.pose_at) {
+    const Clock::time_point g = Clock::now();
+    if (Status status = state_->ConfigureGeoreferencer(config.mount); !status.ok()) {
+      return status.error();
+    }
+    result.pose = snapshot.pose_at(result.capture_time_ns, result.capture_unix_time_ns);
+    geo_ms = MsSince(g);
+  }
+  const std::optional<tracking::EgoMotion> ego = state_->EgoMotionSincePrevious(result, config);
   const tracking::CameraModel camera{rig.f_px(),
                                      rig.cx(),
                                      rig.cy(),
                                      rig.baseline_m(),
                                      rig.image_size().width,
                                      rig.image_size().height};
-  result.tracks = state_->tracker->Update(result.detections, result.capture_time_ns, camera);
-  result.timings.push_back({"track", MsSince(t)});
+  result.tracks = state_->tracker->Update(result.detections, result.capture_time_ns, camera, ego);
+  result.timings.push_back({"track", MsSince(t) - geo_ms});
 
   // The tracks in the body frame (the mount alone: no pose needed).
   const Eigen::Isometry3d body_from_cam = geo::BodyFromCam(config.mount);
@@ -318,32 +469,8 @@ Result<FrameResult> Pipeline::Finish(PreparedFrame prepared, const Snapshot& sna
   // Stage: geo.
   if (snapshot.pose_at) {
     t = Clock::now();
-    if (state_->georeferencer == nullptr || !(state_->georeferencer->mount() == config.mount)) {
-      const std::vector<std::string> problems = config.mount.Validate();
-      if (!problems.empty()) {
-        std::vector<std::string> prefixed;
-        AppendPrefixed(prefixed, "mount.", problems);
-        return Error::Invalid(prefixed);
-      }
-      state_->georeferencer = std::make_unique<geo::Georeferencer>(config.mount);
-    }
-    result.pose = snapshot.pose_at(result.capture_time_ns, result.capture_unix_time_ns);
-    result.track_geo.assign(result.tracks.size(), std::nullopt);
-    if (result.pose->ok()) {
-      for (size_t i = 0; i < result.tracks.size(); ++i) {
-        const tracking::Track& track = result.tracks[i];
-        geo::PointInCam point;
-        point.position_m = Eigen::Vector3d(track.position_cam_m[0], track.position_cam_m[1],
-                                           track.position_cam_m[2]);
-        point.velocity_mps = Eigen::Vector3d(track.velocity_cam_mps[0], track.velocity_cam_mps[1],
-                                             track.velocity_cam_mps[2]);
-        point.covariance_m2 = geo::DiagonalCovariance(track.position_sigma_m);
-        Result<geo::GeoPoint> geo_point =
-            state_->georeferencer->Georeference(*result.pose->pose, point);
-        if (geo_point.ok()) result.track_geo[i] = std::move(geo_point).value();
-      }
-    }
-    result.timings.push_back({"geo", MsSince(t)});
+    state_->Georeference(result);
+    result.timings.push_back({"geo", geo_ms + MsSince(t)});
   }
 
   result.frame_id = next_frame_id_++;

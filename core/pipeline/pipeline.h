@@ -15,6 +15,7 @@
 #include "core/common/stereo_frame.h"
 #include "core/detection/detection.h"
 #include "core/detection/range_scan.h"
+#include "core/detection/stixels.h"
 #include "core/geo/georeferencer.h"
 #include "core/geo/pose_buffer.h"
 #include "core/geometry/stereo_rig.h"
@@ -26,7 +27,8 @@
 namespace stevi::pipeline {
 
 struct StageTiming {
-  std::string stage;  // "rectify", "disparity", "extract", "scan", "track", "geo", "total"
+  std::string stage;  // "rectify", "disparity", "ground", "extract", "scan", "track", "geo",
+                      // "total"
   double ms = 0;
 };
 
@@ -47,6 +49,11 @@ struct FrameResult {
   // The nearest range per azimuth bin in the body frame (PipelineConfig::range_scan); absent when
   // the scan is disabled.
   std::optional<detection::RangeScan> range_scan;
+  // The frame's ground plane (processed images), shared by the stixel world and the range scan;
+  // absent when neither ran, when range_scan.ground is disabled, or when no plane was found.
+  std::optional<detection::GroundPlane> ground;
+  // The stixel world (algorithm stixels only).
+  std::optional<detection::StixelWorld> stixels;
   // Georeferencing: the vehicle pose looked up at the capture time (absent when there is no pose
   // source), and per track, in the order of `tracks`, its WGS84 position, NED velocity and sigma
   // (absent when the pose was not found or the track could not be georeferenced).

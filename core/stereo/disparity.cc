@@ -64,6 +64,21 @@ cv::Mat1w ToFixedPoint16U(const DisparityMap& disparity) {
   return out;
 }
 
+DisparityMap TrustedOnly(const DisparityMap& disparity, double min_confidence) {
+  if (disparity.confidence.empty() || min_confidence <= 0) return disparity;
+  DisparityMap out = disparity;
+  out.fixed = disparity.fixed.clone();
+  const int threshold = static_cast<int>(std::ceil(255.0 * min_confidence));
+  for (int y = 0; y < out.fixed.rows; ++y) {
+    int16_t* d = out.fixed[y];
+    const uint8_t* c = disparity.confidence[y];
+    for (int x = 0; x < out.fixed.cols; ++x) {
+      if (c[x] < threshold) d[x] = DisparityMap::kInvalid;
+    }
+  }
+  return out;
+}
+
 // Colour scale: 0 px (far) to min_disparity + num_disparities (near) over TURBO; when the map
 // does not carry its search range, its largest value is used instead.
 cv::Mat3b ToColour(const DisparityMap& disparity) {

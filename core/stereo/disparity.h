@@ -19,6 +19,10 @@ struct DisparityMap {
   int num_disparities = 0;
   // The matcher's window (pixels): its errors are correlated over about this distance.
   int block_size = 1;
+  // Per pixel, how far the disparity can be trusted: round(255 x P(inlier)), the probability that
+  // the value lies within its noise of the truth (0 where unmatched). Empty when the matcher gives
+  // none (block matching, cv::StereoSGBM); consumers then treat every matched pixel alike.
+  cv::Mat1b confidence;
 
   bool empty() const { return fixed.empty(); }
   // Disparity in pixels at (x, y), or nullopt when unmatched.
@@ -38,6 +42,11 @@ struct DisparityMap {
 std::optional<double> MedianDisparityInMask(const DisparityMap& disparity, const cv::Mat1i& labels,
                                             int label, const cv::Rect& box, double min_disparity_px,
                                             int* valid_count = nullptr);
+
+// The map with every disparity whose confidence is below min_confidence (a probability, 0..1)
+// unmatched, for consumers that read no confidence. A map without confidence, or min_confidence
+// <= 0, is returned as it is (sharing its pixels).
+DisparityMap TrustedOnly(const DisparityMap& disparity, double min_confidence);
 
 // 16-bit image of the raw fixed-point disparity (value = d * 16, 0 = unmatched), for PNG output.
 cv::Mat1w ToFixedPoint16U(const DisparityMap& disparity);

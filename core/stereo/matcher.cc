@@ -11,6 +11,7 @@
 
 #include "core/common/error.h"
 #include "core/stereo/block_matcher.h"
+#include "core/stereo/dense_matcher.h"
 
 namespace stevi::stereo {
 namespace {
@@ -169,6 +170,22 @@ class OpenCvMatcher final : public DisparityMatcher {
   cv::Mat gradient_, abs_gradient_, texture_sum_;
 };
 
+// The dense matcher behind the interface (it pads, crops and gates nothing: it matches every
+// column and says how far each value can be trusted).
+class DenseAdapter final : public DisparityMatcher {
+ public:
+  explicit DenseAdapter(MatcherOptions options)
+      : options_(std::move(options)), matcher_(options_.dense) {}
+  DisparityMap Compute(const cv::Mat& left_rect, const cv::Mat& right_rect) override {
+    return matcher_.Compute(left_rect, right_rect);
+  }
+  const MatcherOptions& options() const override { return options_; }
+
+ private:
+  MatcherOptions options_;
+  DenseMatcher matcher_;
+};
+
 }  // namespace
 
 std::vector<std::string> BlockMatchingOptions::Validate() const { return fields::Check(*this); }
@@ -198,6 +215,7 @@ std::string_view MatcherKindName(MatcherKind kind) {
   switch (kind) {
     case MatcherKind::kBlockMatching: return "block_matching";
     case MatcherKind::kSemiGlobal: return "semi_global";
+    case MatcherKind::kDense: return "dense";
   }
   return "unknown";
 }
@@ -206,18 +224,27 @@ std::vector<std::string> MatcherOptions::Validate() const {
   switch (kind) {
     case MatcherKind::kBlockMatching: return Prefixed(block_matching.Validate(), "block_matching.");
     case MatcherKind::kSemiGlobal: return Prefixed(semi_global.Validate(), "semi_global.");
+    case MatcherKind::kDense: return Prefixed(dense.Validate(), "dense.");
   }
   return {"kind: unknown matcher kind" + Got(static_cast<int>(kind))};
 }
 
 int MatcherOptions::num_disparities() const {
-  return kind == MatcherKind::kSemiGlobal ? semi_global.num_disparities
-                                          : block_matching.num_disparities;
+  switch (kind) {
+    case MatcherKind::kSemiGlobal: return semi_global.num_disparities;
+    case MatcherKind::kDense: return dense.num_disparities;
+    case MatcherKind::kBlockMatching: break;
+  }
+  return block_matching.num_disparities;
 }
 
 int MatcherOptions::min_disparity() const {
-  return kind == MatcherKind::kSemiGlobal ? semi_global.min_disparity
-                                          : block_matching.min_disparity;
+  switch (kind) {
+    case MatcherKind::kSemiGlobal: return semi_global.min_disparity;
+    case MatcherKind::kDense: return dense.min_disparity;
+    case MatcherKind::kBlockMatching: break;
+  }
+  return block_matching.min_disparity;
 }
 
 int BlockMatchingLeftPad(const BlockMatchingOptions& o) {
@@ -272,6 +299,7 @@ double EstimateNoiseSigma(const cv::Mat& grey) {
 
 std::unique_ptr<DisparityMatcher> MakeMatcher(const MatcherOptions& options) {
   CV_Assert(options.Validate().empty());
+  if (options.kind == MatcherKind::kDense) return std::make_unique<DenseAdapter>(options);
   if (options.kind == MatcherKind::kSemiGlobal) {
     const SemiGlobalOptions& o = options.semi_global;
     // Grey input: cn = 1 in OpenCV's usual 8 * cn * block^2 and 32 * cn * block^2.

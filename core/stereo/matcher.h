@@ -10,6 +10,7 @@
 
 #include "core/common/fields.h"
 #include "core/stereo/block_matcher.h"
+#include "core/stereo/dense_matcher.h"
 #include "core/stereo/disparity.h"
 
 namespace stevi::stereo {
@@ -163,7 +164,7 @@ struct SemiGlobalOptions {
   }
 };
 
-enum class MatcherKind { kBlockMatching, kSemiGlobal };
+enum class MatcherKind { kBlockMatching, kSemiGlobal, kDense };
 
 std::string_view MatcherKindName(MatcherKind kind);
 
@@ -171,6 +172,8 @@ struct MatcherOptions {
   MatcherKind kind = MatcherKind::kBlockMatching;
   BlockMatchingOptions block_matching;
   SemiGlobalOptions semi_global;
+  // Census semi-global matching with a calibrated per-pixel confidence (dense_matcher.h).
+  DenseMatcherOptions dense;
 
   // Validates the options of the selected kind only, with field names prefixed
   // ("block_matching.num_disparities: ...").
@@ -178,13 +181,16 @@ struct MatcherOptions {
   friend bool operator==(const MatcherOptions&, const MatcherOptions&) = default;
 
   static constexpr fields::ChoiceName<MatcherKind> kKindNames[] = {
-      {MatcherKind::kBlockMatching, "block_matching"}, {MatcherKind::kSemiGlobal, "semi_global"}};
+      {MatcherKind::kBlockMatching, "block_matching"},
+      {MatcherKind::kSemiGlobal, "semi_global"},
+      {MatcherKind::kDense, "dense"}};
   template <class Self, class V>
   static void Fields(Self& s, V& v) {
     using fields::Field;
     v.Choice(s.kind, Field("kind", "", "which matcher runs"), kKindNames);
     v.Nested(s.block_matching, Field("block_matching"));
     v.Nested(s.semi_global, Field("semi_global"));
+    v.Nested(s.dense, Field("dense"));
   }
   int num_disparities() const;
   int min_disparity() const;

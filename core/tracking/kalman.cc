@@ -166,6 +166,16 @@ void ConstantVelocityKalman::PredictAngleDepth(double dt_s, double q) {
   P_ = 0.5 * (P_ + P_.transpose()).eval();
 }
 
+void ConstantVelocityKalman::MapAngleDepth(const Matrix6& linear, const Vector6& offset) {
+  const auto map = [&linear, &offset](const Vector6& s) {
+    return AngleDepthFromCam(linear * CamFromAngleDepth(s) + offset);
+  };
+  const Matrix6 F = NumericJacobian(map, x_);
+  x_ = map(x_);
+  P_ = F * P_ * F.transpose();
+  P_ = 0.5 * (P_ + P_.transpose()).eval();
+}
+
 bool ConstantVelocityKalman::Update(const Eigen::Vector3d& measured_m,
                                     const Eigen::Matrix3d& covariance_m2) {
   // H = [I 0], so H P = the top three rows of P and H P H^T its top-left block.

@@ -127,6 +127,15 @@ class ConstantVelocityKalman {
   void PredictAngleDepth(double dt_s, double process_noise);
   Eigen::Vector3d PredictedAngleDepth(double dt_s) const;
 
+  // For a state s = (a, b, z) and its rates: maps its cam-frame position and velocity (p, v)
+  // through the affine map (p, v) -> linear * (p, v) + offset, the mean exactly and the covariance
+  // through the map's Jacobian in s (no process noise). A rigid motion of the camera,
+  // p' = R p + t, is linear = diag(R, R) and offset = (t, 0); a change of what the velocity is
+  // relative to, v' = v + A p + c, is linear = [I 0; A I] and offset = (0, c). A point that ends
+  // behind the camera is frozen at the smallest depth (see PredictAngleDepth).
+  void MapAngleDepth(const Eigen::Matrix<double, 6, 6>& linear,
+                     const Eigen::Matrix<double, 6, 1>& offset);
+
   // Corrects with a measured position (metres) of covariance `covariance_m2` (Joseph form, which
   // keeps the covariance symmetric and positive). Returns false, leaving the filter unchanged, when
   // the innovation covariance is not positive definite (a NaN in the input).

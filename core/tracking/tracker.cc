@@ -1,6 +1,7 @@
 #include "core/tracking/tracker.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -60,6 +61,11 @@ std::vector<std::string> TrackerOptions::Validate() const {
     problems.push_back("tentative_delete_misses: must be <= delete_misses = " +
                        std::to_string(delete_misses) + Got(tentative_delete_misses));
   }
+  // Below 1, confirm_hits is a problem of its own.
+  if (confirm_hits >= 1 && confirm_window < confirm_hits) {
+    problems.push_back("confirm_window: must be >= confirm_hits = " + std::to_string(confirm_hits) +
+                       Got(confirm_window));
+  }
   return problems;
 }
 
@@ -75,6 +81,7 @@ void Tracker::SetOptions(TrackerOptions options) {
 void Tracker::Reset() {
   tracks_.clear();
   last_t_ns_.reset();
+  ground_velocity_ = false;
 }
 
 namespace {
@@ -422,10 +429,15 @@ void Tracker::UpdateMeasured(Entry& e, const Prediction& p, const detection::Det
   e.since_measured_s = 0;
   e.last = d;
   ++e.hits;
+  e.hit_history = (e.hit_history << 1) | 1;
   e.misses = 0;
-  if (e.state != TrackState::kTentative || e.hits >= options_.confirm_hits) {
-    e.state = TrackState::kConfirmed;
-  }
+  if (e.state != TrackState::kTentative || ConfirmedByHits(e)) e.state = TrackState::kConfirmed;
+}
+
+bool Tracker::ConfirmedByHits(const Entry& e) const {
+  const int window = options_.confirm_window;
+  const std::uint64_t mask = window >= 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << window) - 1;
+  return std::popcount(e.hit_history & mask) >= options_.confirm_hits;
 }
 
 int Tracker::FindSharedBlob(const Prediction& p,
@@ -478,6 +490,7 @@ void Tracker::UpdatePositionOnly(int t, int k, const std::vector<detection::Dete
     }
   }
   ++e.hits;
+  e.hit_history = (e.hit_history << 1) | 1;
   e.misses = 0;
   e.state = TrackState::kConfirmed;
 }
@@ -498,6 +511,7 @@ void Tracker::Coast(Entry& e, double dt, const CameraModel& camera) {
     }
   }
   ++e.misses;
+  e.hit_history <<= 1;
   if (e.state == TrackState::kConfirmed) e.state = TrackState::kCoasting;
 }
 
@@ -588,6 +602,7 @@ void Tracker::MergeTracks() {
         older.since_measured_s = 0;
         older.misses = 0;
         ++older.hits;
+        older.hit_history |= 1;
         older.state = TrackState::kConfirmed;
       }
       younger.id = 0;  // merged: removed below
@@ -609,12 +624,93 @@ bool Tracker::Expired(const Entry& e, const CameraModel& camera) const {
          v - 0.5 * e.full_size.height > camera.height;
 }
 
+namespace {
+
+// The cross-product matrix [w]x.
+Eigen::Matrix3d Skew(const Eigen::Vector3d& w) {
+  Eigen::Matrix3d m;
+  m << 0, -w.z(), w.y(), w.z(), 0, -w.x(), -w.y(), w.x(), 0;
+  return m;
+}
+
+}  // namespace
+
+Tracker::ApparentMotion Tracker::ApparentMotionOf(const Eigen::Isometry3d& cam_now_from_cam_prev,
+                                                  double dt) {
+  // The logarithm of the rigid motion: rotation vector phi (angle theta) and the translation's
+  // generator V^-1 t, V^-1 = I - W / 2 + (1 - theta sin(theta) / (2 (1 - cos(theta)))) W^2 /
+  // theta^2 with W = [phi]x (I - W / 2 + W^2 / 12 for a small angle).
+  const Eigen::AngleAxisd angle_axis(cam_now_from_cam_prev.linear());
+  const double theta = angle_axis.angle();
+  const Eigen::Vector3d phi = theta * angle_axis.axis();
+  const Eigen::Matrix3d W = Skew(phi);
+  double k = 1.0 / 12;
+  if (theta > 1e-4)
+    k = (1 - theta * std::sin(theta) / (2 * (1 - std::cos(theta)))) / (theta * theta);
+  const Eigen::Matrix3d V_inv = Eigen::Matrix3d::Identity() - 0.5 * W + k * W * W;
+  return {.linear = W / dt, .offset = V_inv * cam_now_from_cam_prev.translation() / dt};
+}
+
+void Tracker::ApplyEgoMotion(const EgoMotion& ego, double dt) {
+  using Matrix6 = Eigen::Matrix<double, 6, 6>;
+  using Vector6 = Eigen::Matrix<double, 6, 1>;
+  const Eigen::Matrix3d R = ego.cam_now_from_cam_prev.linear();
+  const Eigen::Vector3d t = ego.cam_now_from_cam_prev.translation();
+  if (dt > 0) {
+    const ApparentMotion apparent = ApparentMotionOf(ego.cam_now_from_cam_prev, dt);
+    apparent_linear_ = apparent.linear;
+    apparent_offset_ = apparent.offset;
+  }
+  // Relative velocities (the last update had no ego-motion) lose the apparent velocity of a static
+  // point, A p + c, and are over the ground; then position and velocity turn with the camera. A
+  // track started at the last update has no velocity of its own yet (the prior, at rest): it starts
+  // at rest over the ground instead.
+  const bool to_ground = !ground_velocity_ && dt > 0;
+  Matrix6 rigid = Matrix6::Zero();
+  rigid.topLeftCorner<3, 3>() = R;
+  rigid.bottomRightCorner<3, 3>() = R;
+  Vector6 moved = Vector6::Zero();
+  moved.head<3>() = t;
+  Matrix6 convert = Matrix6::Identity();
+  Vector6 convert_offset = Vector6::Zero();
+  if (to_ground) {
+    convert.bottomLeftCorner<3, 3>() = -apparent_linear_;
+    convert_offset.tail<3>() = -apparent_offset_;
+  }
+  const Matrix6 linear = rigid * convert;
+  const Vector6 offset = rigid * convert_offset + moved;
+  for (Entry& e : tracks_) {
+    if (to_ground && e.age_frames > 1) {
+      e.kalman.MapAngleDepth(linear, offset);
+    } else {
+      e.kalman.MapAngleDepth(rigid, moved);
+    }
+  }
+  if (dt > 0) ground_velocity_ = true;
+}
+
+void Tracker::ToRelativeVelocity() {
+  Eigen::Matrix<double, 6, 6> linear = Eigen::Matrix<double, 6, 6>::Identity();
+  linear.bottomLeftCorner<3, 3>() = apparent_linear_;
+  Eigen::Matrix<double, 6, 1> offset = Eigen::Matrix<double, 6, 1>::Zero();
+  offset.tail<3>() = apparent_offset_;
+  for (Entry& e : tracks_) e.kalman.MapAngleDepth(linear, offset);
+  ground_velocity_ = false;
+}
+
 std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& detections,
-                                   int64_t t_ns, const CameraModel& camera) {
+                                   int64_t t_ns, const CameraModel& camera,
+                                   const std::optional<EgoMotion>& ego) {
   if (std::vector<std::string> problems = camera.Validate(); !problems.empty()) {
     throw std::invalid_argument("Tracker::Update: camera: " + Error::Invalid(problems).message);
   }
   const double dt = TimeStep(t_ns);
+  // The tracks in this frame's cam frame: carried through the camera's motion when it is known.
+  if (ego) {
+    ApplyEgoMotion(*ego, dt);
+  } else if (ground_velocity_) {
+    ToRelativeVelocity();
+  }
   SelectUsable(detections);
   const int num_tracks = static_cast<int>(tracks_.size());
   FindCuts(detections, camera);
@@ -660,7 +756,7 @@ Track Tracker::Output(const Entry& e, const CameraModel& camera) const {
   const ConstantVelocityKalman::State& x = e.kalman.state();
   const double a = x(0), b = x(1), z = x(2), da = x(3), db = x(4), dz = x(5);
   const Eigen::Vector3d p(a * z, b * z, z);
-  const Eigen::Vector3d v(da * z + a * dz, db * z + b * dz, dz);
+  const Eigen::Vector3d v_filter(da * z + a * dz, db * z + b * dz, dz);
   Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Zero();
   J(0, 0) = z, J(0, 2) = a;
   J(1, 1) = z, J(1, 2) = b;
@@ -668,6 +764,15 @@ Track Tracker::Output(const Entry& e, const CameraModel& camera) const {
   J(3, 0) = dz, J(3, 2) = da, J(3, 3) = z, J(3, 5) = a;
   J(4, 1) = dz, J(4, 2) = db, J(4, 4) = z, J(4, 5) = b;
   J(5, 5) = 1;
+  Eigen::Vector3d v = v_filter;
+  if (ground_velocity_) {
+    // Published relative to the camera: the ground velocity plus the apparent velocity the
+    // camera's own motion gives the point, v + A p + c.
+    v += apparent_linear_ * p + apparent_offset_;
+    Eigen::Matrix<double, 6, 6> relative = Eigen::Matrix<double, 6, 6>::Identity();
+    relative.bottomLeftCorner<3, 3>() = apparent_linear_;
+    J = (relative * J).eval();
+  }
   const Eigen::Matrix<double, 6, 1> variance =
       (J * e.kalman.covariance() * J.transpose()).diagonal();
   if (e.misses > 0 && z > kMinDepthM) {

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 
 #include "core/common/fields.h"
@@ -85,8 +86,15 @@ struct GateOptions {
 struct TrackerOptions {
   KalmanOptions kalman;
   GateOptions gates;
-  // A tentative track becomes confirmed at this many hits (frames with a detection), >= 1.
+  // M-of-N confirmation: a tentative track becomes confirmed when it has confirm_hits (M) hits
+  // (updates with a detection) within its last confirm_window (N) updates, counting the one that
+  // created it; 1 <= M <= N <= 64. The defaults M = 3, N = 5 are exactly the rule "3 hits in all"
+  // with tentative_delete_misses = 2: a tentative track never misses twice in a row, so its third
+  // hit comes by its fifth update at the latest (in general, within 1 + (M - 1) K updates for
+  // tentative_delete_misses K). A smaller N asks for denser evidence: M = 3, N = 4 does not
+  // confirm a track seen every other frame.
   int confirm_hits = 3;
+  int confirm_window = 5;
   // A tentative track is deleted at this many consecutive misses, 1..delete_misses. 2 lets it
   // survive one dropped detection (detectors recognise 60-80 % of obstacles per frame) while
   // clutter dies within two frames.
@@ -116,6 +124,12 @@ struct TrackerOptions {
     v.Nested(s.kalman, Field("kalman"));
     v.Nested(s.gates, Field("gates"));
     v.Number(s.confirm_hits, Field("confirm_hits", "", "hits to confirm a track").AtLeast(1));
+    // At least confirm_hits: checked in Validate().
+    v.Number(
+        s.confirm_window,
+        Field("confirm_window", "updates",
+              "confirm_hits must fall within a track's last this many updates; >= confirm_hits")
+            .In(1, 64));
     // At most delete_misses: checked in Validate().
     v.Number(s.tentative_delete_misses,
              Field("tentative_delete_misses", "",
@@ -135,7 +149,7 @@ struct TrackerOptions {
 };
 
 enum class TrackState {
-  kTentative,  // not yet confirm_hits hits
+  kTentative,  // not yet confirm_hits hits within confirm_window updates
   kConfirmed,  // measured this frame
   kCoasting,   // confirmed, not measured this frame: the state is predicted
 };
@@ -174,6 +188,13 @@ struct Track {
   std::optional<double> closest_approach_m;
 };
 
+// The camera's own motion since the previous update, from the vehicle's poses at the two frames and
+// the camera's mount (core/pipeline: Pipeline::Finish): a point fixed in the world that was at p in
+// the previous frame's cam frame is at cam_now_from_cam_prev * p in this frame's.
+struct EgoMotion {
+  Eigen::Isometry3d cam_now_from_cam_prev = Eigen::Isometry3d::Identity();
+};
+
 // Thread-compatible: call Update() from one thread at a time.
 class Tracker {
  public:
@@ -186,8 +207,17 @@ class Tracker {
   // is the real interval since the previous update (0 for a repeated or earlier timestamp, at most
   // max_dt_s). Detections without a finite position in front of the camera are ignored. The camera
   // must be valid (else std::invalid_argument).
+  //
+  // With `ego` (the camera's motion since the previous update), every track is first carried into
+  // this frame's cam frame (a static obstacle's prediction lands where it is seen now), and the
+  // filters' velocities are over the ground: a new track starts at rest in the world, and a static
+  // obstacle keeps a zero velocity while the camera drives or turns. The published velocity,
+  // range rate and time to collision stay relative to the camera (README.md, "Ego-motion").
+  // Without it, the velocities are relative to the camera, as the thesis's; an update without
+  // ego-motion after one with it converts them back with the camera's last motion.
   std::vector<Track> Update(const std::vector<detection::Detection>& detections, int64_t t_ns,
-                            const CameraModel& camera);
+                            const CameraModel& camera,
+                            const std::optional<EgoMotion>& ego = std::nullopt);
 
   // Drops every track and the time reference. Ids keep increasing: an id is never reused.
   void Reset();
@@ -207,6 +237,8 @@ class Tracker {
     int age_frames = 0;
     int hits = 0;
     int misses = 0;
+    // Bit k: the update k updates ago (0 = this one) had a detection.
+    std::uint64_t hit_history = 1;
     detection::Detection last;      // the last detection, as measured
     ConstantVelocityKalman kalman;  // on s = (a, b, z): see MeasureAngleDepth
     FadingMemoryFilter range_filter;
@@ -268,6 +300,22 @@ class Tracker {
   // The stages of Update(), in order. The interval since the previous update (clamped to
   // [0, max_dt_s]), remembering t_ns.
   double TimeStep(int64_t t_ns);
+  // The velocity field a camera motion gives the static points, in the cam frame: a point at p
+  // seems to move at linear * p + offset (m/s). From the motion's logarithm (its twist over dt), so
+  // that it is the same field before and after the motion, and exact for a constant turn.
+  struct ApparentMotion {
+    Eigen::Matrix3d linear;
+    Eigen::Vector3d offset;
+  };
+  static ApparentMotion ApparentMotionOf(const Eigen::Isometry3d& cam_now_from_cam_prev, double dt);
+  // Every track carried through the camera's motion over dt into this frame's cam frame, with its
+  // velocity over the ground (converted from relative when it was).
+  void ApplyEgoMotion(const EgoMotion& ego, double dt);
+  // Every track's velocity from over the ground back to relative to the camera, with the camera's
+  // motion of the last ego-motion update.
+  void ToRelativeVelocity();
+  // Hits within the last confirm_window updates reach confirm_hits.
+  bool ConfirmedByHits(const Entry& e) const;
   // usable_: the detections that can be tracked.
   void SelectUsable(const std::vector<detection::Detection>& detections);
   // predictions_: every track predicted by dt.
@@ -311,6 +359,12 @@ class Tracker {
   std::vector<Entry> tracks_;
   std::uint64_t next_id_ = 1;
   std::optional<int64_t> last_t_ns_;
+  // The filters' velocities are over the ground (the last update had ego-motion), not relative to
+  // the camera. The camera's last motion as the velocity field it gives a static point at p:
+  // apparent_linear_ * p + apparent_offset_ (m/s, ApparentMotionOf).
+  bool ground_velocity_ = false;
+  Eigen::Matrix3d apparent_linear_ = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d apparent_offset_ = Eigen::Vector3d::Zero();
 
   // Per-update buffers, kept to avoid reallocating every frame.
   std::vector<int> usable_;              // indices of the detections that can be tracked

@@ -18,6 +18,7 @@
 #include "core/pipeline/pipeline.h"
 #include "drivers/synthetic/random_scenes.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/testing/track_level.h"
 #include "tests/testing/truth_match.h"
 
 namespace stevi::bench {
@@ -319,6 +320,78 @@ std::string JsonTotals(const Totals& t) {
   return j.str();
 }
 
+// Track level (tests/testing/track_level.h): an obstacle is measurable when at least
+// kMinVisiblePx of it are visible and its truth median disparity is at least
+// kMeasurableSigmas disparity sigmas (PipelineConfig::range.disparity_sigma_px, camera pixels).
+constexpr double kMeasurableSigmas = 3.0;
+
+testing::TlFrame TrackLevelFrame(const pipeline::FrameResult& result,
+                                 const drivers::FrameTruth& truth, double fB,
+                                 double disparity_sigma_px) {
+  testing::TlFrame f;
+  const int bin = std::max(1, result.binning);
+  for (const drivers::ObstacleTruth& o : truth.obstacles) {
+    testing::TlTruth t;
+    t.id = o.id;
+    t.box = o.bbox;
+    t.visible = o.visible_px > 0;
+    t.expected = o.visible_px >= kMinVisiblePx &&
+                 o.median_disparity_px >= kMeasurableSigmas * disparity_sigma_px;
+    t.depth_m = o.median_disparity_px > 0 ? fB / o.median_disparity_px : 0.0;
+    f.truths.push_back(t);
+  }
+  for (const tracking::Track& track : result.tracks) {
+    const cv::Rect& b = track.detection.bbox;
+    f.tracks.push_back({track.id, track.state == tracking::TrackState::kConfirmed,
+                        cv::Rect(b.x * bin, b.y * bin, b.width * bin, b.height * bin),
+                        track.position_cam_m[2], track.position_sigma_m[2]});
+  }
+  return f;
+}
+
+void PrintTrackLevelHeader(const FamilyEvalOptions& options) {
+  std::printf(
+      "\nTRACK LEVEL (tracker, confirmed tracks): measurable = visible >= %d px and truth "
+      "median disparity >= %.0f x the disparity sigma (PipelineConfig::range.disparity_sigma_px);"
+      "\n  conf@%d = measurable obstacles confirmed (a track in state confirmed, box IoU >= %.1f) "
+      "within %d frames of becoming measurable (target 95 %%), over those whose window fits "
+      "the scene (cens = not confirmed and the scene ended first);\n  ftc = median frames from "
+      "measurable to confirmed (confirmed at all: ever); false/1k = confirmed tracks matching "
+      "no expected or don't-care obstacle in any confirmed frame, per 1000 frames (target <= "
+      "1); err/sig = rms (depth - truth) / depth sigma of confirmed track-frames (target "
+      "0.7..1.4)\n",
+      kMinVisiblePx, kMeasurableSigmas, options.confirm_window, kMinIoU, options.confirm_window);
+  std::printf("%-11s %-13s %6s %6s %5s %5s %8s %5s %5s %7s %5s %6s %8s %7s\n", "family",
+              "algorithm", "scenes", "frames", "sigma", "obst", "conf@N", "cens", "ever", "ftc",
+              "conf", "false", "false/1k", "err/sig");
+}
+
+void PrintTrackLevelRow(const std::string& family, const std::string& variant,
+                        const testing::TrackLevelTotals& t, double sigma_px) {
+  char conf[32];
+  std::snprintf(conf, sizeof conf, "%.1f%%", t.ConfirmedPct());
+  std::printf("%-11s %-13s %6d %6d %5.2f %5d %8s %5d %5d %7.1f %5d %6d %8.2f %7.2f\n",
+              family.c_str(), variant.c_str(), t.sequences, t.frames, sigma_px, t.obstacles, conf,
+              t.censored, t.confirmed_ever, t.MedianFramesToConfirm(), t.confirmed_tracks,
+              t.false_tracks, t.FalsePer1000Frames(), t.ErrorOverSigmaRms());
+}
+
+std::string JsonTrackLevel(const testing::TrackLevelTotals& t, int window, double sigma_px) {
+  std::ostringstream j;
+  j << "{\"window_frames\": " << window << ", \"disparity_sigma_px\": " << sigma_px
+    << ", \"measurable_sigmas\": " << kMeasurableSigmas << ", \"frames\": " << t.frames
+    << ", \"obstacles\": " << t.obstacles << ", \"scored\": " << t.scored
+    << ", \"censored\": " << t.censored << ", \"confirmed_in_window\": " << t.confirmed_in_window
+    << ", \"confirmed_in_window_pct\": " << t.ConfirmedPct()
+    << ", \"confirmed_ever\": " << t.confirmed_ever
+    << ", \"median_frames_to_confirm\": " << t.MedianFramesToConfirm()
+    << ", \"confirmed_tracks\": " << t.confirmed_tracks << ", \"false_tracks\": " << t.false_tracks
+    << ", \"false_tracks_per_1000_frames\": " << t.FalsePer1000Frames()
+    << ", \"error_over_sigma_rms\": " << t.ErrorOverSigmaRms()
+    << ", \"error_over_sigma_n\": " << t.normalised_error.size() << "}";
+  return j.str();
+}
+
 }  // namespace
 
 bool ParseSeedRange(const std::string& text, uint64_t& first, uint64_t& last) {
@@ -340,83 +413,90 @@ bool ParseSeedRange(const std::string& text, uint64_t& first, uint64_t& last) {
   return first <= last;
 }
 
-int RunFamilyEval(const FamilyEvalOptions& options, const std::vector<EvalVariant>& variants) {
-  const auto start = std::chrono::steady_clock::now();
-  std::printf(
-      "random scene families, seeds %llu-%llu%s\n",
-      static_cast<unsigned long long>(options.seed_first),
-      static_cast<unsigned long long>(options.seed_last),
-      options.seed_first > 1000 ? " (the TEST split: never tune on it)" : " (tuning split)");
-  std::printf(
-      "rule: expected = visible >= %d px and truth median disparity >= %.0f px; a "
-      "detection matches at IoU >= %.1f one-to-one; unmatched detections on a "
-      "non-expected obstacle (IoU >= %.1f or >= 50 %% inside it) are don't care (dc), "
-      "others false positives (FP); prec = matched / (matched + FP)\n",
-      kMinVisiblePx, kMinDisparityPx, kMinIoU, kMinIoU);
-  std::printf(
-      "box/obj = mean boxes per found obstacle (1 + unmatched detections >= 50 %% inside "
-      "its truth box), frag = found obstacles with > 1 box; err = |depth - fB / truth "
-      "median disparity| / truth: median/rms (n) by truth disparity band; err/sig = rms "
-      "of (depth - truth) / depth sigma\n");
-  if (!options.dump_dir.empty()) std::filesystem::create_directories(options.dump_dir);
+namespace {
 
-  std::map<std::string, std::map<std::string, Totals>> table;  // family -> variant -> totals
+using TrackTable = std::map<std::string, std::map<std::string, testing::TrackLevelTotals>>;
+
+struct FamilyTables {
+  std::map<std::string, std::map<std::string, Totals>> frames;  // family -> variant -> totals
+  TrackTable tracks;                                            // family -> variant -> totals
   double render_s = 0;
   int rendered_frames = 0;
-  for (const std::string& family : options.families) {
-    for (uint64_t seed = options.seed_first; seed <= options.seed_last; ++seed) {
-      const drivers::Scenario scenario = drivers::RandomScenario(family, seed);
-      const drivers::SyntheticRenderer renderer(scenario.options);
-      const auto rig = std::make_shared<const geometry::StereoRig>(renderer.Rig());
-      const double fB = scenario.options.f_px * scenario.options.baseline_m;
-      const int frames =
-          options.max_frames > 0 ? std::min(options.max_frames, scenario.frames) : scenario.frames;
-      std::vector<StereoFrame> images;
-      std::vector<drivers::FrameTruth> truths(static_cast<size_t>(frames));
-      const auto r0 = std::chrono::steady_clock::now();
-      for (int k = 0; k < frames; ++k) {
-        images.push_back(renderer.Render(k, &truths[static_cast<size_t>(k)]));
+};
+
+int SceneFrames(const FamilyEvalOptions& options, const drivers::Scenario& scenario) {
+  if (options.scene_frames > 0) return options.scene_frames;
+  return options.max_frames > 0 ? std::min(options.max_frames, scenario.frames) : scenario.frames;
+}
+
+// Renders one scene and runs every variant over it. False on a pipeline error (printed).
+bool RunScene(const FamilyEvalOptions& options, const std::vector<EvalVariant>& variants,
+              const std::string& family, uint64_t seed, FamilyTables& tables) {
+  const drivers::Scenario scenario = drivers::RandomScenario(family, seed);
+  const drivers::SyntheticRenderer renderer(scenario.options);
+  const auto rig = std::make_shared<const geometry::StereoRig>(renderer.Rig());
+  const double fB = scenario.options.f_px * scenario.options.baseline_m;
+  const int frames = SceneFrames(options, scenario);
+  std::vector<StereoFrame> images;
+  std::vector<drivers::FrameTruth> truths(static_cast<size_t>(frames));
+  const auto r0 = std::chrono::steady_clock::now();
+  for (int k = 0; k < frames; ++k) {
+    drivers::FrameTruth& truth = truths[static_cast<size_t>(k)];
+    images.push_back(renderer.Render(k, &truth));
+    truth.disparity_px.release();  // the scores read the obstacles only
+    truth.object_id.release();
+  }
+  tables.render_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - r0).count();
+  tables.rendered_frames += frames;
+  const bool dump = !options.dump_dir.empty() && seed < options.seed_first + options.dump_scenes;
+  for (const EvalVariant& variant : variants) {
+    pipeline::Pipeline pipe;
+    pipeline::PipelineConfig config = variant.config;
+    if (options.max_width_px) config.max_width_px = *options.max_width_px;
+    const pipeline::Snapshot snapshot{std::make_shared<const pipeline::PipelineConfig>(config),
+                                      rig};
+    Totals totals;
+    totals.scenes = 1;
+    std::vector<testing::TlFrame> track_frames;
+    for (int k = 0; k < frames; ++k) {
+      Result<pipeline::FrameResult> result = pipe.Process(images[static_cast<size_t>(k)], snapshot);
+      if (!result.ok()) {
+        std::fprintf(stderr, "%s frame %d (%s): %s\n", scenario.name.c_str(), k,
+                     variant.name.c_str(), result.error().message.c_str());
+        return false;
       }
-      render_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - r0).count();
-      rendered_frames += frames;
-      const bool dump =
-          !options.dump_dir.empty() && seed < options.seed_first + options.dump_scenes;
-      for (const EvalVariant& variant : variants) {
-        pipeline::Pipeline pipe;
-        pipeline::PipelineConfig config = variant.config;
-        if (options.max_width_px) config.max_width_px = *options.max_width_px;
-        const pipeline::Snapshot snapshot{std::make_shared<const pipeline::PipelineConfig>(config),
-                                          rig};
-        Totals totals;
-        totals.scenes = 1;
-        for (int k = 0; k < frames; ++k) {
-          Result<pipeline::FrameResult> result =
-              pipe.Process(images[static_cast<size_t>(k)], snapshot);
-          if (!result.ok()) {
-            std::fprintf(stderr, "%s frame %d (%s): %s\n", scenario.name.c_str(), k,
-                         variant.name.c_str(), result.error().message.c_str());
-            return 1;
-          }
-          const FrameScore s = Score(*result, truths[static_cast<size_t>(k)], fB, totals);
-          if (dump && k == frames - 1) {
-            Draw(images[static_cast<size_t>(k)], *result, fB, s,
-                 options.dump_dir + "/" + scenario.name + "-" + variant.name + "-f" +
-                     std::to_string(k) + ".png");
-          }
-        }
-        table[family][variant.name].Add(totals);
+      const FrameScore s = Score(*result, truths[static_cast<size_t>(k)], fB, totals);
+      track_frames.push_back(TrackLevelFrame(*result, truths[static_cast<size_t>(k)], fB,
+                                             config.range.disparity_sigma_px));
+      if (dump && k == frames - 1) {
+        Draw(images[static_cast<size_t>(k)], *result, fB, s,
+             options.dump_dir + "/" + scenario.name + "-" + variant.name + "-f" +
+                 std::to_string(k) + ".png");
       }
     }
+    tables.frames[family][variant.name].Add(totals);
+    testing::TrackLevelOptions tl;
+    tl.min_iou = kMinIoU;
+    tl.inside_fraction = kInsideFraction;
+    tl.window_frames = options.confirm_window;
+    tables.tracks[family][variant.name].Add(testing::ScoreTrackLevel(track_frames, tl));
   }
+  return true;
+}
 
+double SigmaOf(const EvalVariant& variant) { return variant.config.range.disparity_sigma_px; }
+
+void PrintTables(const FamilyEvalOptions& options, const std::vector<EvalVariant>& variants,
+                 FamilyTables& tables, std::map<std::string, Totals>& all,
+                 std::map<std::string, testing::TrackLevelTotals>& all_tracks) {
   std::printf("\n");
   PrintHeader();
-  std::map<std::string, Totals> all;
   for (const std::string& family : options.families) {
     for (const EvalVariant& variant : variants) {
-      const Totals& t = table[family][variant.name];
+      const Totals& t = tables.frames[family][variant.name];
       PrintRow(family, variant.name, t);
       all[variant.name].Add(t);
+      all_tracks[variant.name].Add(tables.tracks[family][variant.name]);
     }
   }
   if (options.families.size() > 1) {
@@ -430,35 +510,100 @@ int RunFamilyEval(const FamilyEvalOptions& options, const std::vector<EvalVarian
                   c.second, c.first);
     }
   }
+  std::printf("\n");
+  PrintTrackLevelHeader(options);
+  for (const std::string& family : options.families) {
+    for (const EvalVariant& variant : variants) {
+      PrintTrackLevelRow(family, variant.name, tables.tracks[family][variant.name],
+                         SigmaOf(variant));
+    }
+  }
+  if (options.families.size() > 1) {
+    for (const EvalVariant& variant : variants) {
+      PrintTrackLevelRow("all", variant.name, all_tracks[variant.name], SigmaOf(variant));
+    }
+  }
+}
+
+bool WriteJson(const FamilyEvalOptions& options, const std::vector<EvalVariant>& variants,
+               FamilyTables& tables, const std::map<std::string, Totals>& all,
+               const std::map<std::string, testing::TrackLevelTotals>& all_tracks) {
+  std::ofstream json(options.json_path);
+  json << "{\"seeds\": [" << options.seed_first << ", " << options.seed_last << "], \"split\": \""
+       << (options.seed_first > 1000 ? "test" : "tuning")
+       << "\", \"scene_frames\": " << options.scene_frames
+       << ", \"confirm_window\": " << options.confirm_window << ", \"families\": {";
+  bool first_family = true;
+  auto emit = [&](const std::string& name, const std::map<std::string, Totals>& by_variant,
+                  const std::map<std::string, testing::TrackLevelTotals>& tracks) {
+    json << (first_family ? "" : ", ") << "\"" << name << "\": {";
+    first_family = false;
+    bool first = true;
+    for (const EvalVariant& variant : variants) {
+      const auto it = by_variant.find(variant.name);
+      const auto tt = tracks.find(variant.name);
+      if (it == by_variant.end() || tt == tracks.end()) continue;
+      std::string per_frame = JsonTotals(it->second);
+      per_frame.pop_back();  // the closing brace: the track level goes inside
+      json << (first ? "" : ", ") << "\"" << variant.name << "\": " << per_frame
+           << ", \"track_level\": "
+           << JsonTrackLevel(tt->second, options.confirm_window, SigmaOf(variant)) << "}";
+      first = false;
+    }
+    json << "}";
+  };
+  for (const std::string& family : options.families) {
+    emit(family, tables.frames[family], tables.tracks[family]);
+  }
+  emit("all", all, all_tracks);
+  json << "}}\n";
+  return static_cast<bool>(json);
+}
+
+}  // namespace
+
+int RunFamilyEval(const FamilyEvalOptions& options, const std::vector<EvalVariant>& variants) {
+  const auto start = std::chrono::steady_clock::now();
+  std::printf(
+      "random scene families, seeds %llu-%llu%s\n",
+      static_cast<unsigned long long>(options.seed_first),
+      static_cast<unsigned long long>(options.seed_last),
+      options.seed_first > 1000 ? " (the TEST split: never tune on it)" : " (tuning split)");
+  if (options.scene_frames > 0) {
+    std::printf(
+        "scene frames: %d per scene (--scene-frames; past its own 4-6 frames each obstacle "
+        "continues on its straight path)\n",
+        options.scene_frames);
+  }
+  std::printf(
+      "rule: expected = visible >= %d px and truth median disparity >= %.0f px; a "
+      "detection matches at IoU >= %.1f one-to-one; unmatched detections on a "
+      "non-expected obstacle (IoU >= %.1f or >= 50 %% inside it) are don't care (dc), "
+      "others false positives (FP); prec = matched / (matched + FP)\n",
+      kMinVisiblePx, kMinDisparityPx, kMinIoU, kMinIoU);
+  std::printf(
+      "box/obj = mean boxes per found obstacle (1 + unmatched detections >= 50 %% inside "
+      "its truth box), frag = found obstacles with > 1 box; err = |depth - fB / truth "
+      "median disparity| / truth: median/rms (n) by truth disparity band; err/sig = rms "
+      "of (depth - truth) / depth sigma\n");
+  if (!options.dump_dir.empty()) std::filesystem::create_directories(options.dump_dir);
+
+  FamilyTables tables;
+  for (const std::string& family : options.families) {
+    for (uint64_t seed = options.seed_first; seed <= options.seed_last; ++seed) {
+      if (!RunScene(options, variants, family, seed, tables)) return 1;
+    }
+  }
+  std::map<std::string, Totals> all;
+  std::map<std::string, testing::TrackLevelTotals> all_tracks;
+  PrintTables(options, variants, tables, all, all_tracks);
   const double wall_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::printf("\n\nrendering: %d frames, %.3f s a frame; wall time %.1f s\n", rendered_frames,
-              rendered_frames ? render_s / rendered_frames : 0.0, wall_s);
-
-  if (!options.json_path.empty()) {
-    std::ofstream json(options.json_path);
-    json << "{\"seeds\": [" << options.seed_first << ", " << options.seed_last
-         << "], \"families\": {";
-    bool first_family = true;
-    auto emit = [&](const std::string& name, const std::map<std::string, Totals>& by_variant) {
-      json << (first_family ? "" : ", ") << "\"" << name << "\": {";
-      first_family = false;
-      bool first = true;
-      for (const EvalVariant& variant : variants) {
-        const auto it = by_variant.find(variant.name);
-        if (it == by_variant.end()) continue;
-        json << (first ? "" : ", ") << "\"" << variant.name << "\": " << JsonTotals(it->second);
-        first = false;
-      }
-      json << "}";
-    };
-    for (const std::string& family : options.families) emit(family, table[family]);
-    emit("all", all);
-    json << "}}\n";
-    if (!json) {
-      std::fprintf(stderr, "stevi-eval: could not write %s\n", options.json_path.c_str());
-      return 1;
-    }
+  std::printf("\nrendering: %d frames, %.3f s a frame; wall time %.1f s\n", tables.rendered_frames,
+              tables.rendered_frames ? tables.render_s / tables.rendered_frames : 0.0, wall_s);
+  if (!options.json_path.empty() && !WriteJson(options, variants, tables, all, all_tracks)) {
+    std::fprintf(stderr, "stevi-eval: could not write %s\n", options.json_path.c_str());
+    return 1;
   }
   return 0;
 }

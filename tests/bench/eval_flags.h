@@ -26,7 +26,28 @@ struct EvalFlags {
   std::string json;
   std::string dump;
   int dump_scenes = 3;
+  // --scene-frames N: render N frames of every random scene (0 = its own 4..6); --confirm-window
+  // N: the track-level confirmation window (frames, default 5). See eval_family.h.
+  int scene_frames = 0;
+  int confirm_window = 5;
 };
+
+// Parses a whole number >= `min` into `out`; the problem when it is not one.
+inline std::optional<std::string> ParseWholeFlag(const std::string& flag, const std::string& value,
+                                                 int min, int& out) {
+  size_t used = 0;
+  int parsed = 0;
+  try {
+    parsed = std::stoi(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != value.size() || value.empty() || parsed < min) {
+    return flag + ": expected a whole number >= " + std::to_string(min) + ", got '" + value + "'";
+  }
+  out = parsed;
+  return std::nullopt;
+}
 
 // Parses argv into `flags`; returns the problem ("--frames: expected ...", "unknown flag --x")
 // when there is one.
@@ -39,11 +60,17 @@ inline std::optional<std::string> ParseEvalFlags(int argc, char** argv, bool all
       flags.trace = true;
       continue;
     }
-    if (allow_family && (flag == "--family" || flag == "--seeds" || flag == "--json" ||
-                         flag == "--dump" || flag == "--dump-scenes")) {
+    if (allow_family &&
+        (flag == "--family" || flag == "--seeds" || flag == "--json" || flag == "--dump" ||
+         flag == "--dump-scenes" || flag == "--scene-frames" || flag == "--confirm-window")) {
       if (i + 1 >= argc) return flag + " needs a value";
       const std::string value = argv[++i];
-      if (flag == "--family") {
+      if (flag == "--scene-frames" || flag == "--confirm-window") {
+        std::optional<std::string> problem =
+            flag == "--scene-frames" ? ParseWholeFlag(flag, value, 1, flags.scene_frames)
+                                     : ParseWholeFlag(flag, value, 1, flags.confirm_window);
+        if (problem) return problem;
+      } else if (flag == "--family") {
         flags.family = value;
       } else if (flag == "--seeds") {
         flags.seeds = value;

@@ -12,11 +12,17 @@
 // 3. Each detector's FrameResult::detections (boxes times FrameResult::binning) against those
 //    obstacles: found (IoU >= 0.3 one-to-one), fragments, range error, false positives and what
 //    the truth says lies under them.
+// 4. The KITTI odometry sequence kitti_odom_seq_b (41 frames, true poses; tests/testing/
+//    odometry_sequence.h, odometry_pipeline.h): the pipeline with its tracker, without and with the
+//    poses through Snapshot::pose_at; static-world consistency of the confirmed tracks, confirmed
+//    tracks on the road (an SGBM reference plane), our labelled cars confirmed; --scenario
+//    kitti-odom-seq-b runs this section alone.
 //
 // Usage: stevi-eval-real [--algorithm canonical|stevie|stevis|all] [--max-width N]
 //                        [--scenario PAIR] [--json FILE] [--dump DIR]
 //   --max-width N: only that PipelineConfig::max_width_px (default: the default and 0)
-//   --scenario PAIR: one pair (tsukuba, venus, teddy, cones, motorcycle, kitti-000005_10, ...)
+//   --scenario PAIR: one pair (tsukuba, venus, teddy, cones, motorcycle, kitti-000005_10, ...),
+//     or kitti-odom-seq-b (section 4 alone)
 //   --dump DIR: colourised truth / disparity / error per pair, the truth obstacles of each KITTI
 //     pair, and each detector's boxes over them.
 // Without the reference data it prints why and exits 0 ("skipped").
@@ -39,6 +45,8 @@
 #include "tests/bench/eval_flags.h"
 #include "tests/testing/data.h"
 #include "tests/testing/gt_obstacles.h"
+#include "tests/testing/odometry_pipeline.h"
+#include "tests/testing/odometry_sequence.h"
 #include "tests/testing/real_pairs.h"
 #include "tests/testing/real_pairs_pipeline.h"
 
@@ -46,9 +54,6 @@ namespace {
 
 using namespace stevi;
 using testing::BoxVerdict;
-
-constexpr pipeline::Algorithm kAlgorithms[] = {
-    pipeline::Algorithm::kCanonical, pipeline::Algorithm::kSteViE, pipeline::Algorithm::kSteViS};
 
 std::string Name(pipeline::Algorithm a) { return std::string(pipeline::AlgorithmName(a)); }
 
@@ -300,6 +305,279 @@ void PrintDisparityRow(const std::string& pair, const std::string& widths, int b
               d1m, maem, maer);
 }
 
+// --- 4. the KITTI odometry sequence --------------------------------------------------------------
+
+struct OdoRun {
+  pipeline::Algorithm algorithm;
+  bool with_poses = false;
+  std::vector<testing::OdometryFrame> frames;
+  std::vector<testing::OdoTrackFrame> confirmed;  // every frame's confirmed tracks
+};
+
+std::string RunName(const OdoRun& run) {
+  return Name(run.algorithm) + (run.with_poses ? "+pose" : "");
+}
+
+// The figures of one run (printed and written as JSON).
+struct OdoFigures {
+  int tracks = 0;
+  testing::StaticWorldScore world, world_floor, world_static;
+  testing::GroundScore ground;
+  std::vector<testing::CarScore> cars;
+  int pose_ok = 0, georeferenced = 0;
+  double geo_mismatch_m = 0;
+  double total_ms = 0;
+};
+
+OdoFigures ScoreOdoRun(const testing::OdometrySequence& seq, const OdoRun& run,
+                       const std::vector<std::optional<testing::GroundPlane>>& planes,
+                       const std::vector<cv::Mat1f>& reference_disparity,
+                       const std::vector<testing::LabelledBox>& labels) {
+  OdoFigures f;
+  std::vector<uint64_t> ids;
+  for (const testing::OdoTrackFrame& t : run.confirmed) ids.push_back(t.id);
+  std::sort(ids.begin(), ids.end());
+  f.tracks = static_cast<int>(std::unique(ids.begin(), ids.end()) - ids.begin());
+  testing::StaticWorldOptions w;
+  f.world = testing::ScoreStaticWorld(run.confirmed, seq.poses, w);
+  f.world_static = testing::ScoreStaticWorld(run.confirmed, seq.poses, w, labels);
+  w.floor_m = 0.5;
+  f.world_floor = testing::ScoreStaticWorld(run.confirmed, seq.poses, w);
+  f.ground = testing::ScoreOnGround(run.confirmed, planes, seq.f_px, seq.baseline_m, seq.cx, seq.cy,
+                                    0.3, &reference_disparity);
+  f.cars = testing::ScoreCars(run.confirmed, labels);
+  for (const testing::OdometryFrame& fr : run.frames) {
+    f.pose_ok += fr.pose_ok;
+    f.georeferenced += fr.georeferenced;
+    f.geo_mismatch_m = std::max(f.geo_mismatch_m, fr.geo_mismatch_m);
+    f.total_ms += fr.total_ms / static_cast<double>(run.frames.size());
+  }
+  return f;
+}
+
+std::string Pct(int n, int of) { return of ? Fmt("%.1f%%", 100.0 * n / of) : std::string("-"); }
+
+void PrintOdoFrameTable(const testing::OdometrySequence& seq, const std::vector<OdoRun>& runs,
+                        const std::vector<std::optional<testing::GroundPlane>>& planes,
+                        const std::vector<testing::LabelledBox>& labels) {
+  std::printf(
+      "\nper frame: dets = FrameResult::detections, conf = tracks in state confirmed; road = "
+      "camera height over the reference plane (m); car = labelled cars in the frame\n%5s %5s %4s",
+      "frame", "road", "car");
+  for (const OdoRun& run : runs) {
+    std::printf(" %*s", static_cast<int>(RunName(run).size()) + 10,
+                (RunName(run) + " dets/conf").c_str());
+  }
+  std::printf("\n");
+  for (int k = 0; k < seq.frames(); ++k) {
+    int cars = 0;
+    for (const testing::LabelledBox& b : labels) cars += b.frame == k;
+    const auto& plane = planes[static_cast<size_t>(k)];
+    std::printf("%5d %5s %4d", k, plane ? Fmt("%.2f", plane->height_m).c_str() : "-", cars);
+    for (const OdoRun& run : runs) {
+      const testing::OdometryFrame& fr = run.frames[static_cast<size_t>(k)];
+      std::printf(
+          " %*s", static_cast<int>(RunName(run).size()) + 10,
+          (std::to_string(fr.detections) + "/" + std::to_string(fr.confirmed.size())).c_str());
+    }
+    std::printf("\n");
+  }
+}
+
+void PrintOdoSummary(const std::vector<OdoRun>& runs, const std::vector<OdoFigures>& figures) {
+  std::printf(
+      "\nsummary: conf = confirmed track-frames; world = static-world consistency of "
+      "track-frames of tracks confirmed >= 2 frames: within max(5 %% of range, 3 |sigma|) of "
+      "the track's median world point (target >= 90 %%); +0.5m: with a 0.5 m floor; "
+      "static: without the track-frames on the labelled (moving) cars; med dev = median "
+      "deviation (m);\n  ground = confirmed track-frames whose box top at their depth is "
+      "< 0.3 m above the reference road (target < 2 %%); <road = whose box bottom at their "
+      "depth is > 0.5 m under the road (the box reaches over nearer road); roadpx = >= half of "
+      "the box's reference disparities on the road plane;\n  pose = frames with a pose; geo "
+      "chk = largest distance between a georeferenced track's WGS84 point and its camera point "
+      "carried by the true pose; car N = its scored full-view frames confirmed: IoU >= 0.3 or "
+      "covering >= 50 %% of it (IoU >= 0.3 alone); its first 2 labelled frames are not scored\n");
+  std::printf("%-16s %6s %6s %7s %7s %7s %7s %7s %7s %7s %5s %8s %7s", "run", "tracks", "conf",
+              "world", "+0.5m", "static", "med dev", "ground", "<road", "roadpx", "pose", "geo chk",
+              "ms/f");
+  if (!figures.empty()) {
+    for (const testing::CarScore& c : figures.front().cars) {
+      std::printf(" %14s", ("car " + std::to_string(c.car) + " (IoU)").c_str());
+    }
+  }
+  std::printf("\n");
+  for (size_t i = 0; i < runs.size(); ++i) {
+    const OdoFigures& f = figures[i];
+    std::vector<double> dev = f.world.deviation_m;
+    std::printf("%-16s %6d %6zu %7s %7s %7s %7s %7s %7s %7s %5d %8s %7.1f",
+                RunName(runs[i]).c_str(), f.tracks, runs[i].confirmed.size(),
+                Pct(f.world.consistent, f.world.track_frames).c_str(),
+                Pct(f.world_floor.consistent, f.world_floor.track_frames).c_str(),
+                Pct(f.world_static.consistent, f.world_static.track_frames).c_str(),
+                MedianText(dev).c_str(), Pct(f.ground.on_ground, f.ground.scored).c_str(),
+                Pct(f.ground.below_road, f.ground.scored).c_str(),
+                Pct(f.ground.road_box, f.ground.scored).c_str(), f.pose_ok,
+                f.georeferenced ? Fmt("%.3fm", f.geo_mismatch_m).c_str() : "-", f.total_ms);
+    for (const testing::CarScore& c : f.cars) {
+      std::printf(" %14s",
+                  (std::to_string(c.confirmed_frames) + "/" + std::to_string(c.scored_frames) +
+                   " (" + std::to_string(c.confirmed_iou_frames) + ")")
+                      .c_str());
+    }
+    std::printf("\n");
+  }
+}
+
+void DumpOdoFrame(const testing::OdometrySequence& seq, const OdoRun& run, int k,
+                  const std::vector<testing::LabelledBox>& labels, const std::string& path) {
+  cv::Mat3b out;
+  cv::cvtColor(seq.left[static_cast<size_t>(k)], out, cv::COLOR_GRAY2BGR);
+  const cv::Scalar green(0, 220, 0), red(0, 0, 255);
+  for (const testing::LabelledBox& b : labels) {
+    if (b.frame != k) continue;
+    cv::rectangle(out, b.box, green, 2);
+    Label(out, "car " + std::to_string(b.car), {b.box.x, b.box.y + b.box.height + 13}, green);
+  }
+  for (const cv::Rect& d : run.frames[static_cast<size_t>(k)].detection_boxes) {
+    cv::rectangle(out, d, cv::Scalar(0, 160, 255), 1);
+  }
+  for (const testing::OdoTrackFrame& t : run.frames[static_cast<size_t>(k)].confirmed) {
+    cv::rectangle(out, t.box, red, 2);
+    Label(out, "#" + std::to_string(t.id) + " " + Fmt("%.1fm", cv::norm(t.position_cam_m)),
+          {t.box.x, t.box.y - 3}, red);
+  }
+  const testing::OdometryFrame& fr = run.frames[static_cast<size_t>(k)];
+  Label(out,
+        RunName(run) + " frame " + std::to_string(k) + ": " + std::to_string(fr.detections) +
+            " detections (thin orange), confirmed tracks red (#id range), labelled cars green",
+        {4, 14}, cv::Scalar::all(255));
+  cv::imwrite(path, out);
+}
+
+std::string JsonOdometry(const testing::OdometrySequence& seq, const std::vector<OdoRun>& runs,
+                         const std::vector<OdoFigures>& figures,
+                         const std::vector<std::optional<testing::GroundPlane>>& planes) {
+  std::ostringstream j;
+  j << "{\"sequence\": \"" << seq.name << "\", \"frames\": " << seq.frames()
+    << ", \"reference_camera_height_m\": [";
+  for (size_t k = 0; k < planes.size(); ++k) {
+    j << (k ? ", " : "") << (planes[k] ? Fmt("%.3f", planes[k]->height_m) : "null");
+  }
+  j << "], \"runs\": [";
+  for (size_t i = 0; i < runs.size(); ++i) {
+    const OdoFigures& f = figures[i];
+    j << (i ? ", " : "") << "{\"algorithm\": \"" << Name(runs[i].algorithm)
+      << "\", \"with_poses\": " << (runs[i].with_poses ? "true" : "false")
+      << ", \"confirmed_tracks\": " << f.tracks
+      << ", \"confirmed_track_frames\": " << runs[i].confirmed.size()
+      << ", \"static_world\": {\"track_frames\": " << f.world.track_frames
+      << ", \"consistent_pct\": " << f.world.Pct()
+      << ", \"consistent_pct_floor_0_5m\": " << f.world_floor.Pct()
+      << ", \"consistent_pct_without_labelled_cars\": " << f.world_static.Pct()
+      << "}, \"on_ground\": {\"scored\": " << f.ground.scored
+      << ", \"on_ground\": " << f.ground.on_ground << ", \"pct\": " << f.ground.Pct()
+      << ", \"below_road_pct\": " << f.ground.BelowRoadPct()
+      << ", \"road_box_pct\": " << f.ground.RoadBoxPct() << "}, \"pose_frames\": " << f.pose_ok
+      << ", \"georeferenced_track_frames\": " << f.georeferenced
+      << ", \"mean_total_ms\": " << f.total_ms << ", \"cars\": [";
+    for (size_t c = 0; c < f.cars.size(); ++c) {
+      const testing::CarScore& s = f.cars[c];
+      j << (c ? ", " : "") << "{\"car\": " << s.car
+        << ", \"labelled_frames\": " << s.labelled_frames
+        << ", \"scored_frames\": " << s.scored_frames
+        << ", \"confirmed_frames\": " << s.confirmed_frames << ", \"pct\": " << s.Pct()
+        << ", \"confirmed_iou_frames\": " << s.confirmed_iou_frames
+        << ", \"iou_pct\": " << s.IoUPct() << "}";
+    }
+    j << "], \"per_frame\": [";
+    for (size_t k = 0; k < runs[i].frames.size(); ++k) {
+      const testing::OdometryFrame& fr = runs[i].frames[k];
+      j << (k ? ", " : "") << "{\"detections\": " << fr.detections
+        << ", \"confirmed\": " << fr.confirmed.size() << "}";
+    }
+    j << "]}";
+  }
+  j << "]}";
+  return j.str();
+}
+
+// Section 4. Returns the JSON (empty when skipped), or nullopt on a pipeline error.
+std::optional<std::string> RunOdometryEval(const std::string& data_dir,
+                                           const std::vector<pipeline::Algorithm>& algorithms,
+                                           const bench::EvalFlags& flags) {
+  std::string problem;
+  std::optional<testing::OdometrySequence> seq = testing::LoadOdometrySequence(data_dir, problem);
+  if (!seq) {
+    std::printf("\n4. %s: skipped (%s)\n", testing::kKittiOdomSeqB, problem.c_str());
+    return std::string();
+  }
+  const std::vector<testing::LabelledBox> labels =
+      testing::LoadCarLabels(testing::CarLabelPath(), problem);
+  if (labels.empty()) std::printf("car labels: none (%s)\n", problem.c_str());
+  std::printf(
+      "\n4. KITTI ODOMETRY SEQUENCE %s (%d frames, %s; f %.3f, B %.4f m): the pipeline with its "
+      "tracker (default config but the algorithm), without and with the true poses "
+      "(Snapshot::pose_at); reference road = SGBM 3-way + the RANSAC plane of gt_obstacles.h; "
+      "%zu labelled car boxes (%s)\n",
+      seq->name.c_str(), seq->frames(), seq->folder.c_str(), seq->f_px, seq->baseline_m,
+      labels.size(), testing::CarLabelPath().c_str());
+  std::vector<std::optional<testing::GroundPlane>> planes;
+  std::vector<cv::Mat1f> reference_disparity;
+  std::vector<double> heights;
+  for (int k = 0; k < seq->frames(); ++k) {
+    const auto g = testing::FitReferenceGround(seq->left[static_cast<size_t>(k)],
+                                               seq->right[static_cast<size_t>(k)], seq->f_px,
+                                               seq->baseline_m, seq->cx, seq->cy);
+    planes.push_back(g ? std::optional<testing::GroundPlane>(g->plane) : std::nullopt);
+    reference_disparity.push_back(g ? g->disparity_px : cv::Mat1f());
+    if (g) heights.push_back(g->plane.height_m);
+  }
+  std::sort(heights.begin(), heights.end());
+  std::printf(
+      "reference road: a plane in %zu of %d frames; camera height over it median %s m "
+      "(min %.2f, max %.2f; KITTI: 1.65 m)\n",
+      heights.size(), seq->frames(),
+      Fmt("%.2f", heights.empty() ? 0.0 : heights[heights.size() / 2]).c_str(),
+      heights.empty() ? 0.0 : heights.front(), heights.empty() ? 0.0 : heights.back());
+  std::vector<OdoRun> runs;
+  for (pipeline::Algorithm a : algorithms) {
+    for (const bool with_poses : {false, true}) {
+      testing::OdometryRunOptions o;
+      o.algorithm = a;
+      o.max_width_px = flags.max_width_px;
+      o.with_poses = with_poses;
+      Result<std::vector<testing::OdometryFrame>> frames = testing::RunOdometrySequence(*seq, o);
+      if (!frames.ok()) {
+        std::fprintf(stderr, "%s (%s): %s\n", seq->name.c_str(), Name(a).c_str(),
+                     frames.error().message.c_str());
+        return std::nullopt;
+      }
+      OdoRun run{a, with_poses, std::move(*frames), {}};
+      for (const testing::OdometryFrame& fr : run.frames) {
+        run.confirmed.insert(run.confirmed.end(), fr.confirmed.begin(), fr.confirmed.end());
+      }
+      runs.push_back(std::move(run));
+    }
+  }
+  std::vector<OdoFigures> figures;
+  for (const OdoRun& run : runs)
+    figures.push_back(ScoreOdoRun(*seq, run, planes, reference_disparity, labels));
+  PrintOdoFrameTable(*seq, runs, planes, labels);
+  PrintOdoSummary(runs, figures);
+  if (!flags.dump.empty()) {
+    std::filesystem::create_directories(flags.dump);
+    for (const OdoRun& run : runs) {
+      if (!run.with_poses) continue;
+      for (int k = 0; k < seq->frames(); ++k) {
+        DumpOdoFrame(*seq, run, k, labels,
+                     flags.dump + "/" + seq->name + "-" + Name(run.algorithm) + "-f" +
+                         Fmt("%02.0f", k) + ".png");
+      }
+    }
+  }
+  return JsonOdometry(*seq, runs, figures, planes);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -321,13 +599,15 @@ int main(int argc, char** argv) {
   }
   std::vector<pipeline::Algorithm> algorithms;
   if (flags.algorithm.empty() || flags.algorithm == "all") {
-    algorithms.assign(std::begin(kAlgorithms), std::end(kAlgorithms));
+    // Every algorithm the pipeline knows by name.
+    for (const auto& choice : pipeline::PipelineConfig::kAlgorithmNames) {
+      algorithms.push_back(choice.value);
+    }
   } else if (const std::optional<pipeline::Algorithm> a =
                  pipeline::AlgorithmFromName(flags.algorithm)) {
     algorithms = {*a};
   } else {
-    return usage("--algorithm: expected canonical, stevie, stevis or all, got '" + flags.algorithm +
-                 "'");
+    return usage("--algorithm: expected an algorithm's name or all, got '" + flags.algorithm + "'");
   }
   std::vector<int> widths = {pipeline::PipelineConfig{}.max_width_px, 0};
   if (flags.max_width_px) widths = {*flags.max_width_px};
@@ -347,13 +627,28 @@ int main(int argc, char** argv) {
         testing::DataDirWanted().c_str());
     return 0;
   }
+  if (flags.scenario == testing::kKittiOdomSeqB) {
+    const std::optional<std::string> odometry = RunOdometryEval(*data_dir, algorithms, flags);
+    if (!odometry) return 1;
+    if (!flags.json.empty()) {
+      std::ofstream json(flags.json);
+      json << "{\"data_dir\": \"" << *data_dir
+           << "\", \"odometry\": " << (odometry->empty() ? "null" : *odometry) << "}\n";
+      if (!json) {
+        std::fprintf(stderr, "stevi-eval-real: could not write %s\n", flags.json.c_str());
+        return 1;
+      }
+    }
+    return 0;
+  }
   std::vector<std::string> names = testing::MiddleburyPairNames(true);
   for (const std::string& k : testing::KittiPairNames()) names.push_back(k);
   if (!flags.scenario.empty()) {
     if (std::find(names.begin(), names.end(), flags.scenario) == names.end()) {
       std::string all;
       for (const std::string& n : names) all += " " + n;
-      return usage("--scenario: unknown pair '" + flags.scenario + "' (one of:" + all + ")");
+      return usage("--scenario: unknown pair '" + flags.scenario + "' (one of:" + all + " " +
+                   testing::kKittiOdomSeqB + ")");
     }
     names = {flags.scenario};
   }
@@ -654,6 +949,14 @@ int main(int argc, char** argv) {
     }
   }
 
+  // 4. The KITTI odometry sequence (with every pair; alone with --scenario kitti-odom-seq-b).
+  std::string odometry;
+  if (flags.scenario.empty()) {
+    const std::optional<std::string> o = RunOdometryEval(*data_dir, algorithms, flags);
+    if (!o) return 1;
+    odometry = *o;
+  }
+
   if (!flags.json.empty()) {
     std::ofstream json(flags.json);
     json << "{\"data_dir\": \"" << *data_dir << "\", \"max_width_px\": [";
@@ -720,7 +1023,7 @@ int main(int argc, char** argv) {
       }
       json << "]}";
     }
-    json << "]}\n";
+    json << "], \"odometry\": " << (odometry.empty() ? "null" : odometry) << "}\n";
     if (!json) {
       std::fprintf(stderr, "stevi-eval-real: could not write %s\n", flags.json.c_str());
       return 1;

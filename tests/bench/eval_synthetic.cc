@@ -16,13 +16,19 @@
 //
 // Family mode: stevi-eval --family sky|airfield|long_range|close|all --seeds A-B [--frames N]
 //   [--algorithm NAME] [--max-width N] [--json FILE] [--dump DIR] [--dump-scenes N]
+//   [--scene-frames N] [--confirm-window N]
 //   runs the detectors over the randomised scene families (drivers/synthetic/random_scenes.h) for
 //   seeds A..B of each family and prints a table per family and for all (see eval_family.cc and
 //   tests/bench/README.md). Seeds 1-999 are the TUNING split; seeds 1001 and up are the TEST
 //   split: report on it, never tune on it (no parameter, threshold or rule may be chosen by
 //   looking at test-split results or pictures). --dump writes the last frame of the first N
 //   scenes (default 3) of each family per algorithm as PNG: truth boxes green (dark green: not
-//   expected), detections red (orange: don't care) with their depth.
+//   expected), detections red (orange: don't care) with their depth. A track-level table follows
+//   (tests/testing/track_level.h: obstacles confirmed within --confirm-window N frames, default 5,
+//   false confirmed tracks per 1000 frames, range error over sigma); --scene-frames N renders N
+//   frames of every scene instead of its own 4..6 (the obstacles continue on their paths).
+//   --algorithm takes any name the pipeline knows (PipelineConfig::kAlgorithmNames) or
+//   stevis-graph.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -125,6 +131,16 @@ std::vector<Variant> Variants() {
   v[3].name = "stevis-graph";
   v[3].config.algorithm = pipeline::Algorithm::kSteViS;
   v[3].config.stevis.segmentation = detection::SteViSOptions::Segmentation::kGraph;
+  // Every other algorithm the pipeline knows by name (e.g. a new default), with its defaults.
+  for (const auto& choice : pipeline::PipelineConfig::kAlgorithmNames) {
+    const std::string name(choice.name);
+    if (std::none_of(v.begin(), v.end(), [&](const Variant& x) { return x.name == name; })) {
+      Variant extra;
+      extra.name = name;
+      extra.config.algorithm = choice.value;
+      v.push_back(extra);
+    }
+  }
   return v;
 }
 
@@ -139,7 +155,7 @@ int main(int argc, char** argv) {
                  "[--algorithm canonical|stevie|stevis|stevis-graph] [--size WxH] [--max-width N]\n"
                  "       stevi-eval --family sky|airfield|long_range|close|all --seeds A-B "
                  "[--frames N] [--algorithm NAME] [--max-width N] [--json FILE] [--dump DIR] "
-                 "[--dump-scenes N]\n"
+                 "[--dump-scenes N] [--scene-frames N] [--confirm-window N]\n"
                  "  seeds 1-999: the tuning split; seeds 1001 and up: the TEST split, never to be "
                  "tuned on\n",
                  problem.c_str());
@@ -169,6 +185,8 @@ int main(int argc, char** argv) {
       return usage("--scenario and --size do not apply to --family");
     }
     fo.max_frames = flags.max_frames;
+    fo.scene_frames = flags.scene_frames;
+    fo.confirm_window = flags.confirm_window;
     fo.max_width_px = flags.max_width_px;
     fo.json_path = flags.json;
     fo.dump_dir = flags.dump;

@@ -42,7 +42,8 @@ namespace {
 using namespace stevi;
 
 constexpr pipeline::Algorithm kAlgorithms[] = {
-    pipeline::Algorithm::kCanonical, pipeline::Algorithm::kSteViE, pipeline::Algorithm::kSteViS};
+    pipeline::Algorithm::kCanonical, pipeline::Algorithm::kSteViE, pipeline::Algorithm::kSteViS,
+    pipeline::Algorithm::kStixels};
 
 // "12.3" or "-" when there are no samples.
 std::string RmsOrDash(const std::vector<double>& values, const char* format) {
@@ -225,8 +226,7 @@ int main(int argc, char** argv) {
     const testing::RenderedScenario rendered = testing::RenderScenario(scenario, max_frames);
     for (pipeline::Algorithm algorithm : kAlgorithms) {
       if (!only_algorithm.empty() && pipeline::AlgorithmName(algorithm) != only_algorithm) continue;
-      pipeline::PipelineConfig config;
-      config.algorithm = algorithm;
+      pipeline::PipelineConfig config = pipeline::ConfigForAlgorithm(algorithm);
       Result<testing::TrackingRun> run = testing::RunTracking(rendered, config);
       if (!run.ok()) {
         std::fprintf(stderr, "%s\n", run.error().message.c_str());

@@ -129,20 +129,25 @@ BENCHMARK(BM_RectifyRawRig)->ArgName("size")->Arg(0)->Arg(1)->Unit(benchmark::kM
 void BM_Matcher(benchmark::State& state) {
   const Scene& scene = SceneAt(state.range(1));
   stereo::MatcherOptions options =
-      ConfigFor(0, state.range(0), static_cast<int>(state.range(2))).matcher;
+      ConfigFor(0, std::min<int64_t>(state.range(0), 1), static_cast<int>(state.range(2))).matcher;
+  if (state.range(0) == 2) {  // the dense matcher (census SGM), default options
+    options.kind = stereo::MatcherKind::kDense;
+    options.dense.num_disparities = static_cast<int>(state.range(2));
+  }
   std::unique_ptr<stereo::DisparityMatcher> matcher = stereo::MakeMatcher(options);
   for (auto _ : state)
     benchmark::DoNotOptimize(matcher->Compute(scene.frame.left, scene.frame.right));
-  const std::string what =
-      std::string(state.range(0) == 0 ? "BM block 15, " : "SGBM 3-way block 5, ")
-          .append(std::to_string(state.range(2)))
-          .append(" disp");
+  const std::string what = std::string(state.range(0) == 0   ? "BM block 15, "
+                                       : state.range(0) == 1 ? "SGBM 3-way block 5, "
+                                                             : "dense census 5 paths, ")
+                               .append(std::to_string(state.range(2)))
+                               .append(" disp");
   state.SetLabel(Label(state.range(1), what.c_str()));
 }
 BENCHMARK(BM_Matcher)
     ->ArgNames({"matcher", "size", "disp"})
-    ->ArgsProduct({{0, 1}, {0, 1}, {64}})
-    ->ArgsProduct({{0, 1}, {0}, {32, 128}})
+    ->ArgsProduct({{0, 1, 2}, {0, 1}, {64}})
+    ->ArgsProduct({{0, 1, 2}, {0}, {32, 128}})
     ->Unit(benchmark::kMillisecond);
 
 // The block-matching core on the 640x480 pair padded as the matcher pads it, default options:

@@ -341,7 +341,7 @@ std::optional<Flags> ParseFlags(int argc, char** argv) {
 // ---------------------------------------------------------------------------------------------
 
 struct Variant {
-  std::string name;  // "canonical", "stevie", "stevis", "stevis-graph"
+  std::string name;  // "stixels", "canonical", "stevie", "stevis", "stevis-graph"
   pipeline::Algorithm algorithm;
   detection::SteViSOptions::Segmentation segmentation;
 };
@@ -349,6 +349,7 @@ struct Variant {
 const std::vector<Variant>& Variants() {
   using Seg = detection::SteViSOptions::Segmentation;
   static const std::vector<Variant> variants = {
+      {"stixels", pipeline::Algorithm::kStixels, Seg::kThreshold},
       {"canonical", pipeline::Algorithm::kCanonical, Seg::kThreshold},
       {"stevie", pipeline::Algorithm::kSteViE, Seg::kThreshold},
       {"stevis", pipeline::Algorithm::kSteViS, Seg::kThreshold},
@@ -365,7 +366,18 @@ const Variant& VariantNamed(const std::string& name) {
 }
 
 const char* MatcherName(stereo::MatcherKind kind) {
-  return kind == stereo::MatcherKind::kBlockMatching ? "bm" : "sgbm";
+  switch (kind) {
+    case stereo::MatcherKind::kBlockMatching: return "bm";
+    case stereo::MatcherKind::kSemiGlobal: return "sgbm";
+    case stereo::MatcherKind::kDense: return "dense";
+  }
+  return "?";
+}
+
+// The stixel world always runs with its own matcher, the dense one (it needs disparities on real
+// surfaces); the thesis detectors run with the matcher asked for.
+stereo::MatcherKind MatcherFor(const Variant& variant, stereo::MatcherKind kind) {
+  return variant.algorithm == pipeline::Algorithm::kStixels ? stereo::MatcherKind::kDense : kind;
 }
 
 // max_width_px: PipelineConfig::max_width_px (0: each size at its own resolution).
@@ -375,7 +387,7 @@ pipeline::PipelineConfig ConfigFor(const Variant& variant, stereo::MatcherKind k
   config.max_width_px = max_width_px;
   config.algorithm = variant.algorithm;
   config.stevis.segmentation = variant.segmentation;
-  config.matcher.kind = kind;
+  config.matcher.kind = MatcherFor(variant, kind);
   config.matcher.block_matching.num_disparities = disparities;
   config.matcher.semi_global.num_disparities = disparities;
   return config;
@@ -387,14 +399,23 @@ v1::PipelineConfig ProtoConfigFor(const Variant& variant, stereo::MatcherKind ki
     case pipeline::Algorithm::kCanonical: config.set_algorithm(v1::ALGORITHM_CANONICAL); break;
     case pipeline::Algorithm::kSteViE: config.set_algorithm(v1::ALGORITHM_STEVIE); break;
     case pipeline::Algorithm::kSteViS: config.set_algorithm(v1::ALGORITHM_STEVIS); break;
+    case pipeline::Algorithm::kStixels: config.set_algorithm(v1::ALGORITHM_STIXELS); break;
   }
   config.mutable_stevis()->set_segmentation(variant.segmentation ==
                                                     detection::SteViSOptions::Segmentation::kGraph
                                                 ? v1::SEGMENTATION_GRAPH
                                                 : v1::SEGMENTATION_THRESHOLD);
-  config.mutable_matcher()->set_kind(kind == stereo::MatcherKind::kBlockMatching
-                                         ? v1::MATCHER_KIND_BLOCK_MATCHING
-                                         : v1::MATCHER_KIND_SEMI_GLOBAL);
+  switch (MatcherFor(variant, kind)) {
+    case stereo::MatcherKind::kBlockMatching:
+      config.mutable_matcher()->set_kind(v1::MATCHER_KIND_BLOCK_MATCHING);
+      break;
+    case stereo::MatcherKind::kSemiGlobal:
+      config.mutable_matcher()->set_kind(v1::MATCHER_KIND_SEMI_GLOBAL);
+      break;
+    case stereo::MatcherKind::kDense:
+      config.mutable_matcher()->set_kind(v1::MATCHER_KIND_DENSE);
+      break;
+  }
   return config;
 }
 
@@ -457,7 +478,7 @@ OfflineRun MeasureOffline(const Variant& variant, stereo::MatcherKind kind, cv::
                           int disparities, double seconds, int max_width_px = 0) {
   OfflineRun run;
   run.variant = variant.name;
-  run.matcher = kind;
+  run.matcher = MatcherFor(variant, kind);
   run.size = size;
   run.disparities = disparities;
   run.max_width_px = max_width_px;
@@ -907,7 +928,7 @@ ThroughputRun MeasureThroughput(const Variant& variant, stereo::MatcherKind kind
   run.source_fps = source_fps;
   run.threads = threads;
   run.variant = variant.name;
-  run.matcher = kind;
+  run.matcher = MatcherFor(variant, kind);
   std::fprintf(stderr, "  server throughput: %s source, %s + %s at source.fps %.0f for %.1f s\n",
                run.source.c_str(), variant.name.c_str(), MatcherName(kind), source_fps, seconds);
   const v1::SourceConfig source = SyntheticSourceAt(source_fps, !rendered);
@@ -1568,6 +1589,9 @@ int main(int argc, char** argv) {
   for (const cv::Size& size : sizes) {
     for (const Variant& variant : Variants()) {
       for (stereo::MatcherKind kind : matchers) {
+        // The stixel world has one matcher: measured once.
+        if (variant.algorithm == pipeline::Algorithm::kStixels && kind != matchers.front())
+          continue;
         offline.push_back(MeasureOffline(variant, kind, size, 64, flags.seconds));
       }
     }
@@ -1612,6 +1636,7 @@ int main(int argc, char** argv) {
   for (stereo::MatcherKind kind : matchers) {
     if (flags.quick && kind == stereo::MatcherKind::kSemiGlobal) continue;
     for (const Variant& variant : Variants()) {
+      if (variant.algorithm == pipeline::Algorithm::kStixels && kind != matchers.front()) continue;
       throughput.push_back(MeasureThroughput(variant, kind, flags.seconds, flags.source_fps));
     }
   }
@@ -1656,9 +1681,11 @@ int main(int argc, char** argv) {
 
   // 7. Targets.
   const auto throughput_of = [&](const std::string& variant) {
+    const stereo::MatcherKind matcher =
+        MatcherFor(VariantNamed(variant), stereo::MatcherKind::kBlockMatching);
     for (const ThroughputRun& run : throughput) {
       if (run.source == "looped" && run.variant == variant && run.threads.workers == 0 &&
-          run.threads.opencv == 0 && run.matcher == stereo::MatcherKind::kBlockMatching) {
+          run.threads.opencv == 0 && run.matcher == matcher) {
         return run.fps;
       }
     }
@@ -1671,6 +1698,9 @@ int main(int argc, char** argv) {
     return nullptr;
   };
   std::vector<Target> targets;
+  targets.push_back(
+      {"stixels throughput", ">= 60 fps", throughput_of("stixels"), "fps", true, 60,
+       "server, the default (stixels + dense), 640x480, GetStatus frames_processed/s"});
   targets.push_back(
       {"SteViS throughput", ">= 30 fps", throughput_of("stevis"), "fps", true, 30,
        "server, threshold segmentation, BM, 640x480, 64 disp, GetStatus frames_processed/s"});

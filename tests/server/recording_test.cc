@@ -48,12 +48,26 @@ testing::RunResult ProcessReplay(const std::string& dir,
 
 // The tracks of a frame without what only a pose gives (a replay carries the recorded poses; the
 // synthetic source run offline has none), for comparing detections and tracking.
+// The tracks as the detections and the association made them, without what the vehicle's pose
+// shapes: the geodetic fields, and the Kalman state, which the tracker carries through the
+// ego-motion between the poses (the replay's come through the pose buffer from the recorded
+// states, the live ones straight from the synthetic flight, so they differ in the last bits).
 std::string TracksWithoutGeo(const v1::TrackFrame& frame) {
   std::string out;
   for (v1::Track t : frame.tracks()) {
     t.clear_geodetic();
     t.clear_velocity_ned();
     t.clear_position_sigma_m();
+    t.clear_position_cam();
+    t.clear_position_body();
+    t.clear_position_sigma_cam();
+    t.clear_velocity_cam();
+    t.clear_velocity_sigma_cam();
+    t.clear_range_rate_mps();
+    t.clear_range_rate_sigma_mps();
+    t.clear_time_to_collision_s();
+    t.clear_closest_approach_m();
+    t.clear_smoothed_range_m();
     out += t.SerializeAsString();
   }
   return out;

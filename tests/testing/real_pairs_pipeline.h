@@ -20,8 +20,7 @@ namespace stevi::testing {
 inline Result<pipeline::FrameResult> RunPipelineOnPair(const RealPair& pair,
                                                        pipeline::Algorithm algorithm,
                                                        int max_width_px) {
-  pipeline::PipelineConfig config;
-  config.algorithm = algorithm;
+  pipeline::PipelineConfig config = pipeline::ConfigForAlgorithm(algorithm);
   config.max_width_px = max_width_px;
   const auto rig = std::make_shared<const geometry::StereoRig>(geometry::StereoRig::Ideal(
       pair.left.size(), pair.f_px, pair.baseline_m, pair.cx, pair.cy, pair.name));

@@ -527,8 +527,8 @@ TEST(PipelineRangeScan, PublishesTheScanAndTheTracksInTheBodyFrame) {
             0);
   std::vector<std::string> stages;
   for (const pipeline::StageTiming& t : result->timings) stages.push_back(t.stage);
-  EXPECT_THAT(stages,
-              ::testing::ElementsAre("rectify", "disparity", "extract", "scan", "track", "total"));
+  EXPECT_THAT(stages, ::testing::ElementsAre("rectify", "disparity", "ground", "extract", "scan",
+                                             "track", "total"));
   ASSERT_FALSE(result->tracks.empty());
   ASSERT_EQ(result->track_position_body_m.size(), result->tracks.size());
   const Eigen::Isometry3d body_from_cam = geo::BodyFromCam(config.mount);

@@ -593,6 +593,103 @@ TEST(Tracker, TentativeTracksConfirmOrDie) {
   EXPECT_EQ(tracks[0].state, TrackState::kConfirmed);
 }
 
+// The M-of-N rule with the defaults (M = 3 hits within N = 5 updates, tentative_delete_misses 2)
+// is exactly the former "3 hits in all": every hit/miss sequence of up to 10 updates that starts
+// with a hit gives the same life cycle under both (the former computed here, independently).
+TEST(Tracker, DefaultMOfNIsThreeHitsInAllForEverySequence) {
+  const Eigen::Vector3d p(0, 0, 30);
+  constexpr int kLength = 10;
+  for (int pattern = 0; pattern < (1 << (kLength - 1)); ++pattern) {
+    Tracker tracker;
+    int hits = 0, run_of_misses = 0;
+    bool alive = true, confirmed = false;
+    std::string sequence;
+    for (int k = 0; k < kLength && alive; ++k) {
+      const bool hit = k == 0 || ((pattern >> (k - 1)) & 1) != 0;
+      sequence += hit ? 'H' : 'm';
+      std::vector<detection::Detection> detections;
+      if (hit) detections.push_back(Detect(p, 2, 1.5, nullptr));
+      const std::vector<Track> tracks = tracker.Update(detections, FrameTime(k), kCamera);
+      // The former rule: confirmed at 3 hits; tentative and deleted at 2 misses in a row.
+      run_of_misses = hit ? 0 : run_of_misses + 1;
+      hits += hit ? 1 : 0;
+      if (!confirmed && run_of_misses >= 2) alive = false;
+      if (alive && hits >= 3) confirmed = true;
+      if (!alive) {
+        EXPECT_THAT(tracks, IsEmpty()) << sequence;
+        continue;
+      }
+      ASSERT_EQ(tracks.size(), 1u) << sequence;
+      const TrackState want = !confirmed ? TrackState::kTentative
+                              : hit      ? TrackState::kConfirmed
+                                         : TrackState::kCoasting;
+      EXPECT_EQ(tracks[0].state, want) << sequence;
+    }
+  }
+}
+
+// M hits within the last N updates, exactly: the states of a static obstacle under hit/miss
+// sequences ('H' a detection, 'm' none), for several M and N.
+TEST(Tracker, MOfNConfirmsAtMHitsWithinTheLastNUpdates) {
+  const Eigen::Vector3d p(0, 0, 30);
+  // The state after each update: 't' tentative, 'C' confirmed, 'c' coasting, '-' deleted.
+  const auto states = [&](int m, int n, int tentative_delete_misses, const std::string& sequence) {
+    TrackerOptions options;
+    options.confirm_hits = m;
+    options.confirm_window = n;
+    options.tentative_delete_misses = tentative_delete_misses;
+    Tracker tracker(options);
+    std::string out;
+    for (size_t k = 0; k < sequence.size(); ++k) {
+      std::vector<detection::Detection> detections;
+      if (sequence[k] == 'H') detections.push_back(Detect(p, 2, 1.5, nullptr));
+      const std::vector<Track> tracks =
+          tracker.Update(detections, FrameTime(static_cast<int>(k)), kCamera);
+      if (tracks.empty()) {
+        out += '-';
+        continue;
+      }
+      switch (tracks[0].state) {
+        case TrackState::kTentative: out += 't'; break;
+        case TrackState::kConfirmed: out += 'C'; break;
+        case TrackState::kCoasting: out += 'c'; break;
+      }
+    }
+    return out;
+  };
+  // 3 of 5: every other frame confirms at the fifth update.
+  EXPECT_EQ(states(3, 5, 2, "HmHmHmH"), "ttttCcC");
+  // 3 of 4: every other frame never confirms (at most 2 hits in any 4 updates); it lives on as
+  // tentative, since it never misses twice in a row.
+  EXPECT_EQ(states(3, 4, 2, "HmHmHmHm"), "tttttttt");
+  EXPECT_EQ(states(3, 4, 2, "HmHHm"), "tttCc");
+  EXPECT_EQ(states(3, 4, 2, "HHmH"), "tttC");
+  // 3 of 3: consecutive hits only; an old hit drops out of the window.
+  EXPECT_EQ(states(3, 3, 2, "HmHHmHHH"), "tttttttC");
+  EXPECT_EQ(states(3, 3, 2, "HHH"), "ttC");
+  // 2 of 5 with 3 misses to delete a tentative track: two hits three updates apart confirm.
+  EXPECT_EQ(states(2, 5, 3, "HmmH"), "tttC");
+  EXPECT_EQ(states(2, 5, 3, "Hmmm"), "ttt-");
+  // 1 of N: confirmed at once.
+  EXPECT_EQ(states(1, 1, 2, "Hm"), "Cc");
+}
+
+TEST(TrackerOptions, ConfirmWindowMustHoldConfirmHits) {
+  TrackerOptions options;
+  options.confirm_hits = 4;
+  options.confirm_window = 3;
+  std::vector<std::string> problems = options.Validate();
+  ASSERT_EQ(problems.size(), 1u) << ::testing::PrintToString(problems);
+  EXPECT_EQ(problems[0], "confirm_window: must be >= confirm_hits = 4 (got 3)");
+  options.confirm_window = 65;
+  problems = options.Validate();
+  ASSERT_EQ(problems.size(), 1u) << ::testing::PrintToString(problems);
+  EXPECT_THAT(problems[0], HasSubstr("confirm_window: must be in [1, 64]"));
+  options.confirm_window = 64;
+  EXPECT_THAT(options.Validate(), IsEmpty());
+  EXPECT_EQ(TrackerOptions{}.confirm_window, 5);
+}
+
 TEST(Tracker, IgnoresLowScoreAndUnrangedDetections) {
   TrackerOptions options;
   options.min_score = 0.5;

@@ -1,0 +1,654 @@
+#include "core/detection/stixels.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include "core/detection/stereo_blobs.h"
+#include "core/extraction/edges.h"
+#include "core/stereo/matcher.h"
+
+namespace stevi::detection {
+namespace {
+
+constexpr double kSqrtTwoPi = 2.5066282746310002;
+// A cell whose model cannot hold it (ground above the ground's horizon) costs this much.
+constexpr float kImpossible = 1e4f;
+// A segment's measured weight (sum of its cells' inlier probabilities) below this is unmeasured.
+constexpr double kMinWeight = 1e-3;
+// A cell whose inlier probability is below this is unmeasured when an object's extent is trimmed.
+constexpr double kMeasuredCell = 0.1;
+
+// One cell of a column: the median disparity of its matched pixels, and the probability that it
+// is an inlier (0 when nothing was matched).
+struct Cell {
+  float d = -1;
+  float p = 0;
+};
+
+// The geometry of the columns and cells of one image.
+struct Grid {
+  int width = 0, height = 0;
+  int column_width = 0, cell_height = 0;
+  int columns = 0, cells = 0;
+
+  // Cell k counts from the bottom: rows [Top(k), Bottom(k)].
+  int Bottom(int k) const { return height - 1 - k * cell_height; }
+  int Top(int k) const { return std::max(0, height - (k + 1) * cell_height); }
+  int X0(int c) const { return c * column_width; }
+  int Width(int c) const { return std::min(column_width, width - X0(c)); }
+};
+
+Grid MakeGrid(cv::Size size, const StixelOptions& options) {
+  Grid g;
+  g.width = size.width;
+  g.height = size.height;
+  g.column_width =
+      std::max(2, static_cast<int>(std::lround(size.width * options.column_width_fraction)));
+  g.cell_height =
+      std::max(1, static_cast<int>(std::lround(size.width * options.cell_height_fraction)));
+  g.columns = (size.width + g.column_width - 1) / g.column_width;
+  g.cells = (size.height + g.cell_height - 1) / g.cell_height;
+  return g;
+}
+
+// The noise model shared by the labelling and the grouping.
+struct Model {
+  double sigma_px = 0.25;  // a cell's disparity noise
+  double object_spread = 0.05;
+  double ground_spread = 0.1;
+  double floor_px = 1;  // trusted disparity floor (processed pixels)
+  double uniform = 64;  // the outlier's span of disparities (its density is 1 / uniform)
+  double max_p = 0.95;
+  double min_confidence = 0.5;  // pixels less sure than this are not measured
+
+  double ObjectSigma(double f) const { return std::hypot(sigma_px, object_spread * f); }
+  double GroundSigma(double g) const { return std::hypot(sigma_px, ground_spread * g); }
+  double SkySigma() const { return std::max(sigma_px, floor_px / 3); }
+};
+
+// -log of the Gaussian-plus-outlier likelihood of disparity d under a model (mean mu, sigma s),
+// relative to the outlier alone (so an unmatched cell costs 0 under every model).
+float MixtureCost(float d, float p, double mu, double s, double uniform) {
+  if (p <= 0) return 0.0f;
+  const double z = (d - mu) / s;
+  const double k = uniform / (s * kSqrtTwoPi);
+  return static_cast<float>(-std::log(1.0 - p + p * k * std::exp(-0.5 * z * z)));
+}
+
+// The object disparity bins: spaced 0.75 of the object's sigma, so that rounding a segment's
+// disparity to its bin moves it by at most 0.4 sigma.
+struct Bins {
+  std::vector<double> centre;
+  std::vector<int> of_sixteenth;  // disparity x 16 (rounded) -> nearest bin
+
+  int Of(double d) const {
+    const int i = std::clamp(static_cast<int>(std::lround(d * 16)), 0,
+                             static_cast<int>(of_sixteenth.size()) - 1);
+    return of_sixteenth[static_cast<size_t>(i)];
+  }
+};
+
+Bins MakeBins(const Model& model, double max_d) {
+  Bins bins;
+  for (double f = 0; f <= max_d + 1e-9; f += 0.75 * model.ObjectSigma(f)) bins.centre.push_back(f);
+  const int n = static_cast<int>(std::ceil(max_d * 16)) + 1;
+  bins.of_sixteenth.resize(static_cast<size_t>(n));
+  size_t b = 0;
+  for (int i = 0; i < n; ++i) {
+    const double d = i / 16.0;
+    while (b + 1 < bins.centre.size() &&
+           std::abs(bins.centre[b + 1] - d) <= std::abs(bins.centre[b] - d)) {
+      ++b;
+    }
+    bins.of_sixteenth[static_cast<size_t>(i)] = static_cast<int>(b);
+  }
+  return bins;
+}
+
+// Measures the cells of column c.
+void MeasureColumn(const stereo::DisparityMap& map, const Grid& grid, int c, const Model& model,
+                   std::vector<float>& values, std::vector<Cell>& cells) {
+  const int x0 = grid.X0(c), w = grid.Width(c);
+  const bool has_conf = !map.confidence.empty();
+  cells.assign(static_cast<size_t>(grid.cells), Cell{});
+  for (int k = 0; k < grid.cells; ++k) {
+    values.clear();
+    double conf_sum = 0;
+    const int top = grid.Top(k), bottom = grid.Bottom(k);
+    for (int y = top; y <= bottom; ++y) {
+      const int16_t* drow = map.fixed.ptr<int16_t>(y);
+      const uint8_t* crow = has_conf ? map.confidence.ptr<uint8_t>(y) : nullptr;
+      for (int x = x0; x < x0 + w; ++x) {
+        if (drow[x] < 0) continue;
+        const double conf = has_conf ? crow[x] / 255.0 : model.max_p;
+        if (conf < model.min_confidence) continue;
+        values.push_back(static_cast<float>(drow[x]) / stereo::DisparityMap::kScale);
+        conf_sum += conf;
+      }
+    }
+    if (values.empty()) continue;
+    const size_t mid = values.size() / 2;
+    std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(mid),
+                     values.end());
+    const int area = (bottom - top + 1) * w;
+    // The cell's median trusted disparity; its inlier probability is their summed confidence over
+    // half the cell's area: a cell half covered by sure values is sure, a textureless sky with a
+    // few confident speckles is not.
+    Cell& cell = cells[static_cast<size_t>(k)];
+    cell.d = values[mid];
+    cell.p = static_cast<float>(std::min(model.max_p, conf_sum / (0.5 * area)));
+  }
+}
+
+// Prefix sums of one column's costs under each model, and of its measurements.
+struct ColumnCosts {
+  int n = 0, bins = 0;
+  std::vector<float> ground, sky;          // n + 1
+  std::vector<float> object;               // (n + 1) x bins
+  std::vector<double> weight, weighted_d;  // n + 1: sum of p, of p d
+  std::vector<double> ground_d;            // n: the ground's disparity at each cell (<= 0: none)
+
+  float Object(int i, int j, int b) const {  // cells i..j
+    return object[static_cast<size_t>(j + 1) * bins + b] -
+           object[static_cast<size_t>(i) * bins + b];
+  }
+  float Ground(int i, int j) const { return ground[j + 1] - ground[i]; }
+  float Sky(int i, int j) const { return sky[j + 1] - sky[i]; }
+  double Weight(int i, int j) const { return weight[j + 1] - weight[i]; }
+  double MeanD(int i, int j) const {
+    const double w = Weight(i, j);
+    return w > kMinWeight ? (weighted_d[j + 1] - weighted_d[i]) / w : -1;
+  }
+};
+
+void ComputeColumnCosts(const std::vector<Cell>& cells, const Grid& grid, int c,
+                        const std::optional<GroundPlane>& ground, const Model& model,
+                        const Bins& bins, ColumnCosts& out) {
+  const int n = grid.cells;
+  const int nb = static_cast<int>(bins.centre.size());
+  out.n = n;
+  out.bins = nb;
+  out.ground.assign(static_cast<size_t>(n + 1), 0.0f);
+  out.sky.assign(static_cast<size_t>(n + 1), 0.0f);
+  out.object.assign(static_cast<size_t>(n + 1) * nb, 0.0f);
+  out.weight.assign(static_cast<size_t>(n + 1), 0.0);
+  out.weighted_d.assign(static_cast<size_t>(n + 1), 0.0);
+  out.ground_d.assign(static_cast<size_t>(n), 0.0);
+  const double u = grid.X0(c) + 0.5 * (grid.Width(c) - 1);
+  const double sky_sigma = model.SkySigma();
+  for (int k = 0; k < n; ++k) {
+    const Cell& cell = cells[static_cast<size_t>(k)];
+    const double v = 0.5 * (grid.Top(k) + grid.Bottom(k));
+    const double g = ground ? ground->DisparityAt(u, v) : 0.0;
+    out.ground_d[static_cast<size_t>(k)] = g;
+    float cg = kImpossible;
+    if (g > 0) cg = MixtureCost(cell.d, cell.p, g, model.GroundSigma(g), model.uniform);
+    out.ground[k + 1] = out.ground[k] + cg;
+    out.sky[k + 1] = out.sky[k] + MixtureCost(cell.d, cell.p, 0.0, sky_sigma, model.uniform);
+    out.weight[k + 1] = out.weight[k] + cell.p;
+    out.weighted_d[k + 1] = out.weighted_d[k] + (cell.p > 0 ? cell.p * cell.d : 0.0);
+    const float* prev = &out.object[static_cast<size_t>(k) * nb];
+    float* row = &out.object[static_cast<size_t>(k + 1) * nb];
+    if (cell.p <= 0) {
+      std::copy(prev, prev + nb, row);
+      continue;
+    }
+    // Far from the cell's disparity every bin costs the same (the outlier term): -log(1 - p).
+    const float far = static_cast<float>(-std::log(1.0 - cell.p));
+    for (int b = 0; b < nb; ++b) row[b] = prev[b] + far;
+    const double d = cell.d;
+    for (int b = bins.Of(d); b >= 0; --b) {
+      const double s = model.ObjectSigma(bins.centre[b]);
+      if (d - bins.centre[b] > 6 * s) break;
+      row[b] = prev[b] + MixtureCost(cell.d, cell.p, bins.centre[b], s, model.uniform);
+    }
+    for (int b = bins.Of(d) + 1; b < nb; ++b) {
+      const double s = model.ObjectSigma(bins.centre[b]);
+      if (bins.centre[b] - d > 6 * s) break;
+      row[b] = prev[b] + MixtureCost(cell.d, cell.p, bins.centre[b], s, model.uniform);
+    }
+  }
+}
+
+// The best labelling of rows 0..j whose last segment has a class: its cost, where the segment
+// starts, the class before it (-1: none) and, for objects, its disparity bin.
+struct Best {
+  float cost = std::numeric_limits<float>::infinity();
+  int start = 0;
+  int prev = -1;
+  int bin = -1;
+};
+
+constexpr int kG = 0, kO = 1, kS = 2;
+
+// The transition cost into an object segment of disparity f starting at cell i, after the
+// labelling `before` (class `cls`) of cells 0..i-1.
+float IntoObject(int cls, const Best& before, double f, int i, const ColumnCosts& costs,
+                 const Bins& bins, const Model& model, const StixelOptions& options) {
+  const double s = model.ObjectSigma(f);
+  if (cls == kG) {
+    const double g = costs.ground_d[static_cast<size_t>(i)];
+    if (g <= 0) return 0.0f;
+    const double tol = 3 * std::hypot(s, model.GroundSigma(g));
+    if (f < g - tol) return static_cast<float>(options.sinking_penalty);
+    if (f > g + tol) return static_cast<float>(options.floating_penalty);
+    return 0.0f;
+  }
+  if (cls == kO && before.bin >= 0) {
+    const double below = bins.centre[static_cast<size_t>(before.bin)];
+    if (f > below + 3 * std::hypot(s, model.ObjectSigma(below))) {
+      return static_cast<float>(options.overhang_penalty);
+    }
+  }
+  return 0.0f;
+}
+
+// Labels one column: dynamic programming over the segments, then the path back.
+void LabelColumn(const ColumnCosts& costs, const Bins& bins, const Model& model,
+                 const StixelOptions& options, bool has_ground, std::vector<Best>& dp) {
+  const int n = costs.n;
+  const float penalty = static_cast<float>(options.segment_penalty);
+  dp.assign(static_cast<size_t>(3 * n), Best{});
+  auto at = [&](int j, int cls) -> Best& { return dp[static_cast<size_t>(3 * j + cls)]; };
+  for (int j = 0; j < n; ++j) {
+    for (int i = 0; i <= j; ++i) {
+      // Costs of cells 0..i-1 by their last class (none when i == 0).
+      const Best* before[3] = {nullptr, nullptr, nullptr};
+      if (i > 0) {
+        for (int cls = 0; cls < 3; ++cls) before[cls] = &at(i - 1, cls);
+      }
+      // Ground: from the bottom, or behind an object.
+      if (has_ground) {
+        const float seg = costs.Ground(i, j) + penalty;
+        float base = i == 0 ? 0.0f : before[kO]->cost;
+        if (base + seg < at(j, kG).cost) at(j, kG) = Best{base + seg, i, i == 0 ? -1 : kO, -1};
+      }
+      // Sky: from the bottom, above the ground or above an object.
+      {
+        const float seg = costs.Sky(i, j) + penalty;
+        for (int cls : {kG, kO}) {
+          const float base = i == 0 ? 0.0f : before[cls]->cost;
+          if (base + seg < at(j, kS).cost) at(j, kS) = Best{base + seg, i, i == 0 ? -1 : cls, -1};
+          if (i == 0) break;
+        }
+      }
+      // Object: at its measured mean disparity. A segment with no measurement, or one beyond the
+      // trusted floor, is no object: the sky (nothing near) explains it as well.
+      const double f = costs.MeanD(i, j);
+      if (f < model.floor_px) continue;
+      const int b = bins.Of(f);
+      const float seg = costs.Object(i, j, b) + penalty;
+      if (i == 0) {
+        if (seg < at(j, kO).cost) at(j, kO) = Best{seg, 0, -1, b};
+        continue;
+      }
+      for (int cls = 0; cls < 3; ++cls) {
+        const float base = before[cls]->cost;
+        if (!std::isfinite(base)) continue;
+        const float total =
+            base + seg +
+            IntoObject(cls, *before[cls], bins.centre[b], i, costs, bins, model, options);
+        if (total < at(j, kO).cost) at(j, kO) = Best{total, i, cls, b};
+      }
+    }
+  }
+}
+
+StixelClass ClassOf(int cls) {
+  return cls == kG ? StixelClass::kGround : cls == kO ? StixelClass::kObject : StixelClass::kSky;
+}
+
+// The confidence-weighted least-squares slope of the measured cells lo..hi (disparity per row).
+void FitSlope(const ColumnCosts& costs, const Grid& grid, int lo, int hi, Stixel& s) {
+  double sw = 0, sv = 0, sd = 0, svv = 0, svd = 0;
+  int measured = 0;
+  for (int k = lo; k <= hi; ++k) {
+    const double w = costs.Weight(k, k);
+    if (w < kMeasuredCell) continue;
+    const double v = 0.5 * (grid.Top(k) + grid.Bottom(k));
+    const double d = costs.MeanD(k, k);
+    ++measured;
+    sw += w;
+    sv += w * v;
+    sd += w * d;
+    svv += w * v * v;
+    svd += w * v * d;
+  }
+  s.measured_cells = measured;
+  const double var = svv - sv * sv / std::max(sw, 1e-12);
+  s.slope_px_per_row = measured >= 3 && var > 0 ? (svd - sv * sd / sw) / var : 0.0;
+}
+
+// Walks the labelling of column c back from its top cell, appending its stixels bottom to top.
+void Backtrack(const std::vector<Best>& dp, const ColumnCosts& costs, const Bins& bins,
+               const Model& model, const Grid& grid, int c, std::vector<Stixel>& out) {
+  const int n = grid.cells;
+  int cls = kG;
+  for (int k = 1; k < 3; ++k) {
+    if (dp[static_cast<size_t>(3 * (n - 1) + k)].cost <
+        dp[static_cast<size_t>(3 * (n - 1) + cls)].cost) {
+      cls = k;
+    }
+  }
+  const size_t first = out.size();
+  int j = n - 1;
+  while (j >= 0 && cls >= 0) {
+    const Best& best = dp[static_cast<size_t>(3 * j + cls)];
+    // An object ends where its measurements end: unmatched cells at either end cost every model
+    // the same, so they say nothing about its extent.
+    int lo = best.start, hi = j;
+    if (cls == kO) {
+      while (lo < hi && costs.Weight(lo, lo) < kMeasuredCell) ++lo;
+      while (hi > lo && costs.Weight(hi, hi) < kMeasuredCell) --hi;
+    }
+    Stixel s;
+    s.column = c;
+    s.x0 = grid.X0(c);
+    s.width = grid.Width(c);
+    s.top_row = grid.Top(hi);
+    s.bottom_row = grid.Bottom(lo);
+    s.label = ClassOf(cls);
+    const int cells = hi - lo + 1;
+    s.confidence = costs.Weight(lo, hi) / cells;
+    if (cls == kO) {
+      FitSlope(costs, grid, lo, hi, s);
+      s.disparity_px = costs.MeanD(lo, hi);
+      if (s.disparity_px < 0) s.disparity_px = bins.centre[static_cast<size_t>(best.bin)];
+      s.sigma_px = model.ObjectSigma(s.disparity_px);
+    } else if (cls == kG) {
+      s.disparity_px = 0.5 * (costs.ground_d[static_cast<size_t>(best.start)] +
+                              costs.ground_d[static_cast<size_t>(j)]);
+      s.sigma_px = model.GroundSigma(s.disparity_px);
+    } else {
+      s.sigma_px = model.SkySigma();
+    }
+    out.push_back(s);
+    j = best.start - 1;
+    cls = best.prev;
+  }
+  std::reverse(out.begin() + static_cast<std::ptrdiff_t>(first), out.end());
+}
+
+Model MakeModel(const stereo::DisparityMap& disparity, const geometry::RangeOptions& range,
+                const StixelOptions& options) {
+  Model m;
+  m.sigma_px =
+      options.disparity_sigma_px > 0 ? options.disparity_sigma_px : range.disparity_sigma_px;
+  m.object_spread = options.object_spread_fraction;
+  m.ground_spread = options.ground_spread_fraction;
+  m.floor_px = range.min_disparity_px;
+  m.uniform = std::max(16, disparity.min_disparity + disparity.num_disparities);
+  m.max_p = 1.0 - options.min_outlier_probability;
+  m.min_confidence = range.min_confidence;
+  return m;
+}
+
+}  // namespace
+
+StixelWorld ComputeStixels(const stereo::DisparityMap& disparity,
+                           const std::optional<GroundPlane>& ground,
+                           const geometry::RangeOptions& range, const StixelOptions& options) {
+  StixelWorld world;
+  if (disparity.empty()) return world;
+  const Grid grid = MakeGrid(disparity.fixed.size(), options);
+  world.columns = grid.columns;
+  world.column_width = grid.column_width;
+  world.cell_height = grid.cell_height;
+  const Model model = MakeModel(disparity, range, options);
+  const Bins bins = MakeBins(model, model.uniform);
+  std::vector<float> values;
+  std::vector<Cell> cells;
+  ColumnCosts costs;
+  std::vector<Best> dp;
+  world.stixels.reserve(static_cast<size_t>(grid.columns) * 4);
+  for (int c = 0; c < grid.columns; ++c) {
+    MeasureColumn(disparity, grid, c, model, values, cells);
+    ComputeColumnCosts(cells, grid, c, ground, model, bins, costs);
+    LabelColumn(costs, bins, model, options, ground.has_value(), dp);
+    Backtrack(dp, costs, bins, model, grid, c, world.stixels);
+  }
+  return world;
+}
+
+double HeightAboveGround(const GroundPlane& ground, const geometry::StereoRig& rig, double u,
+                         double v, double d_px) {
+  // d = a u + b v + c with u = f X / Z + cx, v = f Y / Z + cy, d = f B / Z gives the plane
+  // a f X + b f Y + (a cx + b cy + c) Z = f B; the camera lies on its positive side.
+  const double f = rig.f_px(), base = rig.baseline_m();
+  const double nx = ground.a * f, ny = ground.b * f,
+               nz = ground.a * rig.cx() + ground.b * rig.cy() + ground.c;
+  const double norm = std::sqrt(nx * nx + ny * ny + nz * nz);
+  if (!(norm > 0) || !(d_px > 0)) return 0.0;
+  const double z = f * base / d_px;
+  const double x = (u - rig.cx()) * z / f, y = (v - rig.cy()) * z / f;
+  return (f * base - (nx * x + ny * y + nz * z)) / norm;
+}
+
+namespace {
+
+// An object stixel that may become part of an obstacle.
+struct Candidate {
+  const Stixel* stixel = nullptr;
+  int parent = 0;  // union-find
+};
+
+int Find(std::vector<Candidate>& c, int i) {
+  while (c[static_cast<size_t>(i)].parent != i) {
+    c[static_cast<size_t>(i)].parent =
+        c[static_cast<size_t>(c[static_cast<size_t>(i)].parent)].parent;
+    i = c[static_cast<size_t>(i)].parent;
+  }
+  return i;
+}
+
+bool Keeps(const Stixel& s, const StixelWorld& world, const geometry::StereoRig& rig,
+           const std::optional<GroundPlane>& ground, const geometry::RangeOptions& range,
+           const StixelOptions& options) {
+  if (s.label != StixelClass::kObject) return false;
+  const int cells = (s.bottom_row - s.top_row + world.cell_height) / world.cell_height;
+  if (cells < options.min_cells) return false;
+  // At least one cell's worth of confident measurement.
+  if (s.confidence * cells < 1.0) return false;
+  if (!geometry::IsTrustedDisparity(s.disparity_px, rig.f_px(), rig.baseline_m(), range)) {
+    return false;
+  }
+  if (ground && s.measured_cells >= 3 && ground->b > 0 &&
+      s.slope_px_per_row > options.max_slope_fraction * ground->b) {
+    return false;
+  }
+  if (ground) {
+    const double u = s.x0 + 0.5 * (s.width - 1);
+    if (HeightAboveGround(*ground, rig, u, s.top_row, s.disparity_px) <
+        options.min_height_above_ground_m) {
+      return false;
+    }
+    const bool standing = ground->DisparityAt(u, s.bottom_row) > 0 &&
+                          HeightAboveGround(*ground, rig, u, s.bottom_row, s.disparity_px) < 1.0;
+    const double height_m = (s.bottom_row - s.top_row + 1) * rig.baseline_m() / s.disparity_px;
+    if (standing && height_m < options.min_standing_height_m) return false;
+  }
+  return true;
+}
+
+// The distance (metres) between the centres of two stixels' columns at their disparities, on
+// their shared middle row.
+double Gap3d(const Stixel& a, const Stixel& b, const geometry::StereoRig& rig) {
+  const double v = 0.5 * (std::max(a.top_row, b.top_row) + std::min(a.bottom_row, b.bottom_row));
+  const auto point = [&](const Stixel& s) {
+    const double z = rig.f_px() * rig.baseline_m() / s.disparity_px;
+    return cv::Vec3d((s.x0 + 0.5 * (s.width - 1) - rig.cx()) * z / rig.f_px(),
+                     (v - rig.cy()) * z / rig.f_px(), z);
+  };
+  return cv::norm(point(a) - point(b));
+}
+
+// The edges cue: at a boundary between columns, the fraction of the shared rows where the left
+// image has an edge pixel within 2 px of it. An edge running down most of the boundary, with
+// disparities that differ by more than the noise, says two objects meet there.
+struct EdgeCue {
+  cv::Mat1b edges;  // empty: no cue
+
+  double Fraction(int x, int top, int bottom) const {
+    if (edges.empty() || bottom < top) return 0.0;
+    const int x0 = std::max(0, x - 2), x1 = std::min(edges.cols - 1, x + 1);
+    int hit = 0;
+    for (int y = top; y <= bottom; ++y) {
+      const uint8_t* row = edges.ptr<uint8_t>(y);
+      for (int xx = x0; xx <= x1; ++xx) {
+        if (row[xx]) {
+          ++hit;
+          break;
+        }
+      }
+    }
+    return static_cast<double>(hit) / (bottom - top + 1);
+  }
+};
+
+EdgeCue MakeEdgeCue(const cv::Mat& left, const StixelOptions& options) {
+  EdgeCue cue;
+  if (options.split != StixelOptions::Split::kEdges || left.empty() || left.type() != CV_8UC1) {
+    return cue;
+  }
+  // SteViE's edges: thresholds for a pixel noise of 2 grey levels, scaled by the frame's.
+  extraction::EdgeOptions edge_options;
+  const double scale = std::clamp(stereo::EstimateNoiseSigma(left) / 2.0, 0.5, 2.0);
+  edge_options.canny_low *= scale;
+  edge_options.canny_high *= scale;
+  cue.edges = extraction::DetectEdges(left, edge_options);
+  return cue;
+}
+
+// Joins the candidates of neighbouring columns whose rows overlap and disparities agree, unless
+// the edge cue separates them.
+void JoinNeighbours(std::vector<Candidate>& cands, const geometry::StereoRig& rig, double noise_px,
+                    int column_width, int cell_height, const EdgeCue& cue,
+                    const StixelOptions& options) {
+  for (size_t i = 0; i < cands.size(); ++i) {
+    const Stixel& a = *cands[i].stixel;
+    for (size_t j = i + 1; j < cands.size(); ++j) {
+      const Stixel& b = *cands[j].stixel;
+      const int gap = b.column - a.column;
+      if (gap > 1 + options.max_gap_columns) break;  // sorted by column
+      // Neighbouring columns must share rows; in one column, the stixels must touch.
+      const int slack = gap == 0 ? cell_height : 0;
+      if (b.top_row > a.bottom_row + slack || a.top_row > b.bottom_row + slack) continue;
+      // The depths differ by no more than the disparity noise allows, or the 3-D gap is small
+      // (a car's side, a wall at a slant).
+      if (std::abs(a.disparity_px - b.disparity_px) >
+              options.join_sigmas * std::sqrt(2.0) * noise_px &&
+          Gap3d(a, b, rig) > options.max_gap_m) {
+        continue;
+      }
+      if (gap > 0 && std::abs(a.disparity_px - b.disparity_px) > std::sqrt(2.0) * noise_px) {
+        // Every column boundary between them (a gap skips columns).
+        bool cut = false;
+        for (int k = a.column + 1; k <= b.column && !cut; ++k) {
+          cut = cue.Fraction(k * column_width, std::max(a.top_row, b.top_row),
+                             std::min(a.bottom_row, b.bottom_row)) >= options.split_edge_fraction;
+        }
+        if (cut) continue;
+      }
+      const int ra = Find(cands, static_cast<int>(i)), rb = Find(cands, static_cast<int>(j));
+      if (ra != rb) cands[static_cast<size_t>(rb)].parent = ra;
+    }
+  }
+}
+
+// The detection of one group: the median of its pixels that agree with their stixels.
+std::optional<Detection> GroupDetection(const std::vector<const Stixel*>& group,
+                                        const stereo::DisparityMap& disparity,
+                                        const geometry::StereoRig& rig,
+                                        const geometry::RangeOptions& range,
+                                        std::vector<float>& values) {
+  values.clear();
+  cv::Rect box;
+  double area = 0, cx = 0, cy = 0, conf = 0;
+  for (const Stixel* s : group) {
+    const cv::Rect r(s->x0, s->top_row, s->width, s->bottom_row - s->top_row + 1);
+    box = box.area() == 0 ? r : (box | r);
+    const double a = r.area();
+    area += a;
+    cx += a * (r.x + 0.5 * (r.width - 1));
+    cy += a * (r.y + 0.5 * (r.height - 1));
+    conf += a * s->confidence;
+    const double tol = 3 * s->sigma_px;
+    for (int y = r.y; y < r.y + r.height; ++y) {
+      const int16_t* row = disparity.fixed.ptr<int16_t>(y);
+      for (int x = r.x; x < r.x + r.width; ++x) {
+        if (row[x] < 0) continue;
+        const float d = static_cast<float>(row[x]) / stereo::DisparityMap::kScale;
+        if (std::abs(d - s->disparity_px) <= tol) values.push_back(d);
+      }
+    }
+  }
+  if (values.empty() || area <= 0) return std::nullopt;
+  const size_t mid = values.size() / 2;
+  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(mid), values.end());
+  const double median = values[mid];
+  for (float& v : values) v = std::abs(v - static_cast<float>(median));
+  std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(mid), values.end());
+  const double spread = 1.4826 * values[mid];
+  // About one independent value per half-window square (the matcher's errors are correlated over
+  // its window), and the matcher's own systematic error on top.
+  const double half = std::max(1.0, disparity.block_size / 2.0);
+  const double n_eff = std::max(1.0, static_cast<double>(values.size()) / (half * half));
+  Detection d;
+  d.bbox = box;
+  d.centroid_px = cv::Point2d(cx / area, cy / area);
+  d.area_px = static_cast<int>(area);
+  d.perimeter_px = 2.0 * (box.width + box.height);
+  d.disparity_px = median;
+  d.valid_disparities = static_cast<int>(values.size());
+  d.valid_fraction = values.size() / area;
+  d.disparity_sigma_px =
+      std::sqrt(range.disparity_sigma_px * range.disparity_sigma_px + spread * spread / n_eff);
+  d.score = conf / area;
+  d.extractor = "stixels";
+  FillRange(d, rig, range);
+  return d;
+}
+
+}  // namespace
+
+std::vector<Detection> ObstaclesFromStixels(const StixelWorld& world,
+                                            const stereo::DisparityMap& disparity,
+                                            const cv::Mat& left, const geometry::StereoRig& rig,
+                                            const std::optional<GroundPlane>& ground,
+                                            const geometry::RangeOptions& range,
+                                            const StixelOptions& options) {
+  std::vector<Candidate> cands;
+  for (const Stixel& s : world.stixels) {
+    if (Keeps(s, world, rig, ground, range, options)) {
+      cands.push_back({&s, static_cast<int>(cands.size())});
+    }
+  }
+  const double noise_px =
+      options.disparity_sigma_px > 0 ? options.disparity_sigma_px : range.disparity_sigma_px;
+  JoinNeighbours(cands, rig, noise_px, world.column_width, world.cell_height,
+                 MakeEdgeCue(left, options), options);
+  std::vector<std::vector<const Stixel*>> groups(cands.size());
+  for (size_t i = 0; i < cands.size(); ++i) {
+    groups[static_cast<size_t>(Find(cands, static_cast<int>(i)))].push_back(cands[i].stixel);
+  }
+  std::vector<Detection> out;
+  std::vector<float> values;
+  for (const std::vector<const Stixel*>& group : groups) {
+    if (group.empty()) continue;
+    int lo = group.front()->column, hi = lo;
+    for (const Stixel* s : group) {
+      lo = std::min(lo, s->column);
+      hi = std::max(hi, s->column);
+    }
+    if (hi - lo + 1 < options.min_columns) continue;
+    std::optional<Detection> d = GroupDetection(group, disparity, rig, range, values);
+    if (d) out.push_back(std::move(*d));
+  }
+  std::sort(out.begin(), out.end(),
+            [](const Detection& a, const Detection& b) { return a.range_m < b.range_m; });
+  return out;
+}
+
+}  // namespace stevi::detection

@@ -1,0 +1,229 @@
+// stevi-stixel-view: the stixel world and its obstacles on the KITTI 2015 pairs of the shared data,
+// drawn and scored against the truth obstacles (tests/testing/gt_obstacles.h), to look at.
+//
+//   stevi-stixel-view [--out DIR] [--max-width N] [--matcher KIND] [--sgbm-texture N]
+//                     [--num-disparities N] [--penalty P] [--join S] [--sigma PX] [--min-height M]
+//
+// Writes DIR/PAIR-stixels.png: the left image with ground stixels green, object stixels coloured
+// by disparity, the obstacles' boxes (red: matched to a truth obstacle, orange: fragment, magenta:
+// false on free ground, cyan: other false) with their depth, and the truth boxes in thin green.
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/pipeline/config.h"
+#include "core/pipeline/pipeline.h"
+#include "drivers/synthetic/random_scenes.h"
+#include "drivers/synthetic/synthetic_source.h"
+#include "tests/testing/data.h"
+#include "tests/testing/gt_obstacles.h"
+#include "tests/testing/real_pairs.h"
+
+namespace stevi {
+namespace {
+
+cv::Scalar VerdictColour(testing::BoxVerdict v) {
+  switch (v) {
+    case testing::BoxVerdict::kMatched: return {0, 0, 255};
+    case testing::BoxVerdict::kFragment: return {0, 165, 255};
+    case testing::BoxVerdict::kFpFree: return {255, 0, 255};
+    default: return {255, 255, 0};
+  }
+}
+
+void DrawStixels(const pipeline::FrameResult& r, int bin, cv::Mat3b& out) {
+  if (!r.stixels) return;
+  const double max_d = r.disparity.min_disparity + r.disparity.num_disparities;
+  cv::Mat3b overlay = out.clone();
+  for (const detection::Stixel& s : r.stixels->stixels) {
+    const cv::Rect rect(s.x0 * bin, s.top_row * bin, s.width * bin,
+                        (s.bottom_row - s.top_row + 1) * bin);
+    if (s.label == detection::StixelClass::kGround) {
+      cv::rectangle(overlay, rect, {0, 160, 0}, cv::FILLED);
+    } else if (s.label == detection::StixelClass::kObject) {
+      cv::Mat1b v(1, 1, static_cast<uchar>(std::clamp(255.0 * s.disparity_px / max_d, 0.0, 255.0)));
+      cv::Mat3b c;
+      cv::applyColorMap(v, c, cv::COLORMAP_TURBO);
+      cv::rectangle(overlay, rect, cv::Scalar(c(0, 0)), cv::FILLED);
+    }
+  }
+  cv::addWeighted(overlay, 0.45, out, 0.55, 0, out);
+}
+
+// One frame of a random synthetic scene: the disparity, its confidence and the stixel world.
+int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::PipelineConfig& base,
+                 const std::string& out_dir) {
+  const drivers::Scenario scenario = drivers::RandomScenario(family, seed);
+  drivers::SyntheticRenderer renderer(scenario.options);
+  pipeline::PipelineConfig config = base;
+  config.mount.pitch_deg = scenario.options.scene.camera_pitch_deg;
+  const pipeline::Snapshot snapshot{std::make_shared<const pipeline::PipelineConfig>(config),
+                                    std::make_shared<const geometry::StereoRig>(renderer.Rig())};
+  pipeline::Pipeline pipe;
+  Result<pipeline::FrameResult> result = pipe.Process(renderer.Render(0), snapshot);
+  if (!result.ok()) {
+    std::fprintf(stderr, "%s\n", result.error().message.c_str());
+    return 1;
+  }
+  const pipeline::FrameResult& r = result.value();
+  const std::string stem = out_dir + "/" + family + "-" + std::to_string(seed);
+  cv::imwrite(stem + "-disparity.png", stereo::ToColour(r.disparity));
+  if (!r.disparity.confidence.empty())
+    cv::imwrite(stem + "-confidence.png", r.disparity.confidence);
+  cv::Mat3b out;
+  cv::cvtColor(r.rectified_left, out, cv::COLOR_GRAY2BGR);
+  DrawStixels(r, 1, out);
+  for (const detection::Detection& d : r.detections) {
+    cv::rectangle(out, d.bbox, {0, 0, 255}, 1);
+    char label[32];
+    std::snprintf(label, sizeof label, "%.1f", d.depth_m);
+    cv::putText(out, label, d.bbox.tl() + cv::Point(2, 12), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+                {0, 0, 255}, 1);
+  }
+  cv::imwrite(stem + "-stixels.png", out);
+  std::printf("%s %llu: %zu detections, ground %s\n", family.c_str(),
+              static_cast<unsigned long long>(seed), r.detections.size(), r.ground ? "yes" : "no");
+  return 0;
+}
+
+int Run(int argc, char** argv) {
+  std::string out_dir = "/tmp/stixels";
+  pipeline::PipelineConfig config;
+  config.algorithm = pipeline::Algorithm::kStixels;
+  std::string synthetic_family;
+  uint64_t synthetic_seed = 0;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--out" && i + 1 < argc) {
+      out_dir = argv[++i];
+    } else if (a == "--max-width" && i + 1 < argc) {
+      config.max_width_px = std::atoi(argv[++i]);
+    } else if (a == "--synthetic" && i + 2 < argc) {
+      synthetic_family = argv[++i];
+      synthetic_seed = std::strtoull(argv[++i], nullptr, 10);
+    } else if (a == "--min-confidence" && i + 1 < argc) {
+      config.range.min_confidence = std::atof(argv[++i]);
+    } else if (a == "--matcher" && i + 1 < argc) {
+      const std::string kind = argv[++i];
+      bool ok = false;
+      for (const auto& n : stereo::MatcherOptions::kKindNames) {
+        if (kind == n.name) {
+          config.matcher.kind = n.value;
+          ok = true;
+        }
+      }
+      if (!ok) {
+        std::fprintf(stderr, "--matcher: unknown kind %s\n", kind.c_str());
+        return 2;
+      }
+    } else if (a == "--sgbm-texture" && i + 1 < argc) {
+      config.matcher.semi_global.texture_threshold = std::atoi(argv[++i]);
+    } else if (a == "--num-disparities" && i + 1 < argc) {
+      config.matcher.semi_global.num_disparities = std::atoi(argv[++i]);
+    } else if (a == "--penalty" && i + 1 < argc) {
+      config.stixels.segment_penalty = std::atof(argv[++i]);
+    } else if (a == "--join" && i + 1 < argc) {
+      config.stixels.join_sigmas = std::atof(argv[++i]);
+    } else if (a == "--sigma" && i + 1 < argc) {
+      config.stixels.disparity_sigma_px = std::atof(argv[++i]);
+    } else if (a == "--min-columns" && i + 1 < argc) {
+      config.stixels.min_columns = std::atoi(argv[++i]);
+    } else if (a == "--gap" && i + 1 < argc) {
+      config.stixels.max_gap_m = std::atof(argv[++i]);
+    } else if (a == "--min-height" && i + 1 < argc) {
+      config.stixels.min_height_above_ground_m = std::atof(argv[++i]);
+    } else {
+      std::fprintf(stderr,
+                   "usage: stevi-stixel-view [--out DIR] [--max-width N] [--matcher K] ...\n");
+      return 2;
+    }
+  }
+  if (!synthetic_family.empty()) {
+    return RunSynthetic(synthetic_family, synthetic_seed, config, out_dir);
+  }
+  const std::optional<std::string> dir = testing::DataDir();
+  if (!dir) {
+    std::printf("skipped: no reference data at %s\n", testing::DataDirWanted().c_str());
+    return 0;
+  }
+  int found = 0, truth = 0, fp = 0, boxes = 0, within5 = 0;
+  for (const std::string& name : testing::KittiPairNames()) {
+    std::string problem;
+    const std::optional<testing::RealPair> pair = testing::LoadRealPair(*dir, name, problem);
+    if (!pair) {
+      std::fprintf(stderr, "%s\n", problem.c_str());
+      return 1;
+    }
+    const auto rig = std::make_shared<const geometry::StereoRig>(geometry::StereoRig::Ideal(
+        pair->left.size(), pair->f_px, pair->baseline_m, pair->cx, pair->cy, pair->name));
+    const pipeline::Snapshot snapshot{std::make_shared<const pipeline::PipelineConfig>(config),
+                                      rig};
+    StereoFrame frame;
+    frame.left = pair->left;
+    frame.right = pair->right;
+    frame.rectified = true;
+    pipeline::Pipeline pipe;
+    Result<pipeline::FrameResult> result = pipe.Process(frame, snapshot);
+    if (!result.ok()) {
+      std::fprintf(stderr, "%s: %s\n", name.c_str(), result.error().message.c_str());
+      return 1;
+    }
+    const pipeline::FrameResult& r = result.value();
+    const int bin = r.binning;
+    const testing::GtScene scene = testing::ExtractGtObstacles(
+        pair->truth_px, pair->f_px, pair->baseline_m, pair->cx, pair->cy);
+    std::vector<testing::ScoredBox> scored;
+    for (const detection::Detection& d : r.detections) {
+      scored.push_back(
+          {cv::Rect(d.bbox.x * bin, d.bbox.y * bin, d.bbox.width * bin, d.bbox.height * bin),
+           d.depth_m});
+    }
+    const testing::DetectionScore score =
+        testing::ScoreDetections(scene, pair->f_px, pair->baseline_m, scored);
+    int w5 = 0;
+    for (const testing::ObstacleResult& o : score.obstacles) {
+      if (o.detection >= 0 && std::abs(o.range_error_pct) <= 5) ++w5;
+    }
+    found += score.found;
+    truth += static_cast<int>(scene.obstacles.size());
+    fp += score.fp;
+    boxes += static_cast<int>(scored.size());
+    within5 += w5;
+    double ms = 0;
+    for (const pipeline::StageTiming& t : r.timings) {
+      if (t.stage == "total") ms = t.ms;
+    }
+    std::printf(
+        "%-16s ground %s  boxes %2zu  truth %2zu  found %2d (%d within 5 %%)  frag %2d  FP %2d"
+        " (free %d struct %d wrZ %d noGT %d)  %.1f ms\n",
+        name.c_str(), r.ground ? "yes" : "no ", scored.size(), scene.obstacles.size(), score.found,
+        w5, score.fragments, score.fp, score.fp_free, score.fp_structure, score.fp_wrong_depth,
+        score.fp_no_truth, ms);
+    cv::Mat3b out;
+    cv::cvtColor(pair->left, out, cv::COLOR_GRAY2BGR);
+    DrawStixels(r, bin, out);
+    for (const testing::GtObstacle& o : scene.obstacles) cv::rectangle(out, o.bbox, {0, 255, 0}, 1);
+    for (size_t i = 0; i < scored.size(); ++i) {
+      const cv::Scalar c = VerdictColour(score.boxes[i]);
+      cv::rectangle(out, scored[i].bbox, c, 2);
+      char label[32];
+      std::snprintf(label, sizeof label, "%.1f", scored[i].depth_m);
+      cv::putText(out, label, scored[i].bbox.tl() + cv::Point(2, 12), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+                  c, 1);
+    }
+    cv::imwrite(out_dir + "/" + name + "-stixels.png", out);
+  }
+  std::printf("all: boxes %d  truth %d  found %d (%.0f %%)  within 5 %% %d (%.0f %%)  FP %d\n",
+              boxes, truth, found, 100.0 * found / std::max(1, truth), within5,
+              100.0 * within5 / std::max(1, truth), fp);
+  return 0;
+}
+
+}  // namespace
+}  // namespace stevi
+
+int main(int argc, char** argv) { return stevi::Run(argc, argv); }
