@@ -29,7 +29,14 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& config) {
 
 std::vector<std::string> MergeFromProto(const v1::PipelineConfig& update,
                                         pipeline::PipelineConfig& config) {
-  return FieldsFromProto(update, config);
+  std::vector<std::string> problems = FieldsFromProto(update, config);
+  // The stixel world comes with its own matcher: an update that selects it and names no matcher
+  // kind gets the dense one (pipeline::ConfigForAlgorithm).
+  if (update.algorithm() == v1::ALGORITHM_STIXELS &&
+      update.matcher().kind() == v1::MATCHER_KIND_UNSPECIFIED) {
+    config.matcher.kind = pipeline::ConfigForAlgorithm(pipeline::Algorithm::kStixels).matcher.kind;
+  }
+  return problems;
 }
 
 void ToProto(const std::vector<pipeline::StageTiming>& timings,

@@ -20,6 +20,7 @@ v1::PipelineConfig ToProto(const pipeline::PipelineConfig& config);
 // Overlays the fields that are set in `update` onto `config`. Returns the problems that the proto
 // itself carries (an enum value out of range, a negative count), each naming the field; `config`
 // is then partly updated and must be discarded. Range checks are left to PipelineConfig::Validate.
+// An update that selects ALGORITHM_STIXELS and names no matcher kind selects the dense matcher.
 std::vector<std::string> MergeFromProto(const v1::PipelineConfig& update,
                                         pipeline::PipelineConfig& config);
 

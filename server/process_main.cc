@@ -45,6 +45,32 @@ int Fail(const std::string& message, int code = 2) {
   return code;
 }
 
+using namespace stevi;
+
+// The frames' poses: a replay's recorded ones, exactly as live; the synthetic rig's own pose and
+// flight, as the server follows them (the tracker carries its tracks through the ego-motion, so
+// the same frames give the same tracks offline and live); none for image files.
+Result<std::unique_ptr<server::PoseSource>> MakePoses(const v1::ServerConfig& config,
+                                                      drivers::StereoSource& source,
+                                                      bool synthetic) {
+  if (const std::vector<geo::VehicleState> recorded = source.RecordedVehicleStates();
+      !recorded.empty()) {
+    Result<std::unique_ptr<server::PoseSource>> created =
+        server::PoseSource::Create(geo::PoseBufferOptions{}, std::nullopt);
+    if (created.ok()) (*created)->SetRecordedStates(recorded);
+    return created;
+  }
+  if (!synthetic) return std::unique_ptr<server::PoseSource>();
+  const std::string& scene = config.source().synthetic().scene();
+  const std::optional<geo::VehicleState> start = drivers::SceneRigPose(scene);
+  Result<std::unique_ptr<server::PoseSource>> created = server::MakePoseSource(config.geo(), start);
+  if (created.ok() && start) {
+    if (auto path = drivers::SceneRigPath(scene, *start))
+      (*created)->SetSyntheticPath(std::move(path));
+  }
+  return created;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -114,32 +140,10 @@ int main(int argc, char** argv) {
   }
   std::ostream& out = out_file.is_open() ? static_cast<std::ostream&>(out_file) : std::cout;
 
-  // A replay georeferences its frames with the poses recorded with them, exactly as live.
-  std::unique_ptr<server::PoseSource> poses;
   for (const std::string& note : (*source)->Notes()) std::cerr << "stevi-process: " << note << "\n";
-  if (const std::vector<geo::VehicleState> recorded = (*source)->RecordedVehicleStates();
-      !recorded.empty()) {
-    Result<std::unique_ptr<server::PoseSource>> created =
-        server::PoseSource::Create(geo::PoseBufferOptions{}, std::nullopt);
-    if (!created.ok()) return Fail(created.error().message, 1);
-    poses = std::move(created).value();
-    poses->SetRecordedStates(recorded);
-  }
-  // The synthetic rig georeferences (and carries its tracks through its ego-motion) with its own
-  // pose and flight, as the server does: the same frames give the same tracks offline and live.
-  if (!poses && synthetic) {
-    const v1::SourceConfig& src = config.source();
-    const std::optional<geo::VehicleState> start = drivers::SceneRigPose(src.synthetic().scene());
-    Result<std::unique_ptr<server::PoseSource>> created =
-        server::MakePoseSource(config.geo(), start);
-    if (!created.ok()) return Fail(created.error().message, 1);
-    poses = std::move(created).value();
-    if (start) {
-      if (auto path = drivers::SceneRigPath(src.synthetic().scene(), *start)) {
-        poses->SetSyntheticPath(std::move(path));
-      }
-    }
-  }
+  Result<std::unique_ptr<server::PoseSource>> made = MakePoses(config, **source, synthetic);
+  if (!made.ok()) return Fail(made.error().message, 1);
+  std::unique_ptr<server::PoseSource> poses = std::move(made).value();
   pipeline::Pipeline pipe;
   pipeline::Snapshot snapshot{
       std::make_shared<const pipeline::PipelineConfig>(std::move(pipeline_config).value()),

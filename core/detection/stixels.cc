@@ -63,8 +63,12 @@ struct Model {
   double max_p = 0.95;
   double min_confidence = 0.5;  // pixels less sure than this are not measured
 
-  double ObjectSigma(double f) const { return std::hypot(sigma_px, object_spread * f); }
-  double GroundSigma(double g) const { return std::hypot(sigma_px, ground_spread * g); }
+  double ObjectSigma(double f) const {
+    return std::sqrt(sigma_px * sigma_px + object_spread * object_spread * f * f);
+  }
+  double GroundSigma(double g) const {
+    return std::sqrt(sigma_px * sigma_px + ground_spread * ground_spread * g * g);
+  }
   double SkySigma() const { return std::max(sigma_px, floor_px / 3); }
 };
 
@@ -81,18 +85,22 @@ float MixtureCost(float d, float p, double mu, double s, double uniform) {
 // disparity to its bin moves it by at most 0.4 sigma.
 struct Bins {
   std::vector<double> centre;
+  std::vector<double> sigma;      // the object's sigma at each centre
   std::vector<int> of_sixteenth;  // disparity x 16 (rounded) -> nearest bin
 
   int Of(double d) const {
-    const int i = std::clamp(static_cast<int>(std::lround(d * 16)), 0,
-                             static_cast<int>(of_sixteenth.size()) - 1);
+    const int i =
+        std::clamp(static_cast<int>(d * 16 + 0.5), 0, static_cast<int>(of_sixteenth.size()) - 1);
     return of_sixteenth[static_cast<size_t>(i)];
   }
 };
 
 Bins MakeBins(const Model& model, double max_d) {
   Bins bins;
-  for (double f = 0; f <= max_d + 1e-9; f += 0.75 * model.ObjectSigma(f)) bins.centre.push_back(f);
+  for (double f = 0; f <= max_d + 1e-9; f += 0.75 * model.ObjectSigma(f)) {
+    bins.centre.push_back(f);
+    bins.sigma.push_back(model.ObjectSigma(f));
+  }
   const int n = static_cast<int>(std::ceil(max_d * 16)) + 1;
   bins.of_sixteenth.resize(static_cast<size_t>(n));
   size_t b = 0;
@@ -149,6 +157,11 @@ struct ColumnCosts {
   std::vector<float> object;               // (n + 1) x bins
   std::vector<double> weight, weighted_d;  // n + 1: sum of p, of p d
   std::vector<double> ground_d;            // n: the ground's disparity at each cell (<= 0: none)
+  std::vector<double> ground_sigma;        // n: its sigma
+  // The cells a segment may start at: the bottom one, every measured one, the first of each
+  // unmeasured run and the first above the ground's horizon. An unmeasured cell costs every model
+  // the same (nothing), so a boundary inside an unmeasured run may as well lie at its start.
+  std::vector<int> starts;
 
   float Object(int i, int j, int b) const {  // cells i..j
     return object[static_cast<size_t>(j + 1) * bins + b] -
@@ -176,6 +189,8 @@ void ComputeColumnCosts(const std::vector<Cell>& cells, const Grid& grid, int c,
   out.weight.assign(static_cast<size_t>(n + 1), 0.0);
   out.weighted_d.assign(static_cast<size_t>(n + 1), 0.0);
   out.ground_d.assign(static_cast<size_t>(n), 0.0);
+  out.ground_sigma.assign(static_cast<size_t>(n), 0.0);
+  out.starts.clear();
   const double u = grid.X0(c) + 0.5 * (grid.Width(c) - 1);
   const double sky_sigma = model.SkySigma();
   for (int k = 0; k < n; ++k) {
@@ -183,8 +198,16 @@ void ComputeColumnCosts(const std::vector<Cell>& cells, const Grid& grid, int c,
     const double v = 0.5 * (grid.Top(k) + grid.Bottom(k));
     const double g = ground ? ground->DisparityAt(u, v) : 0.0;
     out.ground_d[static_cast<size_t>(k)] = g;
+    out.ground_sigma[static_cast<size_t>(k)] = model.GroundSigma(g);
+    // A start at the bottom, at a measured cell, at the first cell of an unmeasured run, and where
+    // the ground's horizon is crossed.
+    const bool after_measured = k > 0 && cells[static_cast<size_t>(k - 1)].p > 0;
+    const bool horizon = k > 0 && out.ground_d[static_cast<size_t>(k - 1)] > 0 && g <= 0;
+    if (k == 0 || cell.p > 0 || after_measured || horizon) out.starts.push_back(k);
     float cg = kImpossible;
-    if (g > 0) cg = MixtureCost(cell.d, cell.p, g, model.GroundSigma(g), model.uniform);
+    if (g > 0) {
+      cg = MixtureCost(cell.d, cell.p, g, out.ground_sigma[static_cast<size_t>(k)], model.uniform);
+    }
     out.ground[k + 1] = out.ground[k] + cg;
     out.sky[k + 1] = out.sky[k] + MixtureCost(cell.d, cell.p, 0.0, sky_sigma, model.uniform);
     out.weight[k + 1] = out.weight[k] + cell.p;
@@ -200,12 +223,12 @@ void ComputeColumnCosts(const std::vector<Cell>& cells, const Grid& grid, int c,
     for (int b = 0; b < nb; ++b) row[b] = prev[b] + far;
     const double d = cell.d;
     for (int b = bins.Of(d); b >= 0; --b) {
-      const double s = model.ObjectSigma(bins.centre[b]);
+      const double s = bins.sigma[static_cast<size_t>(b)];
       if (d - bins.centre[b] > 6 * s) break;
       row[b] = prev[b] + MixtureCost(cell.d, cell.p, bins.centre[b], s, model.uniform);
     }
     for (int b = bins.Of(d) + 1; b < nb; ++b) {
-      const double s = model.ObjectSigma(bins.centre[b]);
+      const double s = bins.sigma[static_cast<size_t>(b)];
       if (bins.centre[b] - d > 6 * s) break;
       row[b] = prev[b] + MixtureCost(cell.d, cell.p, bins.centre[b], s, model.uniform);
     }
@@ -225,20 +248,23 @@ constexpr int kG = 0, kO = 1, kS = 2;
 
 // The transition cost into an object segment of disparity f starting at cell i, after the
 // labelling `before` (class `cls`) of cells 0..i-1.
-float IntoObject(int cls, const Best& before, double f, int i, const ColumnCosts& costs,
-                 const Bins& bins, const Model& model, const StixelOptions& options) {
-  const double s = model.ObjectSigma(f);
+float IntoObject(int cls, const Best& before, int b, int i, const ColumnCosts& costs,
+                 const Bins& bins, const StixelOptions& options) {
+  const double f = bins.centre[static_cast<size_t>(b)];
+  const double s = bins.sigma[static_cast<size_t>(b)];
   if (cls == kG) {
     const double g = costs.ground_d[static_cast<size_t>(i)];
     if (g <= 0) return 0.0f;
-    const double tol = 3 * std::hypot(s, model.GroundSigma(g));
+    const double sg = costs.ground_sigma[static_cast<size_t>(i)];
+    const double tol = 3 * std::sqrt(s * s + sg * sg);
     if (f < g - tol) return static_cast<float>(options.sinking_penalty);
     if (f > g + tol) return static_cast<float>(options.floating_penalty);
     return 0.0f;
   }
   if (cls == kO && before.bin >= 0) {
     const double below = bins.centre[static_cast<size_t>(before.bin)];
-    if (f > below + 3 * std::hypot(s, model.ObjectSigma(below))) {
+    const double sb = bins.sigma[static_cast<size_t>(before.bin)];
+    if (f > below + 3 * std::sqrt(s * s + sb * sb)) {
       return static_cast<float>(options.overhang_penalty);
     }
   }
@@ -253,7 +279,8 @@ void LabelColumn(const ColumnCosts& costs, const Bins& bins, const Model& model,
   dp.assign(static_cast<size_t>(3 * n), Best{});
   auto at = [&](int j, int cls) -> Best& { return dp[static_cast<size_t>(3 * j + cls)]; };
   for (int j = 0; j < n; ++j) {
-    for (int i = 0; i <= j; ++i) {
+    for (const int i : costs.starts) {
+      if (i > j) break;
       // Costs of cells 0..i-1 by their last class (none when i == 0).
       const Best* before[3] = {nullptr, nullptr, nullptr};
       if (i > 0) {
@@ -287,9 +314,7 @@ void LabelColumn(const ColumnCosts& costs, const Bins& bins, const Model& model,
       for (int cls = 0; cls < 3; ++cls) {
         const float base = before[cls]->cost;
         if (!std::isfinite(base)) continue;
-        const float total =
-            base + seg +
-            IntoObject(cls, *before[cls], bins.centre[b], i, costs, bins, model, options);
+        const float total = base + seg + IntoObject(cls, *before[cls], b, i, costs, bins, options);
         if (total < at(j, kO).cost) at(j, kO) = Best{total, i, cls, b};
       }
     }

@@ -38,7 +38,7 @@ std::vector<std::string> DenseMatcherOptions::Validate() const {
   }
   if (p1 + p2 > kDenseMaxPenaltySum) {
     problems.push_back("p2: p1 + p2 must be at most " + std::to_string(kDenseMaxPenaltySum) +
-                       " (8-bit path costs; got " + std::to_string(p1 + p2) + ")");
+                       " (8-bit path costs: got " + std::to_string(p1 + p2) + ")");
   }
   return problems;
 }
@@ -107,38 +107,12 @@ template <typename V>
   a = Min(a, __builtin_shufflevector(a, a, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0));
   return a[0];
 }
-[[gnu::always_inline]] inline int HorizontalMin(const U8x32& v) {
-  const U8x16 lo =
-      __builtin_shufflevector(v, v, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-  const U8x16 hi =
-      __builtin_shufflevector(v, v, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31);
-  return HorizontalMin(Min(lo, hi));
-}
-[[gnu::always_inline]] inline int HorizontalMin(const U8x64& v) {
-  U8x32 lo, hi;
-  std::memcpy(&lo, &v, sizeof lo);
-  std::memcpy(&hi, reinterpret_cast<const char*>(&v) + sizeof lo, sizeof hi);
-  MinInto(lo, hi);
-  return HorizontalMin(lo);
-}
 [[gnu::always_inline]] inline int HorizontalMin(const U16x8& v) {
   U16x8 a = v;
   a = Min(a, __builtin_shufflevector(a, a, 4, 5, 6, 7, 0, 1, 2, 3));
   a = Min(a, __builtin_shufflevector(a, a, 2, 3, 0, 1, 2, 3, 0, 1));
   a = Min(a, __builtin_shufflevector(a, a, 1, 0, 1, 0, 1, 0, 1, 0));
   return a[0];
-}
-[[gnu::always_inline]] inline int HorizontalMin(const U16x16& v) {
-  const U16x8 lo = __builtin_shufflevector(v, v, 0, 1, 2, 3, 4, 5, 6, 7);
-  const U16x8 hi = __builtin_shufflevector(v, v, 8, 9, 10, 11, 12, 13, 14, 15);
-  return HorizontalMin(Min(lo, hi));
-}
-[[gnu::always_inline]] inline int HorizontalMin(const U16x32& v) {
-  U16x16 lo, hi;
-  std::memcpy(&lo, &v, sizeof lo);
-  std::memcpy(&hi, reinterpret_cast<const char*>(&v) + sizeof lo, sizeof hi);
-  MinInto(lo, hi);
-  return HorizontalMin(lo);
 }
 
 #if defined(__x86_64__) || defined(__i386__)

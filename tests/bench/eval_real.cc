@@ -94,8 +94,7 @@ std::vector<std::vector<pipeline::Algorithm>> MatcherGroups(
   std::vector<std::vector<pipeline::Algorithm>> groups;
   std::vector<stereo::MatcherOptions> options;
   for (pipeline::Algorithm a : algorithms) {
-    pipeline::PipelineConfig config;
-    config.algorithm = a;
+    pipeline::PipelineConfig config = pipeline::ConfigForAlgorithm(a);
     size_t g = 0;
     while (g < options.size() && !(options[g] == config.matcher)) ++g;
     if (g == options.size()) {

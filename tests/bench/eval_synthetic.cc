@@ -137,7 +137,7 @@ std::vector<Variant> Variants() {
     if (std::none_of(v.begin(), v.end(), [&](const Variant& x) { return x.name == name; })) {
       Variant extra;
       extra.name = name;
-      extra.config.algorithm = choice.value;
+      extra.config = pipeline::ConfigForAlgorithm(choice.value);
       v.push_back(extra);
     }
   }

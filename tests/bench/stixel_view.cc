@@ -3,6 +3,9 @@
 //
 //   stevi-stixel-view [--out DIR] [--max-width N] [--matcher KIND] [--sgbm-texture N]
 //                     [--num-disparities N] [--penalty P] [--join S] [--sigma PX] [--min-height M]
+//                     [--gap M] [--min-columns N] [--min-confidence P] [--jpeg]
+//                     [--synthetic FAMILY SEED]   (one frame of a random scene: disparity,
+//                                                  confidence and stixels)
 //
 // Writes DIR/PAIR-stixels.png: the left image with ground stixels green, object stixels coloured
 // by disparity, the obstacles' boxes (red: matched to a truth obstacle, orange: fragment, magenta:
@@ -85,8 +88,13 @@ int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::Pipel
                 {0, 0, 255}, 1);
   }
   cv::imwrite(stem + "-stixels.png", out);
-  std::printf("%s %llu: %zu detections, ground %s\n", family.c_str(),
-              static_cast<unsigned long long>(seed), r.detections.size(), r.ground ? "yes" : "no");
+  double extract_ms = 0;
+  for (const pipeline::StageTiming& t : r.timings) {
+    if (t.stage == "extract") extract_ms = t.ms;
+  }
+  std::printf("%s %llu: %zu detections, ground %s, extract %.1f ms\n", family.c_str(),
+              static_cast<unsigned long long>(seed), r.detections.size(), r.ground ? "yes" : "no",
+              extract_ms);
   return 0;
 }
 
@@ -96,12 +104,15 @@ int Run(int argc, char** argv) {
   config.algorithm = pipeline::Algorithm::kStixels;
   std::string synthetic_family;
   uint64_t synthetic_seed = 0;
+  bool jpeg = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--out" && i + 1 < argc) {
       out_dir = argv[++i];
     } else if (a == "--max-width" && i + 1 < argc) {
       config.max_width_px = std::atoi(argv[++i]);
+    } else if (a == "--jpeg") {
+      jpeg = true;  // the KITTI pictures at 0.6 scale as JPEG (for the README)
     } else if (a == "--synthetic" && i + 2 < argc) {
       synthetic_family = argv[++i];
       synthetic_seed = std::strtoull(argv[++i], nullptr, 10);
@@ -215,7 +226,13 @@ int Run(int argc, char** argv) {
       cv::putText(out, label, scored[i].bbox.tl() + cv::Point(2, 12), cv::FONT_HERSHEY_SIMPLEX, 0.4,
                   c, 1);
     }
-    cv::imwrite(out_dir + "/" + name + "-stixels.png", out);
+    if (jpeg) {
+      cv::Mat3b small;
+      cv::resize(out, small, cv::Size(), 0.6, 0.6, cv::INTER_AREA);
+      cv::imwrite(out_dir + "/" + name + "-stixels.jpg", small, {cv::IMWRITE_JPEG_QUALITY, 80});
+    } else {
+      cv::imwrite(out_dir + "/" + name + "-stixels.png", out);
+    }
   }
   std::printf("all: boxes %d  truth %d  found %d (%.0f %%)  within 5 %% %d (%.0f %%)  FP %d\n",
               boxes, truth, found, 100.0 * found / std::max(1, truth), within5,

@@ -95,6 +95,27 @@ TEST(MergeFromProto, FullRoundTripKeepsEveryField) {
   EXPECT_EQ(copy.max_width_px, 0);  // set to 0 is not "unset"
 }
 
+TEST(MergeFromProto, SelectingStixelsWithoutAMatcherKindSelectsTheDenseMatcher) {
+  pipeline::PipelineConfig config;
+  ASSERT_EQ(config.matcher.kind, stereo::MatcherKind::kBlockMatching);
+  v1::PipelineConfig update;
+  update.set_algorithm(v1::ALGORITHM_STIXELS);
+  ASSERT_TRUE(MergeFromProto(update, config).empty());
+  EXPECT_EQ(config.algorithm, pipeline::Algorithm::kStixels);
+  EXPECT_EQ(config.matcher.kind, stereo::MatcherKind::kDense);
+  // A kind named alongside wins.
+  pipeline::PipelineConfig named;
+  update.mutable_matcher()->set_kind(v1::MATCHER_KIND_SEMI_GLOBAL);
+  ASSERT_TRUE(MergeFromProto(update, named).empty());
+  EXPECT_EQ(named.matcher.kind, stereo::MatcherKind::kSemiGlobal);
+  // An update that leaves the algorithm alone leaves the matcher alone.
+  v1::PipelineConfig other;
+  other.mutable_range()->set_max_range_m(50);
+  pipeline::PipelineConfig kept;
+  ASSERT_TRUE(MergeFromProto(other, kept).empty());
+  EXPECT_EQ(kept.matcher.kind, stereo::MatcherKind::kBlockMatching);
+}
+
 TEST(MergeFromProto, UnsetFieldsKeepTheirValues) {
   pipeline::PipelineConfig config;
   config.canonical.threshold_range_m = 33;

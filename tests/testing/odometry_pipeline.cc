@@ -49,8 +49,7 @@ geo::VehicleState VehicleStateOfFrame(const OdometrySequence& sequence, int k) {
 
 Result<std::vector<OdometryFrame>> RunOdometrySequence(const OdometrySequence& sequence,
                                                        const OdometryRunOptions& options) {
-  pipeline::PipelineConfig config;
-  config.algorithm = options.algorithm;
+  pipeline::PipelineConfig config = pipeline::ConfigForAlgorithm(options.algorithm);
   if (options.max_width_px) config.max_width_px = *options.max_width_px;
   const auto rig = std::make_shared<const geometry::StereoRig>(
       geometry::StereoRig::Ideal(sequence.left.front().size(), sequence.f_px, sequence.baseline_m,
