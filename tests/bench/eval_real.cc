@@ -18,7 +18,7 @@
 //    tracks on the road (an SGBM reference plane), our labelled cars confirmed; --scenario
 //    kitti-odom-seq-b runs this section alone.
 //
-// Usage: stevi-eval-real [--algorithm canonical|stevie|stevis|all] [--max-width N]
+// Usage: stevi-eval-real [--algorithm canonical|stevie|stevis|stixels|all] [--max-width N]
 //                        [--scenario PAIR] [--json FILE] [--dump DIR]
 //   --max-width N: only that PipelineConfig::max_width_px (default: the default and 0)
 //   --scenario PAIR: one pair (tsukuba, venus, teddy, cones, motorcycle, kitti-000005_10, ...),
@@ -581,11 +581,12 @@ std::optional<std::string> RunOdometryEval(const std::string& data_dir,
 
 int main(int argc, char** argv) {
   const auto usage = [](const std::string& problem) {
-    std::fprintf(stderr,
-                 "stevi-eval-real: %s\nusage: stevi-eval-real [--algorithm "
-                 "canonical|stevie|stevis|all] [--max-width N] [--scenario PAIR] [--json FILE] "
-                 "[--dump DIR]\n",
-                 problem.c_str());
+    std::fprintf(
+        stderr,
+        "stevi-eval-real: %s\nusage: stevi-eval-real [--algorithm "
+        "canonical|stevie|stevis|stixels|all] [--max-width N] [--scenario PAIR] [--json FILE] "
+        "[--dump DIR]\n",
+        problem.c_str());
     return 2;
   };
   bench::EvalFlags flags;

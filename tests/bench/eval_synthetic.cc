@@ -150,15 +150,16 @@ int main(int argc, char** argv) {
   int max_frames = 0;
   std::string only_scenario, only_algorithm;
   const auto usage = [](const std::string& problem) {
-    std::fprintf(stderr,
-                 "stevi-eval: %s\nusage: stevi-eval [--frames N] [--scenario NAME] "
-                 "[--algorithm canonical|stevie|stevis|stevis-graph] [--size WxH] [--max-width N]\n"
-                 "       stevi-eval --family sky|airfield|long_range|close|all --seeds A-B "
-                 "[--frames N] [--algorithm NAME] [--max-width N] [--json FILE] [--dump DIR] "
-                 "[--dump-scenes N] [--scene-frames N] [--confirm-window N]\n"
-                 "  seeds 1-999: the tuning split; seeds 1001 and up: the TEST split, never to be "
-                 "tuned on\n",
-                 problem.c_str());
+    std::fprintf(
+        stderr,
+        "stevi-eval: %s\nusage: stevi-eval [--frames N] [--scenario NAME] "
+        "[--algorithm canonical|stevie|stevis|stevis-graph|stixels] [--size WxH] [--max-width N]\n"
+        "       stevi-eval --family sky|airfield|long_range|close|all --seeds A-B "
+        "[--frames N] [--algorithm NAME] [--max-width N] [--json FILE] [--dump DIR] "
+        "[--dump-scenes N] [--scene-frames N] [--confirm-window N]\n"
+        "  seeds 1-999: the tuning split; seeds 1001 and up: the TEST split, never to be "
+        "tuned on\n",
+        problem.c_str());
     return 2;
   };
   bench::EvalFlags flags;

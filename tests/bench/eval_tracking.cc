@@ -10,7 +10,8 @@
 // unmatched track on the full projected box of an obstacle that is not ground truth (hidden, cut
 // by the border or outside the image) is don't-care, any other one a false positive.
 //
-// Usage: stevi-eval-tracking [--scenario NAME] [--algorithm canonical|stevie|stevis] [--frames N]
+// Usage: stevi-eval-tracking [--scenario NAME] [--algorithm canonical|stevie|stevis|stixels]
+// [--frames N]
 //                            [--trace]
 //   --frames caps the frames per scenario (default: each scenario's own length)
 //   --trace  prints, per frame, every miss, false positive, ID switch, fragmentation and don't-care
@@ -178,7 +179,7 @@ int main(int argc, char** argv) {
   const auto usage = [](const std::string& problem) {
     std::fprintf(stderr,
                  "stevi-eval-tracking: %s\nusage: stevi-eval-tracking [--scenario NAME] "
-                 "[--algorithm canonical|stevie|stevis] [--frames N] [--trace]\n",
+                 "[--algorithm canonical|stevie|stevis|stixels] [--frames N] [--trace]\n",
                  problem.c_str());
     return 2;
   };
@@ -215,7 +216,8 @@ int main(int argc, char** argv) {
       "smoothed)\n"
       "      TTC rms: over the matches with >= %d hits of an obstacle on a collision course "
       "(miss <= %.0f m)\n"
-      "      default pipeline config (matcher BM) but the algorithm\n\n",
+      "      pipeline::ConfigForAlgorithm: the algorithm with its own matcher (stixels: dense, "
+      "else BM)\n\n",
       testing::kMinVisiblePx, testing::kMinDisparityPx, testing::kMinIoU, testing::kMinIoU,
       testing::kMinTtcHits, testing::kCollisionCourseM);
   std::printf("%-18s %-9s %6s %5s %6s %6s %6s %5s %4s %4s %4s %4s %4s %9s %9s %7s\n", "scenario",

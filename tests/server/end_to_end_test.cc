@@ -57,6 +57,24 @@ class ServerProcessTest : public ::testing::Test {
     return server_.Stevi(std::move(args), timeout);
   }
 
+  // True once at least `n` StreamTracks subscribers have been sent a frame (GetStatus, asked up
+  // to 300 times: each ask is a whole `stevi status` process, so the loop is bounded in time too).
+  bool SubscribersStreaming(int n) {
+    for (int attempt = 0; attempt < 300; ++attempt) {
+      const testing::RunResult status = Stevi({"status", "--json"});
+      v1::GetStatusResponse response;
+      if (status.exit_code != 0 ||
+          !google::protobuf::util::JsonStringToMessage(status.out, &response).ok()) {
+        continue;
+      }
+      const auto sending =
+          std::count_if(response.subscribers().begin(), response.subscribers().end(),
+                        [](const v1::SubscriberStatus& s) { return s.frames_sent() > 0; });
+      if (sending >= n) return true;
+    }
+    return false;
+  }
+
   testing::ServerProcess server_;
   std::string address_;
 };
@@ -294,6 +312,9 @@ TEST_F(ServerProcessTest, StreamingConsumersSurviveAServerRestart) {
                        "--format", "kml", "--count", "200", "--out", kml});
   ASSERT_TRUE(NextFrameAdvisory(avoid, 100)) << avoid.DrainStderr();
   ASSERT_TRUE(watch.WaitForStdoutLine("\"frame_id\"", 30s)) << watch.DrainStderr();
+  // The export streams too before the server stops: a command that never got a frame gives up at
+  // a server shutting down (it may be a wrong address), and a slow start under load would be that.
+  ASSERT_TRUE(SubscribersStreaming(3)) << exporter.DrainStderr();
 
   server_.process()->Signal(SIGTERM);
   ASSERT_EQ(server_.process()->Wait(10s), 0);
