@@ -15,6 +15,7 @@
 #endif
 
 #include "core/common/error.h"
+#include "core/stereo/vector_memory.h"
 
 // What cv::StereoBM (OpenCV 4.6, modules/calib3d/src/stereobm.cpp) computes, as implemented here:
 //
@@ -134,15 +135,8 @@ using V16x8 = Lanes<int16_t, 16>::V;
 using V32x4 = Lanes<int32_t, 16>::V;
 typedef uint64_t Words __attribute__((vector_size(16)));
 
-// Unaligned loads and stores (vector arguments by reference: no ABI questions without AVX).
-template <typename V>
-[[gnu::always_inline]] inline void Load(V& v, const void* p) {
-  std::memcpy(&v, p, sizeof v);
-}
-template <typename V>
-[[gnu::always_inline]] inline void Store(void* p, const V& v) {
-  std::memcpy(p, &v, sizeof v);
-}
+using simd::Load;
+using simd::Store;
 
 // Loads one vector of right-image pixels: stored at the cost's width (no conversion) or as bytes.
 template <typename V, typename Bytes, typename P>

@@ -14,6 +14,7 @@
 
 #include "core/common/error.h"
 #include "core/stereo/matcher.h"
+#include "core/stereo/vector_memory.h"
 
 namespace stevi::stereo {
 
@@ -79,15 +80,8 @@ typedef uint16_t U16x16 __attribute__((vector_size(32)));
 typedef uint8_t U8x64 __attribute__((vector_size(64)));
 typedef uint16_t U16x32 __attribute__((vector_size(64)));
 
-// Unaligned loads and stores (vector arguments by reference: no ABI questions without AVX).
-template <typename V>
-[[gnu::always_inline]] inline void Load(V& v, const void* p) {
-  std::memcpy(&v, p, sizeof v);
-}
-template <typename V>
-[[gnu::always_inline]] inline void Store(void* p, const V& v) {
-  std::memcpy(p, &v, sizeof v);
-}
+using simd::Load;
+using simd::Store;
 // a = min(a, b), lane by lane (in place: no vector return values).
 template <typename V>
 [[gnu::always_inline]] inline void MinInto(V& a, const V& b) {

@@ -10,7 +10,10 @@
 // Writes DIR/PAIR-stixels.png: the left image with ground stixels green, object stixels coloured
 // by disparity, the obstacles' boxes (red: matched to a truth obstacle, orange: fragment, magenta:
 // false on free ground, cyan: other false) with their depth, and the truth boxes in thin green.
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -98,6 +101,38 @@ int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::Pipel
   return 0;
 }
 
+// The numeric flags and the option each sets; nullptr for any other flag.
+using Setter = void (*)(pipeline::PipelineConfig&, double);
+Setter NumberFlag(const std::string& flag) {
+  static const std::vector<std::pair<std::string, Setter>> flags = {
+      {"--max-width",
+       [](pipeline::PipelineConfig& c, double v) { c.max_width_px = static_cast<int>(v); }},
+      {"--min-confidence",
+       [](pipeline::PipelineConfig& c, double v) { c.range.min_confidence = v; }},
+      {"--sgbm-texture",
+       [](pipeline::PipelineConfig& c, double v) {
+         c.matcher.semi_global.texture_threshold = static_cast<int>(v);
+       }},
+      {"--num-disparities",
+       [](pipeline::PipelineConfig& c, double v) {
+         c.matcher.semi_global.num_disparities = c.matcher.dense.num_disparities =
+             static_cast<int>(v);
+       }},
+      {"--penalty", [](pipeline::PipelineConfig& c, double v) { c.stixels.segment_penalty = v; }},
+      {"--join", [](pipeline::PipelineConfig& c, double v) { c.stixels.join_sigmas = v; }},
+      {"--sigma", [](pipeline::PipelineConfig& c, double v) { c.stixels.disparity_sigma_px = v; }},
+      {"--min-columns",
+       [](pipeline::PipelineConfig& c, double v) { c.stixels.min_columns = static_cast<int>(v); }},
+      {"--gap", [](pipeline::PipelineConfig& c, double v) { c.stixels.max_gap_m = v; }},
+      {"--min-height",
+       [](pipeline::PipelineConfig& c, double v) { c.stixels.min_height_above_ground_m = v; }},
+  };
+  for (const auto& [name, setter] : flags) {
+    if (name == flag) return setter;
+  }
+  return nullptr;
+}
+
 int Run(int argc, char** argv) {
   std::string out_dir = "/tmp/stixels";
   pipeline::PipelineConfig config;
@@ -109,15 +144,19 @@ int Run(int argc, char** argv) {
     const std::string a = argv[i];
     if (a == "--out" && i + 1 < argc) {
       out_dir = argv[++i];
-    } else if (a == "--max-width" && i + 1 < argc) {
-      config.max_width_px = std::atoi(argv[++i]);
     } else if (a == "--jpeg") {
       jpeg = true;  // the KITTI pictures at 0.6 scale as JPEG (for the README)
     } else if (a == "--synthetic" && i + 2 < argc) {
       synthetic_family = argv[++i];
-      synthetic_seed = std::strtoull(argv[++i], nullptr, 10);
-    } else if (a == "--min-confidence" && i + 1 < argc) {
-      config.range.min_confidence = std::atof(argv[++i]);
+      const std::string seed = argv[++i];
+      char* end = nullptr;
+      synthetic_seed = std::strtoull(seed.c_str(), &end, 10);
+      const auto& families = drivers::RandomSceneFamilies();
+      if (seed.empty() || *end != '\0' || seed[0] == '-' ||
+          std::find(families.begin(), families.end(), synthetic_family) == families.end()) {
+        std::fprintf(stderr, "--synthetic: expected FAMILY SEED (a known family, a whole seed)\n");
+        return 2;
+      }
     } else if (a == "--matcher" && i + 1 < argc) {
       const std::string kind = argv[++i];
       bool ok = false;
@@ -131,27 +170,27 @@ int Run(int argc, char** argv) {
         std::fprintf(stderr, "--matcher: unknown kind %s\n", kind.c_str());
         return 2;
       }
-    } else if (a == "--sgbm-texture" && i + 1 < argc) {
-      config.matcher.semi_global.texture_threshold = std::atoi(argv[++i]);
-    } else if (a == "--num-disparities" && i + 1 < argc) {
-      config.matcher.semi_global.num_disparities = std::atoi(argv[++i]);
-    } else if (a == "--penalty" && i + 1 < argc) {
-      config.stixels.segment_penalty = std::atof(argv[++i]);
-    } else if (a == "--join" && i + 1 < argc) {
-      config.stixels.join_sigmas = std::atof(argv[++i]);
-    } else if (a == "--sigma" && i + 1 < argc) {
-      config.stixels.disparity_sigma_px = std::atof(argv[++i]);
-    } else if (a == "--min-columns" && i + 1 < argc) {
-      config.stixels.min_columns = std::atoi(argv[++i]);
-    } else if (a == "--gap" && i + 1 < argc) {
-      config.stixels.max_gap_m = std::atof(argv[++i]);
-    } else if (a == "--min-height" && i + 1 < argc) {
-      config.stixels.min_height_above_ground_m = std::atof(argv[++i]);
+    } else if (NumberFlag(a) != nullptr && i + 1 < argc) {
+      const std::string value = argv[++i];
+      char* end = nullptr;
+      const double number = std::strtod(value.c_str(), &end);
+      if (value.empty() || *end != '\0' || !std::isfinite(number) || std::abs(number) > 1e9) {
+        std::fprintf(stderr, "%s: expected a number, got '%s'\n", a.c_str(), value.c_str());
+        return 2;
+      }
+      NumberFlag(a)(config, number);
     } else {
       std::fprintf(stderr,
                    "usage: stevi-stixel-view [--out DIR] [--max-width N] [--matcher K] ...\n");
       return 2;
     }
+  }
+  // The options' own checks, naming every bad field (a whole-number option given a fraction is
+  // truncated first, as the field would hold it).
+  if (const std::vector<std::string> problems = config.Validate(); !problems.empty()) {
+    for (const std::string& p : problems)
+      std::fprintf(stderr, "stevi-stixel-view: %s\n", p.c_str());
+    return 2;
   }
   if (!synthetic_family.empty()) {
     return RunSynthetic(synthetic_family, synthetic_seed, config, out_dir);
