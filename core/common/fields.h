@@ -248,6 +248,121 @@ std::vector<Row> Table(const S& s) {
   return std::move(tabler.rows);
 }
 
+namespace internal {
+
+// Parses `text` as a finite number ("3", "0.25", "-1e-3"); nullopt when it is not one, whole.
+std::optional<double> ParseNumber(std::string_view text);
+
+// Sets the one field at a dotted path from text (fields::Assign).
+class Assigner {
+ public:
+  Assigner(std::string_view path, std::string_view text) : path_(path), text_(text) {}
+
+  template <class T>
+  void Number(T& value, const Field& f) {
+    if (!Mine(f)) return;
+    const std::optional<double> x = ParseNumber(text_);
+    if (!x || !f.Accepts(*x)) return Fail(f, "must be " + f.Describe(true));
+    using U = std::remove_cvref_t<decltype(Unwrap(value))>;
+    if constexpr (std::is_integral_v<U>) {
+      if (*x != std::floor(*x)) return Fail(f, "must be a whole number");
+    }
+    Unwrap(value) = static_cast<U>(*x);
+  }
+  template <class T>
+  void List(std::vector<T>& values, const Field& f) {
+    if (!Mine(f)) return;
+    std::vector<T> parsed;
+    std::string_view rest = text_;
+    while (!rest.empty()) {
+      const size_t comma = rest.find(',');
+      const std::optional<double> x = ParseNumber(rest.substr(0, comma));
+      if (!x || !f.Accepts(*x)) return Fail(f, "each must be " + f.Describe(true));
+      parsed.push_back(static_cast<T>(*x));
+      rest = comma == std::string_view::npos ? std::string_view{} : rest.substr(comma + 1);
+    }
+    if (parsed.empty()) return Fail(f, "must not be empty");
+    values = std::move(parsed);
+  }
+  void Flag(bool& value, const Field& f) {
+    if (!Mine(f)) return;
+    if (text_ == "true" || text_ == "1") {
+      value = true;
+    } else if (text_ == "false" || text_ == "0") {
+      value = false;
+    } else {
+      Fail(f, "must be true or false");
+    }
+  }
+  void Text(std::string& value, const Field& f) {
+    if (Mine(f)) value = std::string(text_);
+  }
+  template <class E, std::size_t N>
+  void Choice(E& value, const Field& f, const ChoiceName<E> (&names)[N]) {
+    if (!Mine(f)) return;
+    std::string valid;
+    for (const ChoiceName<E>& n : names) {
+      if (n.name == text_) {
+        value = n.value;
+        return;
+      }
+      valid += (valid.empty() ? "" : ", ") + std::string(n.name);
+    }
+    Fail(f, "must be one of " + valid);
+  }
+  template <class T>
+  void Nested(T& nested, const Field& f) {
+    const std::string saved = prefix_;
+    prefix_ += std::string(f.name()) + ".";
+    if (path_.starts_with(prefix_)) Visit(nested, *this);
+    prefix_ = saved;
+  }
+
+  bool found() const { return found_; }
+  const std::optional<std::string>& problem() const { return problem_; }
+
+ private:
+  template <class T>
+  static auto& Unwrap(T& value) {
+    if constexpr (requires { value.emplace(); }) {
+      if (!value) value.emplace();
+      return *value;
+    } else {
+      return value;
+    }
+  }
+  bool Mine(const Field& f) {
+    if (found_ || path_ != prefix_ + std::string(f.name())) return false;
+    found_ = true;
+    return true;
+  }
+  void Fail(const Field&, const std::string& why) {
+    problem_ = std::string(path_) + ": " + why + " (got '" + std::string(text_) + "')";
+  }
+
+  std::string_view path_, text_;
+  std::string prefix_;
+  bool found_ = false;
+  std::optional<std::string> problem_;
+};
+
+}  // namespace internal
+
+// Sets the field of `s` at the dotted path `path` ("stixels.segment_penalty") from `text`: a
+// number within the field's bounds (whole for integer fields), true/false, a choice's name, a
+// comma-separated list or a string. On any problem `s` is left as it was and the problem, naming
+// the path, is returned. Checks between fields stay with the struct's Validate().
+template <class S>
+std::optional<std::string> Assign(S& s, std::string_view path, std::string_view text) {
+  S copy = s;
+  internal::Assigner assigner(path, text);
+  Visit(copy, assigner);
+  if (!assigner.found()) return std::string(path) + ": no such setting";
+  if (assigner.problem()) return assigner.problem();
+  s = std::move(copy);
+  return std::nullopt;
+}
+
 // The rows as a Markdown table (path, default, unit, valid values, meaning).
 std::string MarkdownTable(const std::vector<Row>& rows);
 

@@ -410,6 +410,36 @@ Model MakeModel(const stereo::DisparityMap& disparity, const geometry::RangeOpti
   return m;
 }
 
+// The robust spread (1.4826 MAD about the median) of the confident cells' disparities about the
+// ground plane, over the cells below its horizon; 0 without a ground or with too few cells. Most
+// such cells are ground in most scenes; the median and MAD hold while fewer than half are not.
+double MeasuredNoise(const std::vector<std::vector<Cell>>& columns, const Grid& grid,
+                     const std::optional<GroundPlane>& ground, const Model& model,
+                     std::vector<float>& residuals) {
+  if (!ground) return 0.0;
+  residuals.clear();
+  for (int c = 0; c < grid.columns; ++c) {
+    const double u = grid.X0(c) + 0.5 * (grid.Width(c) - 1);
+    const std::vector<Cell>& cells = columns[static_cast<size_t>(c)];
+    for (int k = 0; k < grid.cells; ++k) {
+      const Cell& cell = cells[static_cast<size_t>(k)];
+      if (cell.p < 0.5 * model.max_p) continue;
+      const double g = ground->DisparityAt(u, 0.5 * (grid.Top(k) + grid.Bottom(k)));
+      if (g < model.floor_px) break;  // bottom to top: the horizon is crossed
+      residuals.push_back(static_cast<float>(cell.d - g));
+    }
+  }
+  if (residuals.size() < 50) return 0.0;
+  const auto median = [&]() {
+    const auto mid = residuals.begin() + static_cast<std::ptrdiff_t>(residuals.size() / 2);
+    std::nth_element(residuals.begin(), mid, residuals.end());
+    return static_cast<double>(*mid);
+  };
+  const double centre = median();
+  for (float& r : residuals) r = std::abs(r - static_cast<float>(centre));
+  return 1.4826 * median();
+}
+
 }  // namespace
 
 StixelWorld ComputeStixels(const stereo::DisparityMap& disparity,
@@ -421,15 +451,20 @@ StixelWorld ComputeStixels(const stereo::DisparityMap& disparity,
   world.columns = grid.columns;
   world.column_width = grid.column_width;
   world.cell_height = grid.cell_height;
-  const Model model = MakeModel(disparity, range, options);
-  const Bins bins = MakeBins(model, model.uniform);
+  Model model = MakeModel(disparity, range, options);
   std::vector<float> values;
-  std::vector<Cell> cells;
+  std::vector<std::vector<Cell>> columns(static_cast<size_t>(grid.columns));
+  for (int c = 0; c < grid.columns; ++c) {
+    MeasureColumn(disparity, grid, c, model, values, columns[static_cast<size_t>(c)]);
+  }
+  model.sigma_px = std::max(model.sigma_px, MeasuredNoise(columns, grid, ground, model, values));
+  world.noise_px = model.sigma_px;
+  const Bins bins = MakeBins(model, model.uniform);
   ColumnCosts costs;
   std::vector<Best> dp;
   world.stixels.reserve(static_cast<size_t>(grid.columns) * 4);
   for (int c = 0; c < grid.columns; ++c) {
-    MeasureColumn(disparity, grid, c, model, values, cells);
+    const std::vector<Cell>& cells = columns[static_cast<size_t>(c)];
     ComputeColumnCosts(cells, grid, c, ground, model, bins, costs);
     LabelColumn(costs, bins, model, options, ground.has_value(), dp);
     Backtrack(dp, costs, bins, model, grid, c, world.stixels);
@@ -485,8 +520,11 @@ bool Keeps(const Stixel& s, const StixelWorld& world, const geometry::StereoRig&
   }
   if (ground) {
     const double u = s.x0 + 0.5 * (s.width - 1);
-    if (HeightAboveGround(*ground, rig, u, s.top_row, s.disparity_px) <
-        options.min_height_above_ground_m) {
+    // The height must hold with the disparity smaller by the noise (the point farther along its
+    // ray: lower below the horizon, which is where a lying surface can pass for a standing one).
+    const double d_far =
+        std::max(0.5 * s.disparity_px, s.disparity_px - options.height_sigmas * world.noise_px);
+    if (HeightAboveGround(*ground, rig, u, s.top_row, d_far) < options.min_height_above_ground_m) {
       return false;
     }
     const bool standing = ground->DisparityAt(u, s.bottom_row) > 0 &&

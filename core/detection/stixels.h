@@ -54,6 +54,10 @@ struct StixelOptions {
   // than this fraction of the ground's (a kerb, a verge, a ramp) lies down, and is no obstacle.
   double min_height_above_ground_m = 0.3;
   double max_slope_fraction = 0.5;
+  // ... and that height holds with the stixel's disparity this many noise sigmas smaller (the
+  // frame's measured cell noise, StixelWorld::noise_px): a surface whose top stands up by less
+  // than the noise can tell lies down (a far ground seen from high up, an SGM staircase).
+  double height_sigmas = 2.0;
   // An object stixel standing on the ground (its foot within 1 m of it) must itself be at least
   // this tall (metres): shorter ones are the ground's own disparity errors. Airborne ones (above
   // the ground's horizon, or floating higher) need only min_cells.
@@ -114,6 +118,9 @@ struct StixelOptions {
     v.Number(s.min_height_above_ground_m,
              Field("min_height_above_ground_m", "m", "lowest top of an obstacle over the ground")
                  .In(0, 100));
+    v.Number(s.height_sigmas,
+             Field("height_sigmas", "", "the height must hold this many noise sigmas farther")
+                 .In(0, 10));
     v.Number(s.min_standing_height_m,
              Field("min_standing_height_m", "m", "shortest object stixel standing on the ground")
                  .In(0, 100));
@@ -159,6 +166,12 @@ struct StixelWorld {
   int columns = 0;
   int column_width = 0;
   int cell_height = 0;
+  // A cell's disparity noise (processed pixels) as labelled: the larger of the configured one and
+  // the frame's own, measured as the robust spread (1.4826 MAD) of the measured cells below the
+  // ground's horizon about the ground plane. Dense matchers' errors are correlated over their
+  // window and step in staircases on slanted surfaces, so cells are noisier than pixel noise over
+  // the cell's area would say.
+  double noise_px = 0;
   std::vector<Stixel> stixels;  // column by column, bottom to top
 };
 

@@ -42,6 +42,25 @@ PipelineConfig ConfigForAlgorithm(Algorithm algorithm) {
   return config;
 }
 
+std::vector<std::string> ApplySettings(PipelineConfig& config,
+                                       const std::vector<std::string>& settings) {
+  PipelineConfig next = config;
+  std::vector<std::string> problems;
+  for (const std::string& setting : settings) {
+    const size_t eq = setting.find('=');
+    if (eq == std::string::npos) {
+      problems.push_back("'" + setting + "': expected path=value");
+      continue;
+    }
+    std::optional<std::string> problem = fields::Assign(
+        next, std::string_view(setting).substr(0, eq), std::string_view(setting).substr(eq + 1));
+    if (problem) problems.push_back(std::move(*problem));
+  }
+  if (problems.empty()) problems = next.Validate();
+  if (problems.empty()) config = std::move(next);
+  return problems;
+}
+
 // Every stage's options are validated, whichever algorithm runs (the matcher's: the selected
 // kind's only, MatcherOptions::Validate()).
 std::vector<std::string> PipelineConfig::Validate() const { return fields::Check(*this); }

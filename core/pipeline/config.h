@@ -90,6 +90,12 @@ struct PipelineConfig {
 // thesis detectors (their gates were tuned on it).
 PipelineConfig ConfigForAlgorithm(Algorithm algorithm);
 
+// Applies settings written "path=value" (the option table's dotted paths: "stixels.split=edges",
+// "matcher.kind=dense", "tracking.confirm_window=7") in order, then validates the whole. On any
+// problem `config` is left as it was and every problem is returned, each naming its setting.
+std::vector<std::string> ApplySettings(PipelineConfig& config,
+                                       const std::vector<std::string>& settings);
+
 // Holds the active configuration. Thread-safe. Readers take an immutable snapshot per frame;
 // Set() validates first and leaves the active config untouched when anything is wrong.
 class ConfigStore {

@@ -20,15 +20,19 @@ namespace stevi::stereo {
 
 // Fitted on the tuning split (Middlebury 2001 + KITTI training 000000..000002) by
 // dense_real_test's DISABLED_FitConfidence (logistic regression, inlier = within 3 px).
-const DenseConfidenceVector kDenseConfidenceWeights = {-0.0196, 1.3695,  -0.1343,
-                                                       0.5800,  -0.0126, 0.0376};
+const DenseConfidenceVector kDenseConfidenceWeights = {-1.6815, -1.2320, 0.5054,  -0.9779, 0.2015,
+                                                       0.1324,  2.7250,  0.2905,  -0.5481, 1.1380,
+                                                       -0.2069, 0.3728,  -0.2347, 0.3593,  0.0411};
 
-DenseConfidenceVector DenseConfidenceFeatures(int margin, double texture_ratio, bool filled,
-                                              int num_paths) {
-  const double m = std::log1p(static_cast<double>(margin) / std::max(1, num_paths));
-  const double t = std::log(std::clamp(texture_ratio, 0.25, 16.0));
-  const double f = filled ? 1.0 : 0.0;
-  return {1.0, m, t, f, f * t, m * t};
+DenseConfidenceVector DenseConfidenceFeatures(const DenseConfidenceInputs& in, int num_paths) {
+  const double m =
+      std::log1p(static_cast<double>(std::clamp(in.margin, 0, 255)) / std::max(1, num_paths));
+  const double t = std::log(std::clamp(in.texture_ratio, 0.25, 16.0));
+  const double s = std::log(std::clamp(in.structure_ratio, 0.5, 8.0));
+  const double f = in.filled ? 1.0 : 0.0;
+  const double a =
+      static_cast<double>(std::clamp(in.agreement, 0, kDenseAgreementMax)) / kDenseAgreementMax;
+  return {1.0, m, t, f, f * t, m * t, a, a * m, a * t, a * a, t * t, m * m, s, s * a, s * t};
 }
 
 std::vector<std::string> DenseMatcherOptions::Validate() const {
@@ -49,19 +53,18 @@ namespace {
 constexpr int kGuard = 64;      // bytes between path entries (the d-1 / d+1 reads)
 constexpr int kMaxVector = 64;  // bytes of the widest vector path (AVX-512)
 constexpr int kCensusRadius = kDenseCensusWindow / 2;
-constexpr int kTextureBins = 32;          // texture ratio in quarters, 0 .. 8
 constexpr int kMarginBins = 256;          // margin (summed over paths), capped
 constexpr double kNoiseSobelMean = 2.76;  // mean |x-Sobel| of Gaussian noise of sigma 1
 
-// Whether there is any structure around a pixel: the texture ratio over a wide window
-// (kWideWindow square) ramps the confidence from 0 at kWideFloor x the noise floor to its full
-// value at kWideFull x. A flat noisy surface (the sky) has a wide-window ratio of about 1 and
-// matches at random however confident its aggregated costs look; real low-texture surfaces (road,
-// walls) still hold some structure within the wide window, and the smoothness carries them. The
-// tuning pairs have almost no flat, noisy pixels with truth, so the fitted model alone cannot learn
-// this; the prior says it.
-constexpr int kWideWindow = 15;
-constexpr double kWideFloor = 1.1, kWideFull = 1.5;
+constexpr int kWideWindow = 15;  // DenseCues::structure's window
+// The structure prior: the fitted model's confidence times a ramp of the structure ratio from 0 at
+// kStructureFloor to 1 at kStructureFull (kDenseStructureFull). A flat noisy surface (a clear sky,
+// ratio about 1) matches at random, and the smoothness then carries whatever disparity lies
+// nearest into it: the values agree with their neighbours and the aggregated margins look sure,
+// so no cue of the match itself can tell. Where there is no structure there is no information.
+constexpr float kStructureFloor = 1.1f, kStructureFull = static_cast<float>(kDenseStructureFull);
+// The logistic's table: z in [-kZRange, kZRange] in steps of 1 / kZSteps.
+constexpr int kZRange = 12, kZSteps = 32;
 // Filled values (left-right failures filled along the row) never go above this confidence.
 constexpr int kFilledCap = 100;
 
@@ -615,19 +618,15 @@ void FinishRow(const Job& job, int y, void* ctx) {
 DenseMatcher::DenseMatcher(const DenseMatcherOptions& options)
     : options_(options), buffers_(std::make_unique<Buffers>()) {
   CV_Assert(options.Validate().empty());
-  lut_.resize(2 * kTextureBins * kMarginBins);
-  for (int f = 0; f < 2; ++f) {
-    for (int t = 0; t < kTextureBins; ++t) {
-      for (int m = 0; m < kMarginBins; ++m) {
-        const DenseConfidenceVector x =
-            DenseConfidenceFeatures(m, (t + 0.5) / 4.0, f == 1, options_.num_paths);
-        double z = 0;
-        for (int i = 0; i < kDenseConfidenceFeatures; ++i) z += kDenseConfidenceWeights[i] * x[i];
-        const double p = 1.0 / (1.0 + std::exp(-z));
-        lut_[(f * kTextureBins + t) * kMarginBins + m] =
-            static_cast<uint8_t>(std::clamp(std::lround(255.0 * p), 1L, f ? kFilledCap : 255L));
-      }
-    }
+  margin_log_.resize(kMarginBins);
+  for (int m = 0; m < kMarginBins; ++m) {
+    margin_log_[m] = static_cast<float>(std::log1p(static_cast<double>(m) / options_.num_paths));
+  }
+  logistic_.resize(2 * kZRange * kZSteps + 1);
+  for (size_t i = 0; i < logistic_.size(); ++i) {
+    const double z = static_cast<double>(i) / kZSteps - kZRange;
+    logistic_[i] =
+        static_cast<uint8_t>(std::clamp(std::lround(255.0 / (1.0 + std::exp(-z))), 1L, 255L));
   }
 }
 
@@ -652,6 +651,7 @@ DisparityMap DenseMatcher::Compute(const cv::Mat& left_rect, const cv::Mat& righ
     cues_.filled.setTo(0);
     cues_.texture_ratio = cv::Mat1f(left_rect.size(), 0.0f);
     cues_.structure = cv::Mat1f(left_rect.size(), 0.0f);
+    cues_.agreement = cv::Mat1b(left_rect.size(), uint8_t{0});
     return out;
   }
   buffers_->Resize(left_rect.cols, left_rect.rows, options_.num_disparities, options_.min_disparity,
@@ -672,46 +672,129 @@ DisparityMap DenseMatcher::Compute(const cv::Mat& left_rect, const cv::Mat& righ
   return out;
 }
 
-// The confidence of every matched pixel from the margin, the texture relative to the frame's
-// pixel noise and whether the value was filled (the LUT of the fitted model).
+namespace {
+
+// DenseCues::agreement of every pixel of `fixed`: eight pixels at a time in 16-byte vectors
+// (SSE2 or NEON), the few at the borders one by one.
+void CountAgreement(const cv::Mat1s& fixed, cv::Mat1b& agreement) {
+  constexpr int kR = 2;                                 // the 5x5 window
+  constexpr int16_t kTolerance = DisparityMap::kScale;  // 1 px
+  typedef int16_t V8 __attribute__((vector_size(16)));
+  const int w = fixed.cols, h = fixed.rows;
+  agreement.create(fixed.size());
+  const auto count_one = [&](int y, int x) {
+    const int16_t d = fixed(y, x);
+    if (d < 0) return 0;
+    int n = 0;
+    for (int yy = std::max(0, y - kR); yy <= std::min(h - 1, y + kR); ++yy) {
+      for (int xx = std::max(0, x - kR); xx <= std::min(w - 1, x + kR); ++xx) {
+        const int16_t v = fixed(yy, xx);
+        n += (yy != y || xx != x) && v >= 0 && std::abs(v - d) <= kTolerance;
+      }
+    }
+    return n;
+  };
+  const V8 tolerance = V8{} + kTolerance, zero = V8{};
+  for (int y = 0; y < h; ++y) {
+    uint8_t* out = agreement.ptr<uint8_t>(y);
+    const int16_t* d = fixed.ptr<int16_t>(y);
+    int x = 0;
+    for (; x < std::min(w, kR); ++x) out[x] = static_cast<uint8_t>(count_one(y, x));
+    if (y >= kR && y + kR < h) {
+      for (; x + 8 + kR <= w; x += 8) {
+        V8 centre, count = zero;
+        simd::Load(centre, d + x);
+        for (int dy = -kR; dy <= kR; ++dy) {
+          const int16_t* n = fixed.ptr<int16_t>(y + dy) + x;
+          for (int dx = -kR; dx <= kR; ++dx) {
+            if (dx == 0 && dy == 0) continue;
+            V8 v;
+            simd::Load(v, n + dx);
+            const V8 diff = centre - v;
+            // Lanes are -1 where true: subtracting counts.
+            count -= (v >= zero) & (diff <= tolerance) & (diff >= -tolerance);
+          }
+        }
+        count &= (centre >= zero);
+        for (int i = 0; i < 8; ++i) out[x + i] = static_cast<uint8_t>(count[i]);
+      }
+    }
+    for (; x < w; ++x) out[x] = static_cast<uint8_t>(count_one(y, x));
+  }
+}
+
+}  // namespace
+
+// The confidence of every matched pixel: the fitted model over the margin, the texture and the
+// wide window's structure relative to the frame's pixel noise, whether the value was filled and how
+// its neighbours agree with it.
 void DenseMatcher::Confidence(const cv::Mat& left, DisparityMap& out) {
+  CountAgreement(out.fixed, cues_.agreement);
   cv::Sobel(left, gradient_, CV_16S, 1, 0, 3, 1.0, 0.0, cv::BORDER_REPLICATE);
   cv::convertScaleAbs(gradient_, abs_gradient_);
   cv::boxFilter(abs_gradient_, texture_sum_, CV_16U, cv::Size(5, 5), cv::Point(-1, -1), false,
                 cv::BORDER_REPLICATE);
-  // The mean over the wide window, for the structure prior.
-  cv::boxFilter(abs_gradient_, wide_mean_, CV_32F, cv::Size(kWideWindow, kWideWindow),
-                cv::Point(-1, -1), true, cv::BORDER_REPLICATE);
+  cv::boxFilter(abs_gradient_, wide_sum_, CV_32S, cv::Size(kWideWindow, kWideWindow),
+                cv::Point(-1, -1), false, cv::BORDER_REPLICATE);
   cues_.noise_sigma = EstimateNoiseSigma(left);
-  const double noise_mean = kNoiseSobelMean * std::max(cues_.noise_sigma, 0.5) * 25.0;
-  const float to_ratio = static_cast<float>(1.0 / noise_mean);
-  const float wide_scale = to_ratio * 25.0f;
+  const double noise_mean = kNoiseSobelMean * std::max(cues_.noise_sigma, 0.5);
+  const float to_ratio = static_cast<float>(1.0 / (noise_mean * 25.0));
+  const float wide_to_ratio = static_cast<float>(1.0 / (noise_mean * kWideWindow * kWideWindow));
   cues_.texture_ratio.create(left.size());
   cues_.structure.create(left.size());
+  // The logs of the two texture ratios, tabulated by their window sums for this frame's noise
+  // (the wide sum in steps of kWideStep grey levels: a 0.1 % change of the ratio at most).
+  constexpr int kWideStep = 16;
+  texture_log_.resize(25 * 255 + 1);
+  for (size_t i = 0; i < texture_log_.size(); ++i) {
+    texture_log_[i] = std::log(std::clamp(static_cast<float>(i) * to_ratio, 0.25f, 16.0f));
+  }
+  wide_log_.resize(kWideWindow * kWideWindow * 255 / kWideStep + 1);
+  for (size_t i = 0; i < wide_log_.size(); ++i) {
+    wide_log_[i] = std::log(
+        std::clamp((static_cast<float>(i) + 0.5f) * kWideStep * wide_to_ratio, 0.5f, 8.0f));
+  }
+  std::array<float, kDenseConfidenceFeatures> w;
+  for (int i = 0; i < kDenseConfidenceFeatures; ++i)
+    w[i] = static_cast<float>(kDenseConfidenceWeights[i]);
+  const float filled_cap = kFilledCap;
   for (int y = 0; y < left.rows; ++y) {
     const uint16_t* tex = texture_sum_.ptr<uint16_t>(y);
+    const int32_t* wide = wide_sum_.ptr<int32_t>(y);
     const int16_t* d = out.fixed.ptr<int16_t>(y);
-    const uint16_t* m = cues_.margin.ptr<uint16_t>(y);
-    const uint8_t* f = cues_.filled.ptr<uint8_t>(y);
+    const uint16_t* margin = cues_.margin.ptr<uint16_t>(y);
+    const uint8_t* filled = cues_.filled.ptr<uint8_t>(y);
+    const uint8_t* agree = cues_.agreement.ptr<uint8_t>(y);
     float* ratio = cues_.texture_ratio.ptr<float>(y);
-    const float* wide = wide_mean_.ptr<float>(y);
-    float* prior = cues_.structure.ptr<float>(y);
+    float* structure = cues_.structure.ptr<float>(y);
     uint8_t* conf = out.confidence.ptr<uint8_t>(y);
     for (int x = 0; x < left.cols; ++x) {
-      const float r = tex[x] * to_ratio;
-      ratio[x] = r;
-      const float structure = std::clamp((wide[x] * wide_scale - static_cast<float>(kWideFloor)) /
-                                             static_cast<float>(kWideFull - kWideFloor),
-                                         0.0f, 1.0f);
-      prior[x] = structure;
+      ratio[x] = static_cast<float>(tex[x]) * to_ratio;
+      structure[x] = static_cast<float>(wide[x]) * wide_to_ratio;
+    }
+    for (int x = 0; x < left.cols; ++x) {
       if (d[x] < 0) {
         conf[x] = 0;
         continue;
       }
-      const int t = std::min(kTextureBins - 1, static_cast<int>(r * 4.0f));
-      const int mm = std::min<int>(kMarginBins - 1, m[x]);
-      conf[x] = static_cast<uint8_t>(std::max(
-          1.0f, std::round(lut_[(f[x] * kTextureBins + t) * kMarginBins + mm] * structure)));
+      // DenseConfidenceFeatures, term by term, in floats.
+      const float m = margin_log_[std::min<int>(kMarginBins - 1, margin[x])];
+      const float t = texture_log_[tex[x]];
+      const float s = wide_log_[static_cast<size_t>(wide[x] / kWideStep)];
+      const float f = filled[x] ? 1.0f : 0.0f;
+      const float a = static_cast<float>(agree[x]) * (1.0f / kDenseAgreementMax);
+      const float z = w[0] + w[1] * m + w[2] * t + w[3] * f + w[4] * f * t + w[5] * m * t +
+                      w[6] * a + w[7] * a * m + w[8] * a * t + w[9] * a * a + w[10] * t * t +
+                      w[11] * m * m + w[12] * s + w[13] * s * a + w[14] * s * t;
+      const auto i = static_cast<int>(
+          (std::clamp(z, -static_cast<float>(kZRange), static_cast<float>(kZRange)) + kZRange) *
+              kZSteps +
+          0.5f);
+      const float prior = std::clamp(
+          (structure[x] - kStructureFloor) / (kStructureFull - kStructureFloor), 0.0f, 1.0f);
+      const auto c = static_cast<uint8_t>(
+          std::max(1.0f, std::round(logistic_[static_cast<size_t>(i)] * prior)));
+      conf[x] = filled[x] ? static_cast<uint8_t>(std::min<float>(c, filled_cap)) : c;
     }
   }
 }

@@ -70,18 +70,34 @@ struct DenseCues {
   cv::Mat1f texture_ratio;
   // 1 where the disparity was filled along the row (failed the left-right check), else 0.
   cv::Mat1b filled;
-  // The structure prior, 0..1, that multiplies the fitted model's confidence (1 where the wide
-  // window holds structure; dense_matcher.cc, kWideWindow).
+  // The texture ratio over a wide window (15x15): whether there is any structure around a pixel.
+  // A flat noisy surface (a clear sky) has about 1 and matches at random; real low-texture
+  // surfaces (road, walls) still hold some structure, and the smoothness carries them.
   cv::Mat1f structure;
+  // How many of the 24 other pixels of the 5x5 window around a matched pixel are matched within
+  // 1 px of it (0..24; 0 where unmatched): a surface agrees with itself, a random match in a flat
+  // noisy sky does not.
+  cv::Mat1b agreement;
   double noise_sigma = 0;  // the frame's measured pixel noise (EstimateNoiseSigma)
 };
 
-// The confidence model: P(inlier) = 1 / (1 + exp(-w . features)), inlier = within 3 px of the
-// truth. Fitted on the tuning split (dense_real_test, DISABLED_FitConfidence).
-inline constexpr int kDenseConfidenceFeatures = 6;
+// The confidence model: P(inlier) = 1 / (1 + exp(-w . features)), inlier = within 1 px of the
+// truth, times the structure prior. Fitted on the tuning split, real pairs and synthetic scenes
+// (dense_real_test, DISABLED_FitConfidence).
+struct DenseConfidenceInputs {
+  int margin = 0;              // DenseCues::margin, capped at 255
+  double texture_ratio = 0;    // DenseCues::texture_ratio
+  bool filled = false;         // DenseCues::filled
+  int agreement = 0;           // DenseCues::agreement
+  double structure_ratio = 0;  // DenseCues::structure
+};
+inline constexpr int kDenseConfidenceFeatures = 15;
+// The fitted model speaks alone where DenseCues::structure is at least this; below it a prior
+// lowers the confidence to 0 at 1.1 (dense_matcher.cc).
+inline constexpr double kDenseStructureFull = 1.5;
+inline constexpr int kDenseAgreementMax = 24;
 using DenseConfidenceVector = std::array<double, kDenseConfidenceFeatures>;
-DenseConfidenceVector DenseConfidenceFeatures(int margin, double texture_ratio, bool filled,
-                                              int num_paths);
+DenseConfidenceVector DenseConfidenceFeatures(const DenseConfidenceInputs& in, int num_paths);
 extern const DenseConfidenceVector kDenseConfidenceWeights;
 
 // Thread-compatible (buffers are members; after the first call at a size, Compute allocates
@@ -112,8 +128,11 @@ class DenseMatcher {
   SimdPath path_ = SimdPath::kBest;
   std::unique_ptr<Buffers> buffers_;
   DenseCues cues_;
-  cv::Mat gradient_, abs_gradient_, texture_sum_, wide_mean_;
-  std::vector<uint8_t> lut_;  // confidence by [filled][texture bin][margin]
+  cv::Mat gradient_, abs_gradient_, texture_sum_, wide_sum_;
+  // The model's terms tabulated: log1p(margin / paths) by margin, and the logistic by z.
+  std::vector<float> margin_log_;
+  std::vector<uint8_t> logistic_;
+  std::vector<float> texture_log_, wide_log_;  // per frame: log ratio by window sum
 };
 
 }  // namespace stevi::stereo

@@ -2,9 +2,13 @@
 #pragma once
 
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <optional>
 #include <string>
+#include <vector>
+
+#include "core/pipeline/config.h"
 
 namespace stevi::bench {
 
@@ -30,7 +34,18 @@ struct EvalFlags {
   // N: the track-level confirmation window (frames, default 5). See eval_family.h.
   int scene_frames = 0;
   int confirm_window = 5;
+  // --set path=value (repeatable): pipeline settings applied over each algorithm's own
+  // configuration (pipeline::ApplySettings), to measure an option without a rebuild.
+  std::vector<std::string> settings;
 };
+
+// Applies flags.settings to `config`; prints the problems and exits with 2 when any.
+inline void ApplySettingFlags(const EvalFlags& flags, pipeline::PipelineConfig& config) {
+  const std::vector<std::string> problems = pipeline::ApplySettings(config, flags.settings);
+  if (problems.empty()) return;
+  for (const std::string& p : problems) std::fprintf(stderr, "--set %s\n", p.c_str());
+  std::exit(2);
+}
 
 // Parses a whole number >= `min` into `out`; the problem when it is not one.
 inline std::optional<std::string> ParseWholeFlag(const std::string& flag, const std::string& value,
@@ -56,6 +71,11 @@ inline std::optional<std::string> ParseEvalFlags(int argc, char** argv, bool all
                                                  bool allow_family = false) {
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
+    if (flag == "--set") {
+      if (i + 1 >= argc) return flag + " needs a value";
+      flags.settings.push_back(argv[++i]);
+      continue;
+    }
     if (allow_trace && flag == "--trace") {
       flags.trace = true;
       continue;

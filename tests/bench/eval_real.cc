@@ -545,6 +545,7 @@ std::optional<std::string> RunOdometryEval(const std::string& data_dir,
       o.algorithm = a;
       o.max_width_px = flags.max_width_px;
       o.with_poses = with_poses;
+      o.settings = flags.settings;
       Result<std::vector<testing::OdometryFrame>> frames = testing::RunOdometrySequence(*seq, o);
       if (!frames.ok()) {
         std::fprintf(stderr, "%s (%s): %s\n", seq->name.c_str(), Name(a).c_str(),

@@ -157,6 +157,7 @@ int main(int argc, char** argv) {
         "       stevi-eval --family sky|airfield|long_range|close|all --seeds A-B "
         "[--frames N] [--algorithm NAME] [--max-width N] [--json FILE] [--dump DIR] "
         "[--dump-scenes N] [--scene-frames N] [--confirm-window N]\n"
+        "  --set path=value (repeatable): a pipeline setting over each algorithm's own\n"
         "  seeds 1-999: the tuning split; seeds 1001 and up: the TEST split, never to be "
         "tuned on\n",
         problem.c_str());
@@ -193,7 +194,8 @@ int main(int argc, char** argv) {
     fo.dump_dir = flags.dump;
     fo.dump_scenes = flags.dump_scenes;
     std::vector<bench::EvalVariant> variants;
-    for (const Variant& v : Variants()) {
+    for (Variant& v : Variants()) {
+      bench::ApplySettingFlags(flags, v.config);
       if (flags.algorithm.empty() || v.name == flags.algorithm)
         variants.push_back({v.name, v.config});
     }
@@ -220,7 +222,8 @@ int main(int argc, char** argv) {
     for (const drivers::Scenario& sc : scenarios) names += " " + sc.name;
     return usage("unknown scenario '" + only_scenario + "' (one of:" + names + ")");
   }
-  const std::vector<Variant> variants = Variants();
+  std::vector<Variant> variants = Variants();
+  for (Variant& v : variants) bench::ApplySettingFlags(flags, v.config);
   if (!only_algorithm.empty() &&
       std::none_of(variants.begin(), variants.end(),
                    [&](const Variant& v) { return v.name == only_algorithm; })) {

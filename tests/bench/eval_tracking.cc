@@ -229,6 +229,7 @@ int main(int argc, char** argv) {
     for (pipeline::Algorithm algorithm : kAlgorithms) {
       if (!only_algorithm.empty() && pipeline::AlgorithmName(algorithm) != only_algorithm) continue;
       pipeline::PipelineConfig config = pipeline::ConfigForAlgorithm(algorithm);
+      bench::ApplySettingFlags(flags, config);
       Result<testing::TrackingRun> run = testing::RunTracking(rendered, config);
       if (!run.ok()) {
         std::fprintf(stderr, "%s\n", run.error().message.c_str());

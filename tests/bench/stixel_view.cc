@@ -1,11 +1,13 @@
 // stevi-stixel-view: the stixel world and its obstacles on the KITTI 2015 pairs of the shared data,
 // drawn and scored against the truth obstacles (tests/testing/gt_obstacles.h), to look at.
 //
-//   stevi-stixel-view [--out DIR] [--max-width N] [--matcher KIND] [--sgbm-texture N]
-//                     [--num-disparities N] [--penalty P] [--join S] [--sigma PX] [--min-height M]
-//                     [--gap M] [--min-columns N] [--min-confidence P] [--jpeg]
+//   stevi-stixel-view [--out DIR] [--set path=value]... [--jpeg]
 //                     [--synthetic FAMILY SEED]   (one frame of a random scene: disparity,
-//                                                  confidence and stixels)
+//                                                  confidence and stixels, the truth boxes green)
+//
+// The configuration is the stixels algorithm's own (pipeline::ConfigForAlgorithm: the dense
+// matcher); --set changes any setting by its option-table path ("stixels.segment_penalty=5",
+// "matcher.kind=semi_global").
 //
 // Writes DIR/PAIR-stixels.png: the left image with ground stixels green, object stixels coloured
 // by disparity, the obstacles' boxes (red: matched to a truth obstacle, orange: fragment, magenta:
@@ -63,26 +65,88 @@ void DrawStixels(const pipeline::FrameResult& r, int bin, cv::Mat3b& out) {
 // One frame of a random synthetic scene: the disparity, its confidence and the stixel world.
 int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::PipelineConfig& base,
                  const std::string& out_dir) {
-  const drivers::Scenario scenario = drivers::RandomScenario(family, seed);
+  // "demo": the server's built-in scene (SyntheticOptions' defaults), frame `seed`.
+  const drivers::Scenario scenario =
+      family == "demo" ? drivers::Scenario{} : drivers::RandomScenario(family, seed);
   drivers::SyntheticRenderer renderer(scenario.options);
   pipeline::PipelineConfig config = base;
   config.mount.pitch_deg = scenario.options.scene.camera_pitch_deg;
   const pipeline::Snapshot snapshot{std::make_shared<const pipeline::PipelineConfig>(config),
                                     std::make_shared<const geometry::StereoRig>(renderer.Rig())};
   pipeline::Pipeline pipe;
-  Result<pipeline::FrameResult> result = pipe.Process(renderer.Render(0), snapshot);
+  drivers::FrameTruth truth;
+  Result<pipeline::FrameResult> result = pipe.Process(
+      renderer.Render(family == "demo" ? static_cast<int64_t>(seed) : 0, &truth), snapshot);
   if (!result.ok()) {
     std::fprintf(stderr, "%s\n", result.error().message.c_str());
     return 1;
   }
   const pipeline::FrameResult& r = result.value();
   const std::string stem = out_dir + "/" + family + "-" + std::to_string(seed);
+  {
+    // The matched disparities of the sky (truth 0) among the trusted pixels.
+    const double s = static_cast<double>(r.disparity.fixed.cols) / truth.disparity_px.cols;
+    int hist[8] = {0}, n = 0;
+    for (int v = 0; v < r.disparity.fixed.rows; ++v) {
+      for (int u = 0; u < r.disparity.fixed.cols; ++u) {
+        if (truth.object_id(static_cast<int>(v / s), static_cast<int>(u / s)) != -1) continue;
+        const std::optional<float> m = r.disparity.At(u, v);
+        if (!m || r.disparity.confidence(v, u) < 128) continue;
+        ++n;
+        ++hist[std::min(7, static_cast<int>(*m))];
+      }
+    }
+    std::printf(
+        "  trusted sky px %d: d in [0,1) %d [1,2) %d [2,3) %d [3,4) %d [4,5) %d [5,6) %d "
+        ">=6 %d (binned image: x%.2f)\n",
+        n, hist[0], hist[1], hist[2], hist[3], hist[4], hist[5], hist[6] + hist[7], s);
+  }
+  if (r.ground) {
+    // Where the fitted plane and the exact ground disparity part (scaled when processed smaller).
+    const double s = static_cast<double>(r.disparity.fixed.cols) / truth.disparity_px.cols;
+    std::vector<double> dev, err;
+    int n_trusted = 0, n_bad = 0;
+    for (int v = 0; v < truth.disparity_px.rows; v += 4) {
+      for (int u = 0; u < truth.disparity_px.cols; u += 4) {
+        if (truth.object_id(v, u) != 0) continue;
+        const double t = truth.disparity_px(v, u) * s;
+        dev.push_back(r.ground->DisparityAt(u * s, v * s) - t);
+        const std::optional<float> m =
+            r.disparity.At(static_cast<int>(u * s), static_cast<int>(v * s));
+        const bool trusted =
+            r.disparity.confidence.empty() ||
+            r.disparity.confidence(static_cast<int>(v * s), static_cast<int>(u * s)) >= 128;
+        if (m && trusted) err.push_back(*m - t);
+        if (m && trusted) ++n_trusted;
+        if (m && trusted && std::abs(*m - t) > 3) ++n_bad;
+      }
+    }
+    auto pct = [](std::vector<double> x, double q) {
+      if (x.empty()) return 0.0;
+      std::sort(x.begin(), x.end());
+      return x[static_cast<size_t>(q * (x.size() - 1))];
+    };
+    std::printf(
+        "  ground plane - truth on ground px: p10 %.2f p50 %.2f p90 %.2f; matched - truth: p10 "
+        "%.2f p50 %.2f p90 %.2f (n %zu)\n",
+        pct(dev, .1), pct(dev, .5), pct(dev, .9), pct(err, .1), pct(err, .5), pct(err, .9),
+        err.size());
+    std::printf("  trusted ground px off by > 3 px: %.1f %%\n",
+                100.0 * n_bad / std::max(1, n_trusted));
+  }
   cv::imwrite(stem + "-disparity.png", stereo::ToColour(r.disparity));
   if (!r.disparity.confidence.empty())
     cv::imwrite(stem + "-confidence.png", r.disparity.confidence);
   cv::Mat3b out;
   cv::cvtColor(r.rectified_left, out, cv::COLOR_GRAY2BGR);
   DrawStixels(r, 1, out);
+  for (const drivers::ObstacleTruth& o : truth.obstacles) {
+    if (o.visible_px <= 0) continue;
+    cv::rectangle(out, o.bbox, {0, 255, 0}, 1);
+    std::printf("  truth %-10s %-9s box %3d,%3d %3dx%3d  %6d px  depth %.1f m  disparity %.2f px\n",
+                o.name.c_str(), o.kind.c_str(), o.bbox.x, o.bbox.y, o.bbox.width, o.bbox.height,
+                o.visible_px, o.depth_m, o.median_disparity_px);
+  }
   for (const detection::Detection& d : r.detections) {
     cv::rectangle(out, d.bbox, {0, 0, 255}, 1);
     char label[32];
@@ -101,42 +165,10 @@ int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::Pipel
   return 0;
 }
 
-// The numeric flags and the option each sets; nullptr for any other flag.
-using Setter = void (*)(pipeline::PipelineConfig&, double);
-Setter NumberFlag(const std::string& flag) {
-  static const std::vector<std::pair<std::string, Setter>> flags = {
-      {"--max-width",
-       [](pipeline::PipelineConfig& c, double v) { c.max_width_px = static_cast<int>(v); }},
-      {"--min-confidence",
-       [](pipeline::PipelineConfig& c, double v) { c.range.min_confidence = v; }},
-      {"--sgbm-texture",
-       [](pipeline::PipelineConfig& c, double v) {
-         c.matcher.semi_global.texture_threshold = static_cast<int>(v);
-       }},
-      {"--num-disparities",
-       [](pipeline::PipelineConfig& c, double v) {
-         c.matcher.semi_global.num_disparities = c.matcher.dense.num_disparities =
-             static_cast<int>(v);
-       }},
-      {"--penalty", [](pipeline::PipelineConfig& c, double v) { c.stixels.segment_penalty = v; }},
-      {"--join", [](pipeline::PipelineConfig& c, double v) { c.stixels.join_sigmas = v; }},
-      {"--sigma", [](pipeline::PipelineConfig& c, double v) { c.stixels.disparity_sigma_px = v; }},
-      {"--min-columns",
-       [](pipeline::PipelineConfig& c, double v) { c.stixels.min_columns = static_cast<int>(v); }},
-      {"--gap", [](pipeline::PipelineConfig& c, double v) { c.stixels.max_gap_m = v; }},
-      {"--min-height",
-       [](pipeline::PipelineConfig& c, double v) { c.stixels.min_height_above_ground_m = v; }},
-  };
-  for (const auto& [name, setter] : flags) {
-    if (name == flag) return setter;
-  }
-  return nullptr;
-}
-
 int Run(int argc, char** argv) {
   std::string out_dir = "/tmp/stixels";
-  pipeline::PipelineConfig config;
-  config.algorithm = pipeline::Algorithm::kStixels;
+  pipeline::PipelineConfig config = pipeline::ConfigForAlgorithm(pipeline::Algorithm::kStixels);
+  std::vector<std::string> settings;
   std::string synthetic_family;
   uint64_t synthetic_seed = 0;
   bool jpeg = false;
@@ -153,41 +185,23 @@ int Run(int argc, char** argv) {
       synthetic_seed = std::strtoull(seed.c_str(), &end, 10);
       const auto& families = drivers::RandomSceneFamilies();
       if (seed.empty() || *end != '\0' || seed[0] == '-' ||
-          std::find(families.begin(), families.end(), synthetic_family) == families.end()) {
+          (synthetic_family != "demo" &&
+           std::find(families.begin(), families.end(), synthetic_family) == families.end())) {
         std::fprintf(stderr, "--synthetic: expected FAMILY SEED (a known family, a whole seed)\n");
         return 2;
       }
-    } else if (a == "--matcher" && i + 1 < argc) {
-      const std::string kind = argv[++i];
-      bool ok = false;
-      for (const auto& n : stereo::MatcherOptions::kKindNames) {
-        if (kind == n.name) {
-          config.matcher.kind = n.value;
-          ok = true;
-        }
-      }
-      if (!ok) {
-        std::fprintf(stderr, "--matcher: unknown kind %s\n", kind.c_str());
-        return 2;
-      }
-    } else if (NumberFlag(a) != nullptr && i + 1 < argc) {
-      const std::string value = argv[++i];
-      char* end = nullptr;
-      const double number = std::strtod(value.c_str(), &end);
-      if (value.empty() || *end != '\0' || !std::isfinite(number) || std::abs(number) > 1e9) {
-        std::fprintf(stderr, "%s: expected a number, got '%s'\n", a.c_str(), value.c_str());
-        return 2;
-      }
-      NumberFlag(a)(config, number);
+    } else if (a == "--set" && i + 1 < argc) {
+      settings.push_back(argv[++i]);
     } else {
       std::fprintf(stderr,
-                   "usage: stevi-stixel-view [--out DIR] [--max-width N] [--matcher K] ...\n");
+                   "usage: stevi-stixel-view [--out DIR] [--set path=value]... [--jpeg] "
+                   "[--synthetic FAMILY SEED]\n");
       return 2;
     }
   }
-  // The options' own checks, naming every bad field (a whole-number option given a fraction is
-  // truncated first, as the field would hold it).
-  if (const std::vector<std::string> problems = config.Validate(); !problems.empty()) {
+  // Each setting's own checks, then the whole's, naming every bad field.
+  if (const std::vector<std::string> problems = pipeline::ApplySettings(config, settings);
+      !problems.empty()) {
     for (const std::string& p : problems)
       std::fprintf(stderr, "stevi-stixel-view: %s\n", p.c_str());
     return 2;

@@ -51,6 +51,10 @@ Result<std::vector<OdometryFrame>> RunOdometrySequence(const OdometrySequence& s
                                                        const OdometryRunOptions& options) {
   pipeline::PipelineConfig config = pipeline::ConfigForAlgorithm(options.algorithm);
   if (options.max_width_px) config.max_width_px = *options.max_width_px;
+  if (std::vector<std::string> problems = pipeline::ApplySettings(config, options.settings);
+      !problems.empty()) {
+    return Error{ErrorCode::kInvalidArgument, "settings: " + problems.front()};
+  }
   const auto rig = std::make_shared<const geometry::StereoRig>(
       geometry::StereoRig::Ideal(sequence.left.front().size(), sequence.f_px, sequence.baseline_m,
                                  sequence.cx, sequence.cy, sequence.name));

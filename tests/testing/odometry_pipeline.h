@@ -28,8 +28,9 @@ geo::VehicleState VehicleStateOfFrame(const OdometrySequence& sequence, int k);
 
 struct OdometryRunOptions {
   pipeline::Algorithm algorithm = pipeline::Algorithm::kCanonical;
-  std::optional<int> max_width_px;  // unset: the default
-  bool with_poses = false;          // Snapshot::pose_at from the true poses
+  std::optional<int> max_width_px;    // unset: the default
+  bool with_poses = false;            // Snapshot::pose_at from the true poses
+  std::vector<std::string> settings;  // pipeline::ApplySettings over the algorithm's own config
 };
 
 // One frame of a run.

@@ -137,5 +137,41 @@ TEST(Table, OneRowPerLeafWithDottedPaths) {
             "| `inner.gain` | 0.5 | dB | in [0, 1] | the gain |\n");
 }
 
+TEST(Assign, SetsEachKindOfFieldByItsDottedPath) {
+  Outer o;
+  EXPECT_EQ(Assign(o, "count", "7"), std::nullopt);
+  EXPECT_EQ(Assign(o, "on", "false"), std::nullopt);
+  EXPECT_EQ(Assign(o, "limit", "2.5"), std::nullopt);
+  EXPECT_EQ(Assign(o, "levels", "0,4,8"), std::nullopt);
+  EXPECT_EQ(Assign(o, "colour", "red"), std::nullopt);
+  EXPECT_EQ(Assign(o, "label", "b c"), std::nullopt);
+  EXPECT_EQ(Assign(o, "inner.gain", "0.25"), std::nullopt);
+  EXPECT_EQ(o.count, 7);
+  EXPECT_FALSE(o.on);
+  EXPECT_EQ(o.limit, 2.5);
+  EXPECT_THAT(o.levels, ElementsAre(0, 4, 8));
+  EXPECT_EQ(o.colour, Colour::kRed);
+  EXPECT_EQ(o.label, "b c");
+  EXPECT_EQ(o.inner.gain, 0.25);
+}
+
+TEST(Assign, RefusesBadTextAndLeavesTheStructAsItWas) {
+  Outer o;
+  EXPECT_EQ(Assign(o, "count", "11"), "count: must be in [1, 10] (got '11')");
+  EXPECT_EQ(Assign(o, "count", "2.5"), "count: must be a whole number (got '2.5')");
+  EXPECT_EQ(Assign(o, "count", "3x"), "count: must be in [1, 10] (got '3x')");
+  EXPECT_EQ(Assign(o, "inner.gain", "nan"), "inner.gain: must be in [0, 1] dB (got 'nan')");
+  EXPECT_EQ(Assign(o, "on", "yes"), "on: must be true or false (got 'yes')");
+  EXPECT_EQ(Assign(o, "colour", "blue"), "colour: must be one of red, green (got 'blue')");
+  EXPECT_EQ(Assign(o, "levels", "1,,2"), "levels: each must be in [0, 8] (got '1,,2')");
+  EXPECT_EQ(Assign(o, "inner", "1"), "inner: no such setting");
+  EXPECT_EQ(Assign(o, "inner.gainx", "1"), "inner.gainx: no such setting");
+  EXPECT_EQ(Assign(o, "", "1"), ": no such setting");
+  const Outer fresh;
+  EXPECT_EQ(o.count, fresh.count);
+  EXPECT_EQ(o.inner.gain, fresh.inner.gain);
+  EXPECT_THAT(o.levels, ElementsAre(1, 2));
+}
+
 }  // namespace
 }  // namespace stevi::fields

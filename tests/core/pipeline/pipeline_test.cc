@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
@@ -305,6 +306,31 @@ TEST(PipelineProcess, WideFramesAreBinnedAndKeepTheirQuality) {
   EXPECT_GE(binned.matched, 0.9 * binned.expected);    // recall
   EXPECT_GE(binned.matched, 0.9 * binned.detections);  // precision
   EXPECT_EQ(binned.depths, binned.matched);
+}
+
+TEST(ApplySettings, SetsByPathThenValidatesTheWholeOrChangesNothing) {
+  PipelineConfig config;
+  EXPECT_THAT(ApplySettings(config, {"algorithm=stixels", "matcher.kind=dense",
+                                     "stixels.split=edges", "tracking.confirm_window=7"}),
+              ::testing::IsEmpty());
+  EXPECT_EQ(config.algorithm, Algorithm::kStixels);
+  EXPECT_EQ(config.matcher.kind, stereo::MatcherKind::kDense);
+  EXPECT_EQ(config.stixels.split, detection::StixelOptions::Split::kEdges);
+  EXPECT_EQ(config.tracking.confirm_window, 7);
+
+  const PipelineConfig before = config;
+  EXPECT_THAT(ApplySettings(config, {"algorithm=canonical", "stixels.segment_penalty",
+                                     "stixels.nope=1", "max_width_px=10"}),
+              ::testing::ElementsAre("'stixels.segment_penalty': expected path=value",
+                                     "stixels.nope: no such setting",
+                                     "max_width_px: must be 0 (never bin) or in [64, 16384] "
+                                     "pixels (got '10')"));
+  EXPECT_EQ(config.algorithm, before.algorithm);
+  // Each value in bounds, the whole not: refused by the whole's validation.
+  EXPECT_THAT(ApplySettings(config, {"matcher.block_matching.num_disparities=50"}),
+              ::testing::Not(::testing::IsEmpty()));
+  EXPECT_EQ(config.matcher.block_matching.num_disparities,
+            before.matcher.block_matching.num_disparities);
 }
 
 TEST(ConfigStoreSet, RejectsABadConfigNamingEveryFieldAndKeepsTheActiveOne) {

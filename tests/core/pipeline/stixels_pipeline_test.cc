@@ -61,11 +61,25 @@ TEST(StixelsPipeline, TheAirfieldsLargeObstaclesAtTheirRange) {
     if (o.visible_px < 5000 || o.median_disparity_px < 8) continue;
     ++large;
     const double z = fb / o.median_disparity_px;
+    bool hit = false;
     for (const detection::Detection& d : result->detections) {
       if (IoU(d.bbox, o.bbox) >= 0.3 && std::abs(d.depth_m - z) <= 0.05 * z) {
-        ++found;
+        hit = true;
         break;
       }
+    }
+    found += hit;
+    if (!hit) {
+      std::string near;
+      for (const detection::Detection& d : result->detections) {
+        if (IoU(d.bbox, o.bbox) > 0) {
+          near += " [" + std::to_string(d.bbox.x) + "," + std::to_string(d.bbox.y) + " " +
+                  std::to_string(d.bbox.width) + "x" + std::to_string(d.bbox.height) + " at " +
+                  std::to_string(d.depth_m) + " m]";
+        }
+      }
+      ADD_FAILURE() << o.name << " (" << o.bbox.x << "," << o.bbox.y << " " << o.bbox.width << "x"
+                    << o.bbox.height << ", " << z << " m) not boxed; overlapping:" << near;
     }
   }
   EXPECT_GT(large, 0);

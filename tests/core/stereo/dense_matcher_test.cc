@@ -134,6 +134,40 @@ TEST(DenseMatcher, ConstantDisparityOnTextureEveryPath) {
   EXPECT_EQ(a.block_size, kDenseCensusWindow);
 }
 
+// DenseCues::agreement against a naive count over the 5x5 window, on a map with holes, steps and
+// every border (the vector code covers eight pixels at a time, the borders one by one).
+TEST(DenseMatcher, AgreementCountsTheWindowsNeighboursWithinOnePixel) {
+  const cv::Mat1b left = Texture({67, 23}, 3);
+  cv::Mat1f truth(left.size());
+  for (int y = 0; y < truth.rows; ++y) {
+    for (int x = 0; x < truth.cols; ++x) truth(y, x) = x < 30 ? 6.0f : 6.0f + 0.2f * (x % 9);
+  }
+  DenseMatcherOptions options;
+  options.num_disparities = 16;
+  options.fill_holes = false;  // keep the left-right failures as holes
+  DenseMatcher matcher(options);
+  DisparityMap map = matcher.Compute(left, RightFor(left, truth));
+  const cv::Mat1s& d = map.fixed;
+  const cv::Mat1b& agreement = matcher.last_cues().agreement;
+  ASSERT_EQ(agreement.size(), d.size());
+  int checked = 0;
+  for (int y = 0; y < d.rows; ++y) {
+    for (int x = 0; x < d.cols; ++x) {
+      int n = 0;
+      for (int yy = y - 2; yy <= y + 2; ++yy) {
+        for (int xx = x - 2; xx <= x + 2; ++xx) {
+          if ((yy == y && xx == x) || yy < 0 || xx < 0 || yy >= d.rows || xx >= d.cols) continue;
+          n += d(yy, xx) >= 0 && std::abs(d(yy, xx) - d(y, x)) <= DisparityMap::kScale;
+        }
+      }
+      EXPECT_EQ(agreement(y, x), d(y, x) < 0 ? 0 : n) << "at " << x << "," << y;
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, 67 * 23);
+  EXPECT_GT(cv::countNonZero(d < 0), 0);  // some holes were counted around
+}
+
 // A slanted plane (d from 6 to 20 px across the image): sub-pixel refinement follows it.
 TEST(DenseMatcher, SlantedPlaneSubPixel) {
   const cv::Mat1b left = Texture({320, 160}, 11);
