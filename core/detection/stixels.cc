@@ -62,6 +62,8 @@ struct Model {
   double uniform = 64;  // the outlier's span of disparities (its density is 1 / uniform)
   double max_p = 0.95;
   double min_confidence = 0.5;  // pixels less sure than this are not measured
+  double baseline_m = 1;        // the rig's
+  double max_gap_m = 1;         // StixelOptions::max_gap_m
 
   double ObjectSigma(double f) const {
     return std::sqrt(sigma_px * sigma_px + object_spread * object_spread * f * f);
@@ -346,6 +348,59 @@ void FitSlope(const ColumnCosts& costs, const Grid& grid, int lo, int hi, Stixel
   s.slope_px_per_row = measured >= 3 && var > 0 ? (svd - sv * sd / sw) / var : 0.0;
 }
 
+// The stixel of cells lo..hi of column c with class cls (from the DP's `best`).
+Stixel MakeStixel(const ColumnCosts& costs, const Bins& bins, const Model& model, const Grid& grid,
+                  int c, int cls, int lo, int hi, const Best& best) {
+  Stixel s;
+  s.column = c;
+  s.x0 = grid.X0(c);
+  s.width = grid.Width(c);
+  s.top_row = grid.Top(hi);
+  s.bottom_row = grid.Bottom(lo);
+  s.label = ClassOf(cls);
+  const int cells = hi - lo + 1;
+  s.confidence = costs.Weight(lo, hi) / cells;
+  if (cls == kO) {
+    FitSlope(costs, grid, lo, hi, s);
+    s.disparity_px = costs.MeanD(lo, hi);
+    if (s.disparity_px < 0) s.disparity_px = bins.centre[static_cast<size_t>(best.bin)];
+    s.sigma_px = model.ObjectSigma(s.disparity_px);
+  } else if (cls == kG) {
+    s.disparity_px =
+        0.5 * (costs.ground_d[static_cast<size_t>(lo)] + costs.ground_d[static_cast<size_t>(hi)]);
+    s.sigma_px = model.GroundSigma(s.disparity_px);
+  } else {
+    s.sigma_px = model.SkySigma();
+  }
+  return s;
+}
+
+// Appends the object stixels of an object segment lo..hi: its measured extent, cut where a run of
+// unmeasured cells spans more than max_gap_m at the segment's disparity. Unmeasured cells cost
+// every model the same, so the DP may bridge them with one segment (a drone above a hangar at the
+// same range); nothing was seen in between, and the grouping joins the pieces again when they lie
+// within max_gap_m of each other.
+void AppendObject(const ColumnCosts& costs, const Bins& bins, const Model& model, const Grid& grid,
+                  int c, int lo, int hi, const Best& best, std::vector<Stixel>& out) {
+  const double d = costs.MeanD(lo, hi);
+  const double max_gap_rows =
+      d > 0 ? model.max_gap_m * d / model.baseline_m : std::numeric_limits<double>::infinity();
+  int piece_lo = -1, last_measured = -1;
+  for (int k = lo; k <= hi + 1; ++k) {
+    const bool measured = k <= hi && costs.Weight(k, k) >= kMeasuredCell;
+    if (k <= hi && !measured) continue;
+    if (piece_lo >= 0 && (k > hi || (k - last_measured - 1) * grid.cell_height > max_gap_rows)) {
+      out.push_back(MakeStixel(costs, bins, model, grid, c, kO, piece_lo, last_measured, best));
+      piece_lo = -1;
+    }
+    if (k > hi) break;
+    if (piece_lo < 0) piece_lo = k;
+    last_measured = k;
+  }
+  // No measured cell at all: nothing was seen there.
+  if (last_measured < 0) out.push_back(MakeStixel(costs, bins, model, grid, c, kS, lo, hi, best));
+}
+
 // Walks the labelling of column c back from its top cell, appending its stixels bottom to top.
 void Backtrack(const std::vector<Best>& dp, const ColumnCosts& costs, const Bins& bins,
                const Model& model, const Grid& grid, int c, std::vector<Stixel>& out) {
@@ -361,44 +416,25 @@ void Backtrack(const std::vector<Best>& dp, const ColumnCosts& costs, const Bins
   int j = n - 1;
   while (j >= 0 && cls >= 0) {
     const Best& best = dp[static_cast<size_t>(3 * j + cls)];
-    // An object ends where its measurements end: unmatched cells at either end cost every model
-    // the same, so they say nothing about its extent.
-    int lo = best.start, hi = j;
     if (cls == kO) {
-      while (lo < hi && costs.Weight(lo, lo) < kMeasuredCell) ++lo;
-      while (hi > lo && costs.Weight(hi, hi) < kMeasuredCell) --hi;
-    }
-    Stixel s;
-    s.column = c;
-    s.x0 = grid.X0(c);
-    s.width = grid.Width(c);
-    s.top_row = grid.Top(hi);
-    s.bottom_row = grid.Bottom(lo);
-    s.label = ClassOf(cls);
-    const int cells = hi - lo + 1;
-    s.confidence = costs.Weight(lo, hi) / cells;
-    if (cls == kO) {
-      FitSlope(costs, grid, lo, hi, s);
-      s.disparity_px = costs.MeanD(lo, hi);
-      if (s.disparity_px < 0) s.disparity_px = bins.centre[static_cast<size_t>(best.bin)];
-      s.sigma_px = model.ObjectSigma(s.disparity_px);
-    } else if (cls == kG) {
-      s.disparity_px = 0.5 * (costs.ground_d[static_cast<size_t>(best.start)] +
-                              costs.ground_d[static_cast<size_t>(j)]);
-      s.sigma_px = model.GroundSigma(s.disparity_px);
+      // Appended top piece first, like the other segments (reversed below).
+      const size_t at = out.size();
+      AppendObject(costs, bins, model, grid, c, best.start, j, best, out);
+      std::reverse(out.begin() + static_cast<std::ptrdiff_t>(at), out.end());
     } else {
-      s.sigma_px = model.SkySigma();
+      out.push_back(MakeStixel(costs, bins, model, grid, c, cls, best.start, j, best));
     }
-    out.push_back(s);
     j = best.start - 1;
     cls = best.prev;
   }
   std::reverse(out.begin() + static_cast<std::ptrdiff_t>(first), out.end());
 }
 
-Model MakeModel(const stereo::DisparityMap& disparity, const geometry::RangeOptions& range,
-                const StixelOptions& options) {
+Model MakeModel(const stereo::DisparityMap& disparity, const geometry::StereoRig& rig,
+                const geometry::RangeOptions& range, const StixelOptions& options) {
   Model m;
+  m.baseline_m = rig.baseline_m();
+  m.max_gap_m = options.max_gap_m;
   m.sigma_px =
       options.disparity_sigma_px > 0 ? options.disparity_sigma_px : range.disparity_sigma_px;
   m.object_spread = options.object_spread_fraction;
@@ -442,7 +478,7 @@ double MeasuredNoise(const std::vector<std::vector<Cell>>& columns, const Grid& 
 
 }  // namespace
 
-StixelWorld ComputeStixels(const stereo::DisparityMap& disparity,
+StixelWorld ComputeStixels(const stereo::DisparityMap& disparity, const geometry::StereoRig& rig,
                            const std::optional<GroundPlane>& ground,
                            const geometry::RangeOptions& range, const StixelOptions& options) {
   StixelWorld world;
@@ -451,14 +487,15 @@ StixelWorld ComputeStixels(const stereo::DisparityMap& disparity,
   world.columns = grid.columns;
   world.column_width = grid.column_width;
   world.cell_height = grid.cell_height;
-  Model model = MakeModel(disparity, range, options);
+  const Model model = MakeModel(disparity, rig, range, options);
   std::vector<float> values;
   std::vector<std::vector<Cell>> columns(static_cast<size_t>(grid.columns));
   for (int c = 0; c < grid.columns; ++c) {
     MeasureColumn(disparity, grid, c, model, values, columns[static_cast<size_t>(c)]);
   }
-  model.sigma_px = std::max(model.sigma_px, MeasuredNoise(columns, grid, ground, model, values));
-  world.noise_px = model.sigma_px;
+  // The labelling keeps the configured noise: on real roads the plane's misfit inflates the
+  // measured spread, and a wider object model then merges a car with the facade behind it.
+  world.noise_px = std::max(model.sigma_px, MeasuredNoise(columns, grid, ground, model, values));
   const Bins bins = MakeBins(model, model.uniform);
   ColumnCosts costs;
   std::vector<Best> dp;

@@ -166,19 +166,21 @@ struct StixelWorld {
   int columns = 0;
   int column_width = 0;
   int cell_height = 0;
-  // A cell's disparity noise (processed pixels) as labelled: the larger of the configured one and
-  // the frame's own, measured as the robust spread (1.4826 MAD) of the measured cells below the
-  // ground's horizon about the ground plane. Dense matchers' errors are correlated over their
-  // window and step in staircases on slanted surfaces, so cells are noisier than pixel noise over
-  // the cell's area would say.
+  // A cell's disparity noise (processed pixels) for the standing test (height_sigmas): the larger
+  // of the configured one and the frame's own, measured as the robust spread (1.4826 MAD) of the
+  // confident cells below the ground's horizon about the ground plane. Dense matchers' errors are
+  // correlated over their window and step in staircases on slanted surfaces, so cells are noisier
+  // than pixel noise over the cell's area would say. The labelling itself uses the configured
+  // noise (StixelOptions::disparity_sigma_px).
   double noise_px = 0;
   std::vector<Stixel> stixels;  // column by column, bottom to top
 };
 
 // Labels every column of `disparity` (with its confidence, when the matcher gives one) bottom to
 // top. `ground` is the frame's ground plane (FitGroundPlane); without one no cell is ground.
-// `range` is in the processed images' pixels.
-StixelWorld ComputeStixels(const stereo::DisparityMap& disparity,
+// `rig` and `range` are the processed images'. An object segment is cut where nothing was
+// measured over more than max_gap_m (metres at its disparity).
+StixelWorld ComputeStixels(const stereo::DisparityMap& disparity, const geometry::StereoRig& rig,
                            const std::optional<GroundPlane>& ground,
                            const geometry::RangeOptions& range, const StixelOptions& options);
 

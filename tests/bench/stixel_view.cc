@@ -142,7 +142,12 @@ int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::Pipel
   DrawStixels(r, 1, out);
   for (const drivers::ObstacleTruth& o : truth.obstacles) {
     if (o.visible_px <= 0) continue;
-    cv::rectangle(out, o.bbox, {0, 255, 0}, 1);
+    const double k = static_cast<double>(out.cols) / truth.object_id.cols;  // binned
+    cv::rectangle(
+        out,
+        cv::Rect(cv::Point(static_cast<int>(o.bbox.x * k), static_cast<int>(o.bbox.y * k)),
+                 cv::Size(static_cast<int>(o.bbox.width * k), static_cast<int>(o.bbox.height * k))),
+        {0, 255, 0}, 1);
     std::printf("  truth %-10s %-9s box %3d,%3d %3dx%3d  %6d px  depth %.1f m  disparity %.2f px\n",
                 o.name.c_str(), o.kind.c_str(), o.bbox.x, o.bbox.y, o.bbox.width, o.bbox.height,
                 o.visible_px, o.depth_m, o.median_disparity_px);

@@ -77,7 +77,7 @@ geometry::RangeOptions Range() {
 
 std::vector<Detection> Obstacles(const Scene& scene, const StixelOptions& options = {},
                                  std::optional<GroundPlane> ground = TrueGround()) {
-  const StixelWorld world = ComputeStixels(scene.map, ground, Range(), options);
+  const StixelWorld world = ComputeStixels(scene.map, Rig(), ground, Range(), options);
   return ObstaclesFromStixels(world, scene.map, cv::Mat(), Rig(), ground, Range(), options);
 }
 
@@ -111,7 +111,7 @@ TEST(Stixels, HeightAboveGroundIsTheAnalyticHeight) {
 TEST(Stixels, ColumnsAreLabelledGroundObjectSky) {
   Scene scene;
   const cv::Rect car = scene.Standing(14, 2.0, 200, 300);
-  const StixelWorld world = ComputeStixels(scene.map, TrueGround(), Range(), {});
+  const StixelWorld world = ComputeStixels(scene.map, Rig(), TrueGround(), Range(), {});
   ASSERT_EQ(world.column_width, 8);
   ASSERT_EQ(world.cell_height, 4);
   for (const Stixel& s : world.stixels) {
@@ -194,6 +194,30 @@ TEST(Stixels, AHoleInAPanelDoesNotSplitIt) {
   EXPECT_GT(IoU(found[0].bbox, car), 0.85);
 }
 
+TEST(Stixels, NothingSeenBetweenADroneAndAHangarAtItsRangeKeepsThemApart) {
+  Scene scene;
+  // A hangar 48 m away and a drone 10 m above it at the same range, unmatched sky between them:
+  // one segment would bridge them at no cost; the cut at the unmeasured run keeps them apart.
+  const cv::Rect hangar = scene.Standing(48, 6.0, 300, 460);
+  const double d = kF * kBase / 48;
+  const cv::Rect drone(360, hangar.y - 150, 30, 12);
+  scene.Box(drone, d);
+  const std::vector<Detection> found = Obstacles(scene);
+  ASSERT_EQ(found.size(), 2u);
+  const bool drone_first = found[0].bbox.y < found[1].bbox.y;
+  EXPECT_GT(IoU(found[drone_first ? 0 : 1].bbox, drone), 0.5);
+  EXPECT_GT(IoU(found[drone_first ? 1 : 0].bbox, hangar), 0.85);
+  // A gap shorter than max_gap_m (a 0.5 m unmatched band across a car at 10 m) is no cut.
+  Scene car_scene;
+  const cv::Rect car = car_scene.Standing(10, 1.5, 200, 320);
+  for (int y = car.y + 30; y < car.y + 30 + 35; ++y) {
+    for (int x = car.x; x < car.x + car.width; ++x) car_scene.Clear(x, y);
+  }
+  const std::vector<Detection> one = Obstacles(car_scene);
+  ASSERT_EQ(one.size(), 1u);
+  EXPECT_GT(IoU(one[0].bbox, car), 0.85);
+}
+
 TEST(Stixels, FittedGroundGivesTheSameObstacles) {
   Scene scene;
   const cv::Rect car = scene.Standing(14, 1.5, 200, 300);
@@ -217,7 +241,7 @@ TEST(Stixels, EdgesSplitTwoTouchingObjectsAndNeverCreateOne) {
   image(left_van).setTo(60);
   image(right_van).setTo(200);
   StixelOptions options;
-  const StixelWorld world = ComputeStixels(scene.map, TrueGround(), Range(), options);
+  const StixelWorld world = ComputeStixels(scene.map, Rig(), TrueGround(), Range(), options);
   const std::vector<Detection> joined =
       ObstaclesFromStixels(world, scene.map, image, Rig(), TrueGround(), Range(), options);
   ASSERT_EQ(joined.size(), 1u);
@@ -234,7 +258,7 @@ TEST(Stixels, EdgesSplitTwoTouchingObjectsAndNeverCreateOne) {
   cv::Mat1b doors(kHeight, kWidth, uchar{128});
   doors(cv::Rect(320, van.y, 96, van.height)).setTo(220);
   cv::rectangle(doors, cv::Rect(40, 60, 100, 120), cv::Scalar(255), cv::FILLED);
-  const StixelWorld world_one = ComputeStixels(one.map, TrueGround(), Range(), options);
+  const StixelWorld world_one = ComputeStixels(one.map, Rig(), TrueGround(), Range(), options);
   EXPECT_EQ(
       ObstaclesFromStixels(world_one, one.map, doors, Rig(), TrueGround(), Range(), options).size(),
       1u);
