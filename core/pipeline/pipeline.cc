@@ -92,8 +92,8 @@ void Extract(const PipelineConfig& config, int factor, const FrameImages& images
           detection::DetectSteViS(rect_left, trusted, work_rig, range, config.stevis, &full);
       break;
     case Algorithm::kStixels:
-      result.stixels = detection::ComputeStixels(result.disparity, work_rig, ground, range,
-                                                 config.stixels);
+      result.stixels =
+          detection::ComputeStixels(result.disparity, work_rig, ground, range, config.stixels);
       result.detections = detection::ObstaclesFromStixels(
           *result.stixels, result.disparity, rect_left, work_rig, ground, range, config.stixels);
       break;
