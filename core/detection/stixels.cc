@@ -743,6 +743,11 @@ std::vector<Detection> ObstaclesFromStixels(const StixelWorld& world,
       hi = std::max(hi, s->column);
     }
     if (hi - lo + 1 < options.min_columns) continue;
+    double support = 0;  // confident pixels
+    for (const Stixel* st : group) {
+      support += st->confidence * st->width * (st->bottom_row - st->top_row + 1);
+    }
+    if (support < options.min_support_px) continue;
     std::optional<Detection> d = GroupDetection(group, disparity, rig, range, values);
     if (d) out.push_back(std::move(*d));
   }

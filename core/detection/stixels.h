@@ -69,8 +69,12 @@ struct StixelOptions {
   double join_sigmas = 3.0;
   double max_gap_m = 1.0;
   int max_gap_columns = 1;
-  // Groups with fewer columns than this are dropped.
+  // Groups with fewer columns than this are dropped, and those with fewer confident pixels than
+  // this (the sum over their stixels of confidence x area): the smallest obstacle the detector
+  // answers for, 100 camera pixels (the pipeline divides it by the binning squared; this
+  // function takes it in the pixels of the map it is given).
   int min_columns = 1;
+  double min_support_px = 100;
   Split split = Split::kNone;
   // With split = edges: neighbouring stixels whose disparities differ by more than the noise stay
   // apart when a Canny edge of the left image runs down at least this fraction of their shared
@@ -135,6 +139,9 @@ struct StixelOptions {
     v.Number(s.max_gap_columns,
              Field("max_gap_columns", "columns", "columns a group may skip").In(0, 16));
     v.Number(s.min_columns, Field("min_columns", "columns", "narrowest group kept").In(1, 1000));
+    v.Number(s.min_support_px,
+             Field("min_support_px", "pixels", "fewest confident pixels of a group kept")
+                 .In(0, 1e6));
     v.Choice(s.split, Field("split", "", "appearance cue that may split a group"), kSplitNames);
     v.Number(
         s.split_edge_fraction,

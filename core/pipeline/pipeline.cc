@@ -91,12 +91,16 @@ void Extract(const PipelineConfig& config, int factor, const FrameImages& images
       result.detections =
           detection::DetectSteViS(rect_left, trusted, work_rig, range, config.stevis, &full);
       break;
-    case Algorithm::kStixels:
+    case Algorithm::kStixels: {
+      // The group support is in camera pixels: a binned pixel stands for factor^2 of them.
+      detection::StixelOptions stixels = config.stixels;
+      stixels.min_support_px /= static_cast<double>(factor) * factor;
       result.stixels =
-          detection::ComputeStixels(result.disparity, work_rig, ground, range, config.stixels);
+          detection::ComputeStixels(result.disparity, work_rig, ground, range, stixels);
       result.detections = detection::ObstaclesFromStixels(
-          *result.stixels, result.disparity, rect_left, work_rig, ground, range, config.stixels);
+          *result.stixels, result.disparity, rect_left, work_rig, ground, range, stixels);
       break;
+    }
   }
 }
 
