@@ -139,9 +139,9 @@ struct StixelOptions {
     v.Number(s.max_gap_columns,
              Field("max_gap_columns", "columns", "columns a group may skip").In(0, 16));
     v.Number(s.min_columns, Field("min_columns", "columns", "narrowest group kept").In(1, 1000));
-    v.Number(s.min_support_px,
-             Field("min_support_px", "pixels", "fewest confident pixels of a group kept")
-                 .In(0, 1e6));
+    v.Number(
+        s.min_support_px,
+        Field("min_support_px", "pixels", "fewest confident pixels of a group kept").In(0, 1e6));
     v.Choice(s.split, Field("split", "", "appearance cue that may split a group"), kSplitNames);
     v.Number(
         s.split_edge_fraction,

@@ -164,8 +164,9 @@ int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::Pipel
   {
     const double k = static_cast<double>(truth.object_id.cols) / out.cols;
     for (const detection::Detection& d : r.detections) {
-      const cv::Rect b(cv::Point(static_cast<int>(d.bbox.x * k), static_cast<int>(d.bbox.y * k)),
-                       cv::Size(static_cast<int>(d.bbox.width * k), static_cast<int>(d.bbox.height * k)));
+      const cv::Rect b(
+          cv::Point(static_cast<int>(d.bbox.x * k), static_cast<int>(d.bbox.y * k)),
+          cv::Size(static_cast<int>(d.bbox.width * k), static_cast<int>(d.bbox.height * k)));
       int sky = 0, ground = 0, object = 0;
       for (int y = b.y; y < b.y + b.height; ++y)
         for (int x = b.x; x < b.x + b.width; ++x) {
@@ -173,8 +174,9 @@ int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::Pipel
           (id < 0 ? sky : id == 0 ? ground : object)++;
         }
       if (object * 4 > b.area()) continue;
-      std::printf("  FALSE %s d %.2f px (depth %.0f m) %dx%d cols %d\n", sky > ground ? "sky   " : "ground",
-                  d.disparity_px, d.depth_m, d.bbox.width, d.bbox.height, d.bbox.width / 8);
+      std::printf("  FALSE %s d %.2f px (depth %.0f m) %dx%d cols %d\n",
+                  sky > ground ? "sky   " : "ground", d.disparity_px, d.depth_m, d.bbox.width,
+                  d.bbox.height, d.bbox.width / 8);
     }
   }
   double extract_ms = 0;
