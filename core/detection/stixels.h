@@ -68,7 +68,7 @@ struct StixelOptions {
   // such gaps between columns); columns this far apart still join (0 = adjacent only).
   double join_sigmas = 3.0;
   double max_gap_m = 1.0;
-  int max_gap_columns = 1;
+  int max_gap_columns = 2;
   // Groups with fewer columns than this are dropped, and those with fewer confident pixels than
   // this (the sum over their stixels of confidence x area): the smallest obstacle the detector
   // answers for, 100 camera pixels (the pipeline divides it by the binning squared; this
