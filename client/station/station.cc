@@ -3,10 +3,12 @@
 #include <google/protobuf/util/json_util.h>
 
 #include <atomic>
+#include <cctype>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <regex>
+#include <optional>
 #include <sstream>
+#include <string_view>
 #include <utility>
 
 #include "client/export.h"
@@ -69,21 +71,78 @@ int HttpStatusOf(grpc::StatusCode code) {
 
 // A server's refusal: its code and message, and for INVALID_ARGUMENT each "field: problem" of the
 // message as {field, message}, so that the page can show each beside its field.
+// Plain matchers for the station's untrusted strings. Not std::regex: libstdc++'s matcher recurses
+// once per character, and a few hundred characters overflow a web worker's stack.
+bool IsWordChar(char c) { return std::isalnum(static_cast<unsigned char>(c)) != 0 || c == '_'; }
+
+// "field.path: message" (a field name of letters, digits, '_', '.', '[' and ']' not starting with
+// a digit, then ": " and a non-empty message): the field and the message.
+std::optional<std::pair<std::string, std::string>> SplitFieldProblem(std::string_view part) {
+  if (part.empty() || !IsWordChar(part[0]) ||
+      std::isdigit(static_cast<unsigned char>(part[0])) != 0) {
+    return std::nullopt;
+  }
+  size_t i = 0;
+  while (i < part.size() &&
+         (IsWordChar(part[i]) || part[i] == '.' || part[i] == '[' || part[i] == ']')) {
+    ++i;
+  }
+  if (part.substr(i, 2) != ": " || i + 2 >= part.size()) return std::nullopt;
+  return std::pair{std::string(part.substr(0, i)), std::string(part.substr(i + 2))};
+}
+
+// A relative file path of '/'-separated names of letters, digits, '_' and '-', the last with one
+// '.' and an extension of letters and digits ("dist/leaflet.js", "dist/images/marker-icon.png").
+bool IsPlainRelativePath(std::string_view rel) {
+  const size_t dot = rel.rfind('.');
+  if (dot == std::string_view::npos || dot + 1 == rel.size()) return false;
+  for (const char c : rel.substr(dot + 1)) {
+    if (std::isalnum(static_cast<unsigned char>(c)) == 0) return false;
+  }
+  bool empty_name = true;
+  for (const char c : rel.substr(0, dot)) {
+    if (c == '/') {
+      if (empty_name) return false;
+      empty_name = true;
+    } else if (IsWordChar(c) || c == '-') {
+      empty_name = false;
+    } else {
+      return false;
+    }
+  }
+  return !empty_name;
+}
+
+// "/api/rigs/rigN/WHAT" (N digits, WHAT of lower-case letters, '_', '.' and '/'): rigN and WHAT.
+std::optional<std::pair<std::string, std::string>> SplitRigPath(std::string_view path) {
+  constexpr std::string_view kPrefix = "/api/rigs/rig";
+  if (!path.starts_with(kPrefix)) return std::nullopt;
+  size_t i = kPrefix.size();
+  while (i < path.size() && std::isdigit(static_cast<unsigned char>(path[i])) != 0) ++i;
+  if (i == kPrefix.size() || i >= path.size() || path[i] != '/' || i + 1 == path.size()) {
+    return std::nullopt;
+  }
+  const std::string_view what = path.substr(i + 1);
+  for (const char c : what) {
+    if (!((c >= 'a' && c <= 'z') || c == '_' || c == '.' || c == '/')) return std::nullopt;
+  }
+  return std::pair{std::string(path.substr(kPrefix.size() - 3, i - (kPrefix.size() - 3))),
+                   std::string(what)};
+}
+
 HttpResponse RpcError(const grpc::Status& status) {
   nlohmann::json body{{"code", client::StatusCodeName(status.error_code())},
                       {"message", status.error_message()}};
   if (status.error_code() == grpc::StatusCode::INVALID_ARGUMENT) {
     nlohmann::json problems = nlohmann::json::array();
-    static const std::regex kFieldProblem(R"(^([A-Za-z_][A-Za-z0-9_.\[\]]*): (.+)$)");
     std::string text = status.error_message();
     size_t start = 0;
     while (start <= text.size()) {
       size_t end = text.find("; ", start);
       if (end == std::string::npos) end = text.size();
       const std::string part = text.substr(start, end - start);
-      std::smatch m;
-      if (std::regex_match(part, m, kFieldProblem)) {
-        problems.push_back({{"field", m[1].str()}, {"message", m[2].str()}});
+      if (const auto field = SplitFieldProblem(part)) {
+        problems.push_back({{"field", field->first}, {"message", field->second}});
       } else if (!part.empty()) {
         problems.push_back({{"field", ""}, {"message", part}});
       }
@@ -110,8 +169,7 @@ std::string HeaderValue(const HttpRequest& request, const std::string& name) {
 
 // Leaflet's files from the Debian package: a plain relative path only.
 HttpResponse LeafletFile(const std::string& dir, const std::string& rel) {
-  static const std::regex kSafe(R"(^[A-Za-z0-9_\-]+(/[A-Za-z0-9_\-]+)*\.[A-Za-z0-9]+$)");
-  if (!std::regex_match(rel, kSafe) || rel.find("..") != std::string::npos) {
+  if (!IsPlainRelativePath(rel) || rel.find("..") != std::string::npos) {
     return ErrorResponse(404, "NOT_FOUND", "no such file: /leaflet/" + rel);
   }
   std::ifstream in(dir + "/" + rel, std::ios::binary);
@@ -378,17 +436,14 @@ HttpResponse Station::Api(const HttpRequest& request) {
     return JsonResponse(
         200, nlohmann::json{{"rigs", rigs}, {"site", !options_.site_geojson.empty()}}.dump());
   }
-  static const std::regex kRigPath(R"(^/api/rigs/(rig[0-9]+)/([a-z_./]+)$)");
-  std::smatch m;
-  if (!std::regex_match(request.path, m, kRigPath)) {
-    return ErrorResponse(404, "NOT_FOUND", "no such API path: " + request.path);
-  }
+  const std::optional<std::pair<std::string, std::string>> rig_path = SplitRigPath(request.path);
+  if (!rig_path) return ErrorResponse(404, "NOT_FOUND", "no such API path: " + request.path);
   RigLink* rig = nullptr;
   for (const auto& r : rigs_) {
-    if (r->link->name() == m[1].str()) rig = r->link.get();
+    if (r->link->name() == rig_path->first) rig = r->link.get();
   }
-  if (rig == nullptr) return ErrorResponse(404, "NOT_FOUND", "no rig " + m[1].str());
-  const std::string what = m[2].str();
+  if (rig == nullptr) return ErrorResponse(404, "NOT_FOUND", "no rig " + rig_path->first);
+  const std::string& what = rig_path->second;
   if (what == "config") return ConfigCall(*rig, request);
   if (what == "snapshot") return SnapshotCall(*rig, request);
   if (what == "calibrations") return CalibrationsCall(*rig, request);

@@ -409,6 +409,37 @@ TEST_F(StationTest, TheApiPassesControlOnAndNamesTheBadField) {
   EXPECT_EQ(r->status, 404);
 }
 
+// Long untrusted strings on every path the station parses: a 200-character calibration id (whose
+// error message once went through std::regex, which recurses per character and overflowed the
+// worker's stack: SIGSEGV), a long API path and a long static file path. Each gets its error; the
+// station keeps serving.
+TEST_F(StationTest, LongIdsAndPathsGetTheirErrorAndTheStationStaysUp) {
+  ASSERT_NO_FATAL_FAILURE(StartStation());
+  const int port = station_->port();
+  std::string error;
+  for (const size_t n : {100u, 200u, 5000u}) {
+    const std::string id(n, 'x');
+    std::optional<testing::HttpReply> r = testing::HttpRequestOnce(
+        "127.0.0.1", port, "POST", "/api/rigs/rig1/calibrations/activate",
+        {{"Content-Type", "application/json"}}, R"({"id": ")" + id + R"("})", error);
+    ASSERT_TRUE(r) << n << ": " << error;
+    EXPECT_GE(r->status, 400) << r->body;
+    EXPECT_LT(r->status, 500) << r->body;
+    r = testing::HttpRequestOnce("127.0.0.1", port, "GET", "/api/rigs/rig1/" + std::string(n, 'a'),
+                                 {}, "", error);
+    ASSERT_TRUE(r) << n << ": " << error;
+    EXPECT_EQ(r->status, 404);
+    r = testing::HttpRequestOnce("127.0.0.1", port, "GET",
+                                 "/leaflet/" + std::string(n, 'b') + ".js", {}, "", error);
+    ASSERT_TRUE(r) << n << ": " << error;
+    EXPECT_EQ(r->status, 404);
+  }
+  const std::optional<testing::HttpReply> rigs =
+      testing::HttpRequestOnce("127.0.0.1", port, "GET", "/api/rigs", {}, "", error);
+  ASSERT_TRUE(rigs) << error;
+  EXPECT_EQ(rigs->status, 200);
+}
+
 // The exports hold the georeferenced tracks the station received: the same tracks, as
 // `stevi export` writes them.
 TEST_F(StationTest, ExportsTheGeoreferencedTracksItReceived) {
