@@ -65,9 +65,17 @@ void DrawStixels(const pipeline::FrameResult& r, int bin, cv::Mat3b& out) {
 // One frame of a random synthetic scene: the disparity, its confidence and the stixel world.
 int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::PipelineConfig& base,
                  const std::string& out_dir) {
-  // "demo": the server's built-in scene (SyntheticOptions' defaults), frame `seed`.
-  const drivers::Scenario scenario =
-      family == "demo" ? drivers::Scenario{} : drivers::RandomScenario(family, seed);
+  // "demo": the server's built-in scene (SyntheticOptions' defaults), frame `seed`; a tracking
+  // scenario by its name, frame `seed`; else a random family's scene `seed`, frame 0.
+  drivers::Scenario scenario;
+  bool by_frame = family == "demo";
+  for (const drivers::Scenario& t : drivers::TrackingScenarios()) {
+    if (t.name == family) {
+      scenario = t;
+      by_frame = true;
+    }
+  }
+  if (!by_frame) scenario = drivers::RandomScenario(family, seed);
   drivers::SyntheticRenderer renderer(scenario.options);
   pipeline::PipelineConfig config = base;
   config.mount.pitch_deg = scenario.options.scene.camera_pitch_deg;
@@ -75,8 +83,8 @@ int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::Pipel
                                     std::make_shared<const geometry::StereoRig>(renderer.Rig())};
   pipeline::Pipeline pipe;
   drivers::FrameTruth truth;
-  Result<pipeline::FrameResult> result = pipe.Process(
-      renderer.Render(family == "demo" ? static_cast<int64_t>(seed) : 0, &truth), snapshot);
+  Result<pipeline::FrameResult> result =
+      pipe.Process(renderer.Render(by_frame ? static_cast<int64_t>(seed) : 0, &truth), snapshot);
   if (!result.ok()) {
     std::fprintf(stderr, "%s\n", result.error().message.c_str());
     return 1;
@@ -208,10 +216,15 @@ int Run(int argc, char** argv) {
       char* end = nullptr;
       synthetic_seed = std::strtoull(seed.c_str(), &end, 10);
       const auto& families = drivers::RandomSceneFamilies();
+      const std::vector<drivers::Scenario> tracking = drivers::TrackingScenarios();
       if (seed.empty() || *end != '\0' || seed[0] == '-' ||
           (synthetic_family != "demo" &&
-           std::find(families.begin(), families.end(), synthetic_family) == families.end())) {
-        std::fprintf(stderr, "--synthetic: expected FAMILY SEED (a known family, a whole seed)\n");
+           std::find(families.begin(), families.end(), synthetic_family) == families.end() &&
+           std::none_of(tracking.begin(), tracking.end(),
+                        [&](const drivers::Scenario& t) { return t.name == synthetic_family; }))) {
+        std::fprintf(stderr,
+                     "--synthetic: expected FAMILY SEED (a random family, demo or a tracking "
+                     "scenario, then a whole seed or frame)\n");
         return 2;
       }
     } else if (a == "--set" && i + 1 < argc) {
