@@ -451,6 +451,8 @@ void DumpOdoFrame(const testing::OdometrySequence& seq, const OdoRun& run, int k
             " detections (thin orange), confirmed tracks red (#id range), labelled cars green",
         {4, 14}, cv::Scalar::all(255));
   cv::imwrite(path, out);
+  // A JPEG beside it, small enough for a README.
+  cv::imwrite(path.substr(0, path.rfind('.')) + ".jpg", out, {cv::IMWRITE_JPEG_QUALITY, 80});
 }
 
 std::string JsonOdometry(const testing::OdometrySequence& seq, const std::vector<OdoRun>& runs,
