@@ -42,15 +42,6 @@ class CollectingErrors : public google::protobuf::io::ErrorCollector {
   std::vector<std::string> problems;
 };
 
-// A number as %g prints it ("0.5", "86400", "nan").
-std::optional<double> ParseDouble(const std::string& text) {
-  double value = 0;
-  const char* end = text.data() + text.size();
-  auto [ptr, ec] = std::from_chars(text.data(), end, value);
-  if (ec != std::errc() || ptr != end || !std::isfinite(value)) return std::nullopt;
-  return value;
-}
-
 }  // namespace
 
 Result<std::unique_ptr<PoseSource>> MakePoseSource(
@@ -164,7 +155,7 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
   if (const std::string* v = get("tls-client-ca")) config.mutable_tls()->set_client_ca_file(*v);
   if (const std::string* v = get("token-file")) config.mutable_auth()->set_token_file(*v);
   if (const std::string* v = get("rate")) {
-    const std::optional<double> rate = *v == "max" ? std::optional<double>(0.0) : ParseDouble(*v);
+    const std::optional<double> rate = *v == "max" ? std::optional<double>(0.0) : ParseNumber(*v);
     if (!rate || *rate < 0 || *rate > 1000) {
       problems.push_back("--rate: must be a speed in (0, 1000] or 'max' (got '" + *v + "')");
     } else {
@@ -175,9 +166,9 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
   if (const std::string* v = get("roi")) {
     const size_t x = v->find('x');
     const std::optional<double> w =
-        x == std::string::npos ? std::nullopt : ParseDouble(v->substr(0, x));
+        x == std::string::npos ? std::nullopt : ParseNumber(v->substr(0, x));
     const std::optional<double> h =
-        x == std::string::npos ? std::nullopt : ParseDouble(v->substr(x + 1));
+        x == std::string::npos ? std::nullopt : ParseNumber(v->substr(x + 1));
     const auto side_ok = [](double s) {
       return s >= drivers::kMinRoiPx && s <= drivers::kMaxRoiPx && s == std::floor(s);
     };
@@ -191,7 +182,7 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
     }
   }
   if (const std::string* v = get("exposure-us")) {
-    const std::optional<double> e = ParseDouble(*v);
+    const std::optional<double> e = ParseNumber(*v);
     if (!e || *e <= 0) {
       problems.push_back("--exposure-us: must be a time in microseconds > 0 (got '" + *v + "')");
     } else {
@@ -199,7 +190,7 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
     }
   }
   if (const std::string* v = get("gain-db")) {
-    const std::optional<double> g = ParseDouble(*v);
+    const std::optional<double> g = ParseNumber(*v);
     if (!g) {
       problems.push_back("--gain-db: must be a number of dB (got '" + *v + "')");
     } else {
@@ -234,7 +225,7 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
   if (const std::string* v = get("data-dir")) config.set_data_dir(*v);
   if (const std::string* v = get("scene")) source->mutable_synthetic()->set_scene(*v);
   if (const std::string* v = get("fps")) {
-    const std::optional<double> fps = ParseDouble(*v);
+    const std::optional<double> fps = ParseNumber(*v);
     if (!fps || *fps <= 0 || *fps > 1000) {
       problems.push_back("--fps: must be a number in (0, 1000] (got '" + *v + "')");
     } else {

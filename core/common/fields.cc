@@ -1,6 +1,5 @@
 #include "core/common/fields.h"
 
-#include <charconv>
 #include <cstdio>
 
 namespace stevi::fields {
@@ -43,18 +42,6 @@ std::string Field::Describe(bool with_unit) const {
 std::string Field::Problem(double value) const {
   return std::string(name_) + ": must be " + Describe(/*with_unit=*/true) + Got(value);
 }
-
-namespace internal {
-
-std::optional<double> ParseNumber(std::string_view text) {
-  double value = 0;
-  const char* end = text.data() + text.size();
-  const auto [ptr, ec] = std::from_chars(text.data(), end, value);
-  if (text.empty() || ec != std::errc() || ptr != end || !std::isfinite(value)) return std::nullopt;
-  return value;
-}
-
-}  // namespace internal
 
 namespace {
 

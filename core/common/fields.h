@@ -250,9 +250,6 @@ std::vector<Row> Table(const S& s) {
 
 namespace internal {
 
-// Parses `text` as a finite number ("3", "0.25", "-1e-3"); nullopt when it is not one, whole.
-std::optional<double> ParseNumber(std::string_view text);
-
 // Sets the one field at a dotted path from text (fields::Assign).
 class Assigner {
  public:
@@ -261,7 +258,7 @@ class Assigner {
   template <class T>
   void Number(T& value, const Field& f) {
     if (!Mine(f)) return;
-    const std::optional<double> x = ParseNumber(text_);
+    const std::optional<double> x = stevi::ParseNumber(text_);
     if (!x || !f.Accepts(*x)) return Fail(f, "must be " + f.Describe(true));
     using U = std::remove_cvref_t<decltype(Unwrap(value))>;
     if constexpr (std::is_integral_v<U>) {
@@ -276,7 +273,7 @@ class Assigner {
     std::string_view rest = text_;
     while (!rest.empty()) {
       const size_t comma = rest.find(',');
-      const std::optional<double> x = ParseNumber(rest.substr(0, comma));
+      const std::optional<double> x = stevi::ParseNumber(rest.substr(0, comma));
       if (!x || !f.Accepts(*x)) return Fail(f, "each must be " + f.Describe(true));
       parsed.push_back(static_cast<T>(*x));
       rest = comma == std::string_view::npos ? std::string_view{} : rest.substr(comma + 1);

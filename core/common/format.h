@@ -3,7 +3,9 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
+#include <string_view>
 
 #include <opencv2/core.hpp>
 
@@ -11,6 +13,9 @@ namespace stevi {
 
 // printf's %g: "0.5", "1e+08", "640".
 std::string FormatNumber(double value);
+// The whole of `text` as a finite number ("0.5", "86400", "-1e-3"); nullopt for anything else
+// (empty, trailing characters, "nan", "inf", out of range).
+std::optional<double> ParseNumber(std::string_view text);
 // printf's %.*f: Fixed(0.123456, 3) is "0.123".
 std::string Fixed(double value, int digits);
 // "640x480".

@@ -194,13 +194,47 @@ TEST_F(DenseReal, MiddleburyBeatsOpenCvSgbm) {
   EXPECT_LE(dense_bad, ref_bad);
 }
 
+// Pixels by confidence bin: the mean predicted P(inlier) against the observed inlier rate (and the
+// rate within 3 px), printed as a Markdown table and checked for calibration.
+struct CalibrationBins {
+  static constexpr int kBins = 8;
+  std::array<double, kBins> predicted{}, inlier{}, within3{}, count{};
+
+  void Add(int confidence, double error_px) {
+    const int bin = std::min(kBins - 1, confidence * kBins / 256);
+    predicted[bin] += confidence / 255.0;
+    inlier[bin] += error_px <= kInlierPx;
+    within3[bin] += error_px <= 3.0;
+    count[bin] += 1;
+  }
+  double Observed(int b) const { return inlier[b] / count[b]; }
+  void Print(const char* title) const {
+    std::printf(
+        "| confidence (%s) | pixels | predicted | inlier (within 1 px) | within 3 px |\n"
+        "|---|---|---|---|---|\n",
+        title);
+    for (int b = 0; b < kBins; ++b) {
+      if (count[b] == 0) continue;
+      std::printf("| %d..%d | %.0f | %.3f | %.3f | %.3f |\n", b * 256 / kBins,
+                  (b + 1) * 256 / kBins - 1, count[b], predicted[b] / count[b], Observed(b),
+                  within3[b] / count[b]);
+    }
+  }
+  // Each bin of at least 2000 pixels within 0.15 of its prediction.
+  void ExpectCalibrated() const {
+    for (int b = 0; b < kBins; ++b) {
+      if (count[b] < 2000) continue;
+      EXPECT_NEAR(Observed(b), predicted[b] / count[b], 0.15) << "bin " << b;
+    }
+  }
+};
+
 // Calibration of the confidence on the held-out pairs: per bin of confidence, the predicted mean
 // against the observed fraction within 3 px (and 1 px) of the truth, for the measured pixels where
 // the fitted model speaks alone; the filled pixels (capped) and those the structure prior lowered
 // are printed apart.
 TEST_F(DenseReal, ConfidenceIsCalibratedOnHeldOutPairs) {
-  constexpr int kBins = 8;
-  std::array<double, kBins> predicted{}, inlier{}, within3{}, count{};
+  CalibrationBins bins;
   long high = 0, high_inlier = 0;
   double filled = 0, filled_inlier = 0, filled_predicted = 0;
   double lowered = 0, lowered_inlier = 0, lowered_predicted = 0;
@@ -230,23 +264,11 @@ TEST_F(DenseReal, ConfidenceIsCalibratedOnHeldOutPairs) {
           lowered_predicted += c / 255.0;
           continue;
         }
-        const int bin = std::min(kBins - 1, c * kBins / 256);
-        predicted[bin] += c / 255.0;
-        inlier[bin] += err <= kInlierPx;
-        within3[bin] += err <= 3.0;
-        count[bin] += 1;
+        bins.Add(c, err);
       }
     }
   }
-  std::printf(
-      "| confidence (measured) | pixels | predicted | inlier (within 1 px) | within 3 "
-      "px |\n|---|---|---|---|---|\n");
-  for (int b = 0; b < kBins; ++b) {
-    if (count[b] == 0) continue;
-    std::printf("| %d..%d | %.0f | %.3f | %.3f | %.3f |\n", b * 256 / kBins,
-                (b + 1) * 256 / kBins - 1, count[b], predicted[b] / count[b], inlier[b] / count[b],
-                within3[b] / count[b]);
-  }
+  bins.Print("measured");
   std::printf("| filled (capped at 100) | %.0f | %.3f | %.3f | |\n", filled,
               filled_predicted / std::max(1.0, filled), filled_inlier / std::max(1.0, filled));
   std::printf("| lowered by the structure prior | %.0f | %.3f | %.3f | |\n", lowered,
@@ -257,14 +279,10 @@ TEST_F(DenseReal, ConfidenceIsCalibratedOnHeldOutPairs) {
   EXPECT_GE(high_rate, 0.90);
   // The lowest populated bin is clearly worse.
   int lowest = 0;
-  while (lowest < kBins && count[lowest] < 1000) ++lowest;
-  ASSERT_LT(lowest, kBins);
-  EXPECT_LT(inlier[lowest] / count[lowest], high_rate - 0.2) << "bin " << lowest;
-  // Calibrated: each well-populated bin's observed rate within 0.15 of its prediction.
-  for (int b = 0; b < kBins; ++b) {
-    if (count[b] < 2000) continue;
-    EXPECT_NEAR(inlier[b] / count[b], predicted[b] / count[b], 0.15) << "bin " << b;
-  }
+  while (lowest < CalibrationBins::kBins && bins.count[lowest] < 1000) ++lowest;
+  ASSERT_LT(lowest, CalibrationBins::kBins);
+  EXPECT_LT(bins.Observed(lowest), high_rate - 0.2) << "bin " << lowest;
+  bins.ExpectCalibrated();
 }
 
 // The same calibration on the synthetic test split (seeds 1001.., never tuned on): flat noisy
@@ -272,8 +290,7 @@ TEST_F(DenseReal, ConfidenceIsCalibratedOnHeldOutPairs) {
 // Every matched pixel counts, with the confidence a consumer sees (filled and lowered ones
 // included).
 TEST(DenseSynthetic, ConfidenceIsCalibratedOnTheSyntheticTestSplit) {
-  constexpr int kBins = 8;
-  std::array<double, kBins> predicted{}, inlier{}, count{};
+  CalibrationBins bins;
   double sky = 0, sky_trusted = 0;
   for (const std::string& family : drivers::RandomSceneFamilies()) {
     for (uint64_t seed = 1001; seed <= 1006; ++seed) {
@@ -291,29 +308,18 @@ TEST(DenseSynthetic, ConfidenceIsCalibratedOnTheSyntheticTestSplit) {
             sky_trusted += d && map.confidence(y, x) >= 128;
           }
           if (!d) continue;
-          const int c = map.confidence(y, x);
-          const int bin = std::min(kBins - 1, c * kBins / 256);
-          predicted[bin] += c / 255.0;
-          inlier[bin] += std::abs(*d - truth.disparity_px(y, x)) <= kInlierPx;
-          count[bin] += 1;
+          bins.Add(map.confidence(y, x), std::abs(*d - truth.disparity_px(y, x)));
         }
       }
     }
   }
-  std::printf(
-      "| confidence (synthetic test split) | pixels | predicted | inlier (within 1 px) |\n"
-      "|---|---|---|---|\n");
-  for (int b = 0; b < kBins; ++b) {
-    if (count[b] == 0) continue;
-    std::printf("| %d..%d | %.0f | %.3f | %.3f |\n", b * 256 / kBins, (b + 1) * 256 / kBins - 1,
-                count[b], predicted[b] / count[b], inlier[b] / count[b]);
-  }
+  bins.Print("synthetic test split");
   std::printf("sky pixels trusted (confidence >= 128): %.2f %% of %.0f\n",
               100.0 * sky_trusted / std::max(1.0, sky), sky);
-  for (int b = 0; b < kBins; ++b) {
-    if (count[b] < 2000) continue;
-    EXPECT_NEAR(inlier[b] / count[b], predicted[b] / count[b], 0.15) << "bin " << b;
-  }
+  bins.ExpectCalibrated();
+  // The open sky (truth 0, flat or clouds) is almost never trusted: 0.40 % measured.
+  ASSERT_GT(sky, 100000);
+  EXPECT_LT(sky_trusted / sky, 0.02);
 }
 
 // Fits the confidence model on the tuning split (logistic regression by Newton's method) and
