@@ -151,8 +151,14 @@ grpc::Status Client::ActivateCalibration(const std::string& id, v1::CalibrationR
   return calibration_stub_->ActivateCalibration(&context, request, record);
 }
 
+bool IsPrintableAscii(const std::string& text) {
+  return std::all_of(text.begin(), text.end(), [](char c) { return c >= 0x20 && c <= 0x7e; });
+}
+
 void Client::AddCredentials(grpc::ClientContext& context) const {
-  if (!options_.bearer_token.empty()) {
+  // gRPC aborts the process on a metadata value with any other byte: such a token is not sent
+  // (the server then answers UNAUTHENTICATED). The CLI and the station refuse it before.
+  if (!options_.bearer_token.empty() && IsPrintableAscii(options_.bearer_token)) {
     context.AddMetadata("authorization", "Bearer " + options_.bearer_token);
   }
 }

@@ -17,6 +17,10 @@
 
 namespace stevi::client {
 
+// True when every byte is printable ASCII (0x20..0x7e): what a gRPC metadata value may hold, such
+// as a bearer token. gRPC aborts the process on any other byte.
+bool IsPrintableAscii(const std::string& text);
+
 // The HTTP/2 receive window of StreamTracks (BDP probing off): how far a slow reader may fall
 // behind before the server starts dropping frames for it. 16 KiB holds about 7 TrackFrames of ten
 // tracks. Other clients of the API should do the same (see README, "Slow readers").

@@ -14,6 +14,7 @@ packages=(
   libcivetweb-dev civetweb nlohmann-json3-dev libjs-leaflet chromium
   libgtest-dev libgmock-dev libbenchmark-dev systemd
   clang-format clang-tidy
+  clang libfuzzer-14-dev libclang-rt-14-dev
 )
 
 missing=()

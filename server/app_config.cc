@@ -6,7 +6,9 @@
 
 #include "drivers/synthetic/chessboard_source.h"
 
+#include <google/protobuf/descriptor.h>
 #include <google/protobuf/io/tokenizer.h>
+#include <google/protobuf/message.h>
 #include <google/protobuf/text_format.h>
 #include <google/protobuf/util/json_util.h>
 
@@ -41,6 +43,68 @@ class CollectingErrors : public google::protobuf::io::ErrorCollector {
   void AddWarning(int, google::protobuf::io::ColumnNumber, const std::string&) override {}
   std::vector<std::string> problems;
 };
+
+// True when `text` is well-formed UTF-8 (no overlong forms, surrogates or values past U+10FFFF).
+bool IsUtf8(const std::string& text) {
+  const auto* p = reinterpret_cast<const unsigned char*>(text.data());
+  const auto* end = p + text.size();
+  while (p < end) {
+    const unsigned char c = *p;
+    int length = 0;
+    unsigned char lo = 0x80, hi = 0xBF;  // the range of the second byte
+    if (c < 0x80) {
+      ++p;
+      continue;
+    }
+    if (c >= 0xC2 && c <= 0xDF) {
+      length = 2;
+    } else if (c >= 0xE0 && c <= 0xEF) {
+      length = 3;
+      if (c == 0xE0) lo = 0xA0;
+      if (c == 0xED) hi = 0x9F;
+    } else if (c >= 0xF0 && c <= 0xF4) {
+      length = 4;
+      if (c == 0xF0) lo = 0x90;
+      if (c == 0xF4) hi = 0x8F;
+    } else {
+      return false;
+    }
+    if (end - p < length || p[1] < lo || p[1] > hi) return false;
+    for (int i = 2; i < length; ++i) {
+      if ((p[i] & 0xC0) != 0x80) return false;
+    }
+    p += length;
+  }
+  return true;
+}
+
+// Names every string field (not bytes) of `message` that is not UTF-8, as "PATH: not valid
+// UTF-8". The text format parser takes any bytes (raw, or escapes such as "\260") into a string
+// field, which a proto3 string must not hold: serialising it fails, JSON drops the bytes.
+void CheckUtf8(const google::protobuf::Message& message, const std::string& path,
+               std::vector<std::string>& problems) {
+  using google::protobuf::FieldDescriptor;
+  const google::protobuf::Reflection* reflection = message.GetReflection();
+  std::vector<const FieldDescriptor*> fields;
+  reflection->ListFields(message, &fields);
+  for (const FieldDescriptor* field : fields) {
+    const std::string name = path + field->name();
+    const int count = field->is_repeated() ? reflection->FieldSize(message, field) : 1;
+    for (int i = 0; i < count; ++i) {
+      const std::string where = field->is_repeated() ? name + "[" + std::to_string(i) + "]" : name;
+      if (field->type() == FieldDescriptor::TYPE_STRING) {
+        const std::string value = field->is_repeated()
+                                      ? reflection->GetRepeatedString(message, field, i)
+                                      : reflection->GetString(message, field);
+        if (!IsUtf8(value)) problems.push_back(where + ": not valid UTF-8");
+      } else if (field->cpp_type() == FieldDescriptor::CPPTYPE_MESSAGE) {
+        CheckUtf8(field->is_repeated() ? reflection->GetRepeatedMessage(message, field, i)
+                                       : reflection->GetMessage(message, field),
+                  where + ".", problems);
+      }
+    }
+  }
+}
 
 }  // namespace
 
@@ -104,33 +168,51 @@ Result<v1::ServerConfig> LoadServerConfig(const std::string& path) {
   buffer << in.rdbuf();
   if (!in.good() && !in.eof())
     return Error{ErrorCode::kInvalidArgument, "config " + path + ": cannot read"};
-  const std::string text = buffer.str();
-
   v1::ServerConfig config;
+  if (Status parsed = ParseConfigText(buffer.str(), "config " + path, config); !parsed.ok()) {
+    return parsed.error();
+  }
+  return config;
+}
+
+Status ParseConfigText(const std::string& text, const std::string& name,
+                       google::protobuf::Message& config) {
+  if (text.size() > kMaxConfigBytes) {
+    return Error{ErrorCode::kResourceExhausted,
+                 name + ": " + std::to_string(text.size()) + " bytes, the limit is 1 MiB"};
+  }
   const size_t first = text.find_first_not_of(" \t\r\n");
   if (first != std::string::npos && text[first] == '{') {
     google::protobuf::util::JsonParseOptions options;
     options.ignore_unknown_fields = false;
     const auto status = google::protobuf::util::JsonStringToMessage(text, &config, options);
     if (!status.ok()) {
-      return Error{ErrorCode::kInvalidArgument,
-                   "config " + path + " (JSON): " + std::string(status.message())};
+      return Error{ErrorCode::kInvalidArgument, name + " (JSON): " + std::string(status.message())};
     }
-    return config;
+  } else {
+    google::protobuf::TextFormat::Parser parser;
+    CollectingErrors errors;
+    parser.RecordErrorsTo(&errors);
+    if (!parser.ParseFromString(text, &config)) {
+      std::vector<std::string> problems;
+      for (const std::string& p : errors.problems) problems.push_back(name + ": " + p);
+      if (problems.empty()) problems.push_back(name + ": cannot parse");
+      return Error::Invalid(problems);
+    }
   }
-  google::protobuf::TextFormat::Parser parser;
-  CollectingErrors errors;
-  parser.RecordErrorsTo(&errors);
-  if (!parser.ParseFromString(text, &config)) {
-    std::vector<std::string> problems;
-    for (const std::string& p : errors.problems) problems.push_back("config " + path + ": " + p);
-    if (problems.empty()) problems.push_back("config " + path + ": cannot parse");
+  std::vector<std::string> problems;
+  CheckUtf8(config, "", problems);
+  if (!problems.empty()) {
+    for (std::string& p : problems) p = name + ": " + p;
     return Error::Invalid(problems);
   }
-  return config;
+  return Status::Ok();
 }
 
-Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
+namespace {
+
+// ApplyFlags' work, on a copy it may leave half changed.
+Status ApplyFlagsToCopy(const Flags& flags, v1::ServerConfig& config) {
   std::vector<std::string> problems;
   const auto get = [&](const std::string& name) -> const std::string* {
     auto it = flags.values.find(name);
@@ -242,6 +324,15 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
   }
   if (!problems.empty()) return Error::Invalid(problems);
   return Status::Ok();
+}
+
+}  // namespace
+
+Status ApplyFlags(const Flags& flags, v1::ServerConfig& config) {
+  v1::ServerConfig updated = config;
+  Status applied = ApplyFlagsToCopy(flags, updated);
+  if (applied.ok()) config = std::move(updated);
+  return applied;
 }
 
 drivers::AravisOptions AravisOptionsFrom(const v1::SourceConfig& source,

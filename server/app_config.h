@@ -50,8 +50,14 @@ Result<Flags> ParseFlags(int argc, const char* const* argv, const std::set<std::
 // file, the line and the problem. Files over 1 MiB are refused.
 Result<v1::ServerConfig> LoadServerConfig(const std::string& path);
 
+// Parses config text into `config` (a ServerConfig, a PipelineConfig, ...) by LoadServerConfig's
+// rules: JSON when the first non-blank character is '{', else protobuf text format; unknown fields
+// are errors. `name` starts every error ("config /etc/stevi.conf"). Text over 1 MiB is refused.
+Status ParseConfigText(const std::string& text, const std::string& name,
+                       google::protobuf::Message& config);
+
 // Applies the source and pipeline flags (--source --left --right --calibration --fps --algorithm
-// --listen) over `config`. Bad values are named.
+// --listen) over `config`. Bad values are named, and then `config` is left as it was.
 Status ApplyFlags(const Flags& flags, v1::ServerConfig& config);
 
 // Cross-field checks before anything is opened: every problem named.

@@ -48,7 +48,11 @@ std::string ParseGlobalOptions(const Args& args, GlobalOptions& out) {
       .Value("--token-file", [&out](const std::string& path) {
         std::string text;
         std::string problem = ReadFlagFile("--token-file", path, text);
-        if (problem.empty()) out.client.bearer_token = FirstLine(text);
+        if (!problem.empty()) return problem;
+        out.client.bearer_token = FirstLine(text);
+        if (!IsPrintableAscii(out.client.bearer_token)) {
+          return "--token-file " + path + ": the token must be printable ASCII";
+        }
         return problem;
       });
   out.command = 0;

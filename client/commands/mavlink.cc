@@ -484,6 +484,7 @@ void Bridge::LogStatus() {
                 : joiner_.waiting().empty() ? "ok"
                                             : joiner_.waiting()},
        {"time_source", joiner_.time_source()},
+       {"last_rejected", joiner_.rejected()},
        {"states_published", Str(states_published_)},
        {"states_dropped", Str(states_dropped_)},
        {"geo", v1::GeoStatus_Name(geo_status_)},

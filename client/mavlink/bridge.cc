@@ -10,6 +10,7 @@ namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kRadToDeg = 180.0 / kPi;
 constexpr uint16_t kUnknown = std::numeric_limits<uint16_t>::max();
+constexpr int64_t kMaxGeoidUndulationMm = 150'000;
 // Above this, max_cm + 1 would read as UINT16_MAX (unknown).
 constexpr uint16_t kLargestMaxCm = 65533;
 
@@ -223,24 +224,30 @@ CommandLong SetMessageInterval(uint8_t target_system, uint8_t target_component, 
 
 std::optional<double> PoseJoiner::geoid_undulation_m() const {
   if (gps_ && gps_->alt_ellipsoid != 0 && gps_->fix_type >= kGpsFixType3dFix) {
-    return (gps_->alt_ellipsoid - gps_->alt) / 1000.0;
+    // In 64 bits: two hostile 32-bit heights differ by more than an int holds. The geoid lies
+    // within about -107..+86 m of the ellipsoid everywhere (EGM2008); a farther one is a bad
+    // message, and the configured undulation stands.
+    const int64_t n_mm = static_cast<int64_t>(gps_->alt_ellipsoid) - gps_->alt;
+    if (std::abs(n_mm) <= kMaxGeoidUndulationMm) return static_cast<double>(n_mm) / 1000.0;
   }
   return options_.geoid_undulation_m;
 }
 
 std::optional<v1::VehicleState> PoseJoiner::OnMessage(const Frame& frame, int64_t host_unix_ns) {
   if (const std::optional<mavlink::Attitude> a = Decode<mavlink::Attitude>(frame)) {
-    attitude_ = Attitude{a->roll * kRadToDeg, a->pitch * kRadToDeg, a->yaw * kRadToDeg,
-                         a->time_boot_ms, host_unix_ns};
+    TakeAttitude({a->roll * kRadToDeg, a->pitch * kRadToDeg, a->yaw * kRadToDeg}, a->time_boot_ms,
+                 host_unix_ns, "ATTITUDE");
   } else if (const std::optional<AttitudeQuaternion> q = Decode<AttitudeQuaternion>(frame)) {
-    const std::array<double, 3> e = EulerDegOfQuaternion(q->q1, q->q2, q->q3, q->q4);
-    attitude_ = Attitude{e[0], e[1], e[2], q->time_boot_ms, host_unix_ns};
+    TakeAttitude(EulerDegOfQuaternion(q->q1, q->q2, q->q3, q->q4), q->time_boot_ms, host_unix_ns,
+                 "ATTITUDE_QUATERNION");
   } else if (const std::optional<GpsRawInt> g = Decode<GpsRawInt>(frame)) {
     gps_ = *g;
   } else if (const std::optional<SystemTime> t = Decode<SystemTime>(frame)) {
-    // 0 until the autopilot knows the time (from GNSS); anything before 2020 is not a Unix time.
+    // 0 until the autopilot knows the time (from GNSS); anything before 2020 is not a Unix time,
+    // and anything from 2100 on is a bad message (it would also overflow the nanoseconds).
     constexpr uint64_t k2020Us = 1577836800ULL * 1000000ULL;
-    if (t->time_unix_usec >= k2020Us) {
+    constexpr uint64_t k2100Us = 4102444800ULL * 1000000ULL;
+    if (t->time_unix_usec >= k2020Us && t->time_unix_usec < k2100Us) {
       boot_to_unix_us_ =
           static_cast<int64_t>(t->time_unix_usec) - static_cast<int64_t>(t->time_boot_ms) * 1000;
     }
@@ -250,11 +257,30 @@ std::optional<v1::VehicleState> PoseJoiner::OnMessage(const Frame& frame, int64_
   return std::nullopt;
 }
 
+void PoseJoiner::TakeAttitude(const std::array<double, 3>& roll_pitch_yaw_deg,
+                              uint32_t time_boot_ms, int64_t host_unix_ns, const char* message) {
+  for (const double angle : roll_pitch_yaw_deg) {
+    if (!std::isfinite(angle)) {
+      // The last good attitude stays; it ages out if no good one follows.
+      rejected_ = std::string(message) + " with a non-finite angle: ignored";
+      return;
+    }
+  }
+  attitude_ = Attitude{roll_pitch_yaw_deg[0], roll_pitch_yaw_deg[1], roll_pitch_yaw_deg[2],
+                       time_boot_ms, host_unix_ns};
+}
+
 std::optional<v1::VehicleState> PoseJoiner::OnPosition(const GlobalPositionInt& m,
                                                        int64_t host_unix_ns) {
   last_position_ns_ = host_unix_ns;
   if (m.lat == 0 && m.lon == 0) {
     waiting_ = "no position fix (GLOBAL_POSITION_INT at 0, 0)";
+    return std::nullopt;
+  }
+  if (std::abs(static_cast<int64_t>(m.lat)) > 900'000'000 ||
+      std::abs(static_cast<int64_t>(m.lon)) > 1'800'000'000) {
+    rejected_ = "GLOBAL_POSITION_INT outside the Earth (lat " + std::to_string(m.lat) + ", lon " +
+                std::to_string(m.lon) + " in 1e-7 degrees): ignored";
     return std::nullopt;
   }
   // The attitude's age on the autopilot's clock when both carry it, else on arrival.

@@ -116,6 +116,9 @@ class PoseJoiner {
   // Why no state came of the last GLOBAL_POSITION_INT ("" once states flow): "no attitude",
   // "no ellipsoid height: ...", "no position fix".
   const std::string& waiting() const { return waiting_; }
+  // The last message dropped as impossible ("" when none yet): an ATTITUDE with a non-finite
+  // angle, a position outside the Earth. Such a message changes nothing.
+  const std::string& rejected() const { return rejected_; }
   // N from GPS_RAW_INT (alt_ellipsoid - alt) when the autopilot gives both, else the option's.
   std::optional<double> geoid_undulation_m() const;
   // "autopilot" when the states' times come from SYSTEM_TIME, "host" when from this computer's
@@ -126,9 +129,12 @@ class PoseJoiner {
 
  private:
   std::optional<v1::VehicleState> OnPosition(const GlobalPositionInt& m, int64_t host_unix_ns);
+  void TakeAttitude(const std::array<double, 3>& roll_pitch_yaw_deg, uint32_t time_boot_ms,
+                    int64_t host_unix_ns, const char* message);
 
   PoseJoinerOptions options_;
   std::string waiting_ = "no GLOBAL_POSITION_INT yet";
+  std::string rejected_;
   struct Attitude {
     double roll_deg = 0, pitch_deg = 0, yaw_deg = 0;
     uint32_t time_boot_ms = 0;

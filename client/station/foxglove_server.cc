@@ -47,6 +47,7 @@ constexpr std::string_view kUnsupportedOps[] = {"advertise",
 
 constexpr uint8_t kMessageDataOpcode = 0x01;
 constexpr size_t kMessageDataHeaderBytes = 13;
+constexpr uint16_t kCloseProtocolError = 1002;
 constexpr uint16_t kClosePolicyViolation = 1008;
 constexpr uint16_t kCloseMessageTooBig = 1009;
 
@@ -106,9 +107,8 @@ bool IsWebSocketUpgrade(const mg_connection* conn) {
   return upgrade != nullptr && strcasecmp(upgrade, "websocket") == 0;
 }
 
-// The token of "Authorization: Bearer T", or nullopt.
-std::optional<std::string> BearerToken(const mg_connection* conn) {
-  const char* auth = mg_get_header(conn, "Authorization");
+// The token of an "Authorization: Bearer T" header's value, or nullopt.
+std::optional<std::string> BearerToken(const char* auth) {
   if (auth == nullptr) return std::nullopt;
   std::string_view value(auth);
   constexpr std::string_view kBearer = "Bearer ";
@@ -170,6 +170,21 @@ int RefuseUpgrade(mg_connection* conn, const HttpResponse& response) {
   text += "\r\n" + response.body;
   mg_write(conn, text.data(), text.size());
   return response.status;
+}
+
+// The body of the Close frame answering a client's Close with `body` (RFC 6455 5.5.1, 7.4): the
+// client's status code echoed; none for none; 1002 (protocol error) for a body too short to hold a
+// code, or a code that no endpoint may send (1005, 1006 and 1015 are for reporting only, 0..999
+// and 1016..2999 are not defined, and 5000 and up do not exist).
+std::string CloseAnswer(std::string_view body) {
+  if (body.empty()) return "";
+  if (body.size() >= 2) {
+    const unsigned code = (unsigned(uint8_t(body[0])) << 8) | uint8_t(body[1]);
+    const bool sendable = (code >= 1000 && code <= 1003) || (code >= 1007 && code <= 1014) ||
+                          (code >= 3000 && code <= 4999);
+    if (sendable) return std::string(body.substr(0, 2));
+  }
+  return std::string{char(kCloseProtocolError >> 8), char(kCloseProtocolError & 0xff)};
 }
 
 HttpResponse JsonError(int status, std::string_view code, std::string_view message) {
@@ -284,6 +299,11 @@ struct FoxgloveServer::Impl {
     // The message being reassembled from fragments: the worker thread only.
     std::string fragments;
     int fragments_opcode = 0;
+
+    // A LocalClient: no connection and no sender; the queue waits for TakeSent, and `written`
+    // holds the frames written at once (guarded by queue_mutex).
+    bool local = false;
+    std::vector<LocalClient::Frame> written;
   };
 
   struct Channel {
@@ -302,7 +322,7 @@ struct FoxgloveServer::Impl {
   std::string wake_host;  // a numeric address that reaches the listening socket (Stop's pokes)
 
   mutable std::mutex mutex_;  // guards what follows
-  std::unordered_map<const mg_connection*, std::unique_ptr<Client>> clients_;
+  std::unordered_map<const Client*, std::unique_ptr<Client>> clients_;
   std::map<uint32_t, Channel> channels_;
   uint32_t next_channel_ = 1;
   std::map<std::string, HttpHandler, std::greater<>> handlers_;  // longest prefix first
@@ -396,13 +416,29 @@ struct FoxgloveServer::Impl {
       reason = client.close_reason;
     }
     if (code != 0) {
-      std::string payload;
-      payload += char(code >> 8);
-      payload += char(code & 0xff);
-      payload += reason.substr(0, 120);
+      const std::string payload = ClosePayload(code, reason);
       mg_websocket_write(client.conn, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, payload.data(),
                          payload.size());
     }
+  }
+
+  // A Close frame's payload: the status code (big-endian) and at most 120 bytes of the reason.
+  static std::string ClosePayload(uint16_t code, const std::string& reason) {
+    std::string payload;
+    payload += char(code >> 8);
+    payload += char(code & 0xff);
+    payload += reason.substr(0, 120);
+    return payload;
+  }
+
+  // Writes one frame at once, beside the sender (local clients: kept for TakeSent).
+  static void WriteNow(Client& client, int opcode, std::string_view payload) {
+    if (client.local) {
+      std::lock_guard lock(client.queue_mutex);
+      client.written.push_back({opcode, std::string(payload)});
+      return;
+    }
+    mg_websocket_write(client.conn, opcode, payload.data(), payload.size());
   }
 
   // ---- protocol messages
@@ -587,7 +623,7 @@ struct FoxgloveServer::Impl {
   int Authorize(mg_connection* conn) {
     if (!IsWebSocketUpgrade(conn)) return 1;
     if (!options.access_token.empty()) {
-      std::optional<std::string> token = BearerToken(conn);
+      std::optional<std::string> token = BearerToken(mg_get_header(conn, "Authorization"));
       if (!token) {
         const char* query = mg_get_request_info(conn)->query_string;
         if (query != nullptr) {
@@ -638,7 +674,8 @@ struct FoxgloveServer::Impl {
     client->remote = (address.find(':') != std::string::npos ? "[" + address + "]" : address) +
                      ":" + std::to_string(info->remote_port);
     mg_set_user_connection_data(conn, client.get());
-    clients_.emplace(conn, std::move(client));
+    const Client* key = client.get();
+    clients_.emplace(key, std::move(client));
     return 0;
   }
 
@@ -648,64 +685,74 @@ struct FoxgloveServer::Impl {
     client->conn = conn;
     client->sender = std::thread([this, client] { SenderLoop(*client); });
     std::lock_guard lock(mutex_);
-    client->ready = true;
-    EnqueueJson(*client, ServerInfo());
+    Greet(*client);
+  }
+
+  // Marks the client ready and queues serverInfo and every channel (mutex_ held).
+  void Greet(Client& client) {
+    client.ready = true;
+    EnqueueJson(client, ServerInfo());
     if (!channels_.empty()) {
       Json advertise{{"op", "advertise"}, {"channels", Json::array()}};
       for (const auto& [id, channel] : channels_) advertise["channels"].push_back(channel.advert);
-      EnqueueJson(*client, advertise);
+      EnqueueJson(client, advertise);
     }
   }
 
   int Data(mg_connection* conn, int bits, char* bytes, size_t size) {
     auto* client = static_cast<Client*>(mg_get_user_connection_data(conn));
     if (client == nullptr) return 0;
+    return Receive(*client, bits, bytes, size);
+  }
+
+  // One frame from the client (civetweb's data handler): 0 ends the connection.
+  int Receive(Client& client, int bits, const char* bytes, size_t size) {
     {
-      std::lock_guard lock(client->queue_mutex);
-      if (client->closing) return 0;
+      std::lock_guard lock(client.queue_mutex);
+      if (client.closing) return 0;
     }
     const int opcode = bits & 0x0f;
     const bool fin = (bits & 0x80) != 0;
     switch (opcode) {
       case MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE: {
-        // The closing handshake (RFC 6455 5.5.1): answer with a Close frame echoing the client's
-        // status code, then let civetweb close the connection. The sender stops first; a write
-        // in flight finishes before ours (civetweb locks the connection for each frame).
-        Close(*client, 0, "");
-        mg_websocket_write(conn, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE, bytes,
-                           std::min<size_t>(size, 2));
+        // The closing handshake (RFC 6455 5.5.1): answer with a Close frame (CloseAnswer), then
+        // let civetweb close the connection. The sender stops first; a write in flight finishes
+        // before ours (civetweb locks the connection for each frame).
+        Close(client, 0, "");
+        WriteNow(client, MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE,
+                 CloseAnswer(std::string_view(bytes, size)));
         return 0;
       }
       case MG_WEBSOCKET_OPCODE_PING:
       case MG_WEBSOCKET_OPCODE_PONG: return 1;
       case MG_WEBSOCKET_OPCODE_TEXT:
       case MG_WEBSOCKET_OPCODE_BINARY:
-        client->fragments.clear();
-        client->fragments_opcode = opcode;
+        client.fragments.clear();
+        client.fragments_opcode = opcode;
         break;
       case MG_WEBSOCKET_OPCODE_CONTINUATION:
-        if (client->fragments_opcode == 0) {
-          Warn(*client, "a continuation frame without a message to continue");
+        if (client.fragments_opcode == 0) {
+          Warn(client, "a continuation frame without a message to continue");
           return 1;
         }
         break;
-      default: Warn(*client, "unknown WebSocket opcode " + std::to_string(opcode)); return 1;
+      default: Warn(client, "unknown WebSocket opcode " + std::to_string(opcode)); return 1;
     }
-    if (client->fragments.size() + size > options.max_incoming_message_bytes) {
-      Close(*client, kCloseMessageTooBig,
+    if (client.fragments.size() + size > options.max_incoming_message_bytes) {
+      Close(client, kCloseMessageTooBig,
             "message larger than " + std::to_string(options.max_incoming_message_bytes) + " bytes");
       return 0;
     }
-    client->fragments.append(bytes, size);
+    client.fragments.append(bytes, size);
     if (!fin) return 1;
-    const int message_opcode = client->fragments_opcode;
-    client->fragments_opcode = 0;
-    std::string message = std::move(client->fragments);
-    client->fragments.clear();
+    const int message_opcode = client.fragments_opcode;
+    client.fragments_opcode = 0;
+    std::string message = std::move(client.fragments);
+    client.fragments.clear();
     if (message_opcode == MG_WEBSOCKET_OPCODE_BINARY) {
-      Warn(*client, "binary client messages are not accepted: this server offers no clientPublish");
+      Warn(client, "binary client messages are not accepted: this server offers no clientPublish");
     } else {
-      HandleText(*client, message);
+      HandleText(client, message);
     }
     return 1;
   }
@@ -713,20 +760,25 @@ struct FoxgloveServer::Impl {
   void Closed(const mg_connection* conn) {
     auto* client = static_cast<Client*>(mg_get_user_connection_data(conn));
     if (client == nullptr) return;
-    Close(*client, 0, "");
-    if (client->sender.joinable()) client->sender.join();
+    Disconnect(*client);
+    mg_set_user_connection_data(conn, nullptr);
+  }
+
+  // Stops the client's sender, ends its subscriptions and forgets it (it is destroyed).
+  void Disconnect(Client& client) {
+    Close(client, 0, "");
+    if (client.sender.joinable()) client.sender.join();
     std::unique_ptr<Client> owned;
     ChangeSubscriptions([&](Changes& changes) {
       std::vector<uint32_t> ids;
-      for (const auto& [id, channel] : client->subscriptions) ids.push_back(id);
-      for (uint32_t id : ids) UnsubscribeLocked(*client, id, changes);
-      auto it = clients_.find(conn);
+      for (const auto& [id, channel] : client.subscriptions) ids.push_back(id);
+      for (uint32_t id : ids) UnsubscribeLocked(client, id, changes);
+      auto it = clients_.find(&client);
       if (it != clients_.end()) {
         owned = std::move(it->second);
         clients_.erase(it);
       }
     });
-    mg_set_user_connection_data(conn, nullptr);
   }
 
   int Http(mg_connection* conn) {
@@ -747,18 +799,8 @@ struct FoxgloveServer::Impl {
       if (!inserted) it->second += ", " + value;
     }
 
-    if (!options.access_token.empty() && request.path.starts_with("/api/")) {
-      std::optional<std::string> token = BearerToken(conn);
-      if (!token) {
-        HttpResponse response = JsonError(401, "UNAUTHENTICATED",
-                                          "this station needs its access token "
-                                          "(Authorization: Bearer T)");
-        response.headers.emplace_back("WWW-Authenticate", "Bearer");
-        return SendHttp(conn, response);
-      }
-      if (!SameSecret(*token, options.access_token)) {
-        return SendHttp(conn, JsonError(403, "PERMISSION_DENIED", "wrong access token"));
-      }
+    if (std::optional<HttpResponse> refusal = RefuseAccess(request)) {
+      return SendHttp(conn, *refusal);
     }
 
     // The body: refused unread when its declared length is too large; otherwise read up to one
@@ -786,6 +828,30 @@ struct FoxgloveServer::Impl {
       }
     }
 
+    return SendHttp(conn, Route(request));
+  }
+
+  // Without the access token a path under /api/ gets 401 (no token) or 403 (a wrong one).
+  std::optional<HttpResponse> RefuseAccess(const HttpRequest& request) const {
+    if (options.access_token.empty() || !request.path.starts_with("/api/")) return std::nullopt;
+    const auto auth = request.headers.find("authorization");
+    std::optional<std::string> token;
+    if (auth != request.headers.end()) token = BearerToken(auth->second.c_str());
+    if (!token) {
+      HttpResponse response = JsonError(401, "UNAUTHENTICATED",
+                                        "this station needs its access token "
+                                        "(Authorization: Bearer T)");
+      response.headers.emplace_back("WWW-Authenticate", "Bearer");
+      return response;
+    }
+    if (!SameSecret(*token, options.access_token)) {
+      return JsonError(403, "PERMISSION_DENIED", "wrong access token");
+    }
+    return std::nullopt;
+  }
+
+  // The handler of the longest prefix of the path; its exceptions become 500.
+  HttpResponse Route(const HttpRequest& request) const {
     HttpHandler handler;
     {
       std::lock_guard lock(mutex_);
@@ -797,18 +863,14 @@ struct FoxgloveServer::Impl {
         }
       }
     }
-    if (!handler) {
-      return SendHttp(conn, JsonError(404, "NOT_FOUND", "nothing at " + Quote(request.path)));
-    }
-    HttpResponse response;
+    if (!handler) return JsonError(404, "NOT_FOUND", "nothing at " + Quote(request.path));
     try {
-      response = handler(request);
+      return handler(request);
     } catch (const std::exception& e) {
-      response = JsonError(500, "INTERNAL", e.what());
+      return JsonError(500, "INTERNAL", e.what());
     } catch (...) {
-      response = JsonError(500, "INTERNAL", "unknown exception");
+      return JsonError(500, "INTERNAL", "unknown exception");
     }
-    return SendHttp(conn, response);
   }
 };
 
@@ -888,6 +950,13 @@ std::unique_ptr<FoxgloveServer> FoxgloveServer::Start(FoxgloveServerOptions opti
   return std::unique_ptr<FoxgloveServer>(new FoxgloveServer(std::move(impl)));
 }
 
+std::unique_ptr<FoxgloveServer> FoxgloveServer::StartUnbound(FoxgloveServerOptions options) {
+  auto impl = std::make_unique<Impl>();
+  impl->options = std::move(options);
+  impl->session_id = "unbound";
+  return std::unique_ptr<FoxgloveServer>(new FoxgloveServer(std::move(impl)));
+}
+
 int FoxgloveServer::port() const { return impl_->port; }
 
 uint32_t FoxgloveServer::AddChannel(ChannelSpec spec) {
@@ -963,6 +1032,58 @@ void FoxgloveServer::SendStatus(int level, std::string message, std::string id) 
   for (auto& [conn, client] : impl_->clients_) {
     if (client->ready) impl_->EnqueueJson(*client, status);
   }
+}
+
+HttpResponse FoxgloveServer::HandleHttp(const HttpRequest& request) const {
+  if (std::optional<HttpResponse> refusal = impl_->RefuseAccess(request)) return *refusal;
+  return impl_->Route(request);
+}
+
+struct FoxgloveServer::LocalClient::State {
+  Impl* server = nullptr;
+  Impl::Client* client = nullptr;  // owned by the server's clients_
+};
+
+FoxgloveServer::LocalClient::LocalClient(std::unique_ptr<State> state) : state_(std::move(state)) {}
+
+FoxgloveServer::LocalClient::~LocalClient() { state_->server->Disconnect(*state_->client); }
+
+bool FoxgloveServer::LocalClient::Receive(uint8_t bits, std::string_view payload) {
+  return state_->server->Receive(*state_->client, bits, payload.data(), payload.size()) != 0;
+}
+
+std::vector<FoxgloveServer::LocalClient::Frame> FoxgloveServer::LocalClient::TakeSent() {
+  Impl::Client& client = *state_->client;
+  std::lock_guard lock(client.queue_mutex);
+  std::vector<Frame> sent;
+  for (Impl::Outgoing& message : client.queue) {
+    sent.push_back({message.opcode, std::move(message.data)});
+  }
+  client.queue.clear();
+  client.queued_bytes = 0;
+  client.queued_control = 0;
+  if (client.closing && client.close_code != 0) {  // what the sender sends as it ends
+    sent.push_back({MG_WEBSOCKET_OPCODE_CONNECTION_CLOSE,
+                    Impl::ClosePayload(client.close_code, client.close_reason)});
+    client.close_code = 0;
+  }
+  for (Frame& frame : client.written) sent.push_back(std::move(frame));
+  client.written.clear();
+  return sent;
+}
+
+std::unique_ptr<FoxgloveServer::LocalClient> FoxgloveServer::ConnectLocal() {
+  auto client = std::make_unique<Impl::Client>();
+  client->local = true;
+  client->remote = "local";
+  auto state = std::make_unique<LocalClient::State>();
+  state->server = impl_.get();
+  state->client = client.get();
+  std::lock_guard lock(impl_->mutex_);
+  impl_->Greet(*client);
+  const Impl::Client* key = client.get();
+  impl_->clients_.emplace(key, std::move(client));
+  return std::unique_ptr<LocalClient>(new LocalClient(std::move(state)));
 }
 
 void FoxgloveServer::AddHttpHandler(std::string path_prefix, HttpHandler handler) {

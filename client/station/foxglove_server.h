@@ -12,6 +12,8 @@
 //   (malformed JSON, unknown or unsupported ops, wrong types, unknown channels or ids, binary
 //   frames: we offer no clientPublish) gets a status warning naming the problem; the connection
 //   stays. A client message larger than max_incoming_message_bytes closes the connection (1009).
+// - A client's Close is answered with a Close echoing its status code; with 1002 (protocol error)
+//   when the code is missing a byte or is one no endpoint may send (RFC 6455 7.4).
 // - Server messages: binary Message Data frames, 0x01 | u32 subscription id | u64 log time ns |
 //   payload (little-endian), to subscribers only, and status messages.
 //
@@ -97,6 +99,10 @@ class FoxgloveServer {
   // invalid or the address cannot be bound.
   static std::unique_ptr<FoxgloveServer> Start(FoxgloveServerOptions options, std::string& error);
 
+  // A server that listens nowhere (options.listen is not used): only LocalClient and HandleHttp
+  // reach it. For tests and the fuzz target.
+  static std::unique_ptr<FoxgloveServer> StartUnbound(FoxgloveServerOptions options);
+
   ~FoxgloveServer();  // Stop()
   FoxgloveServer(const FoxgloveServer&) = delete;
   FoxgloveServer& operator=(const FoxgloveServer&) = delete;
@@ -128,6 +134,41 @@ class FoxgloveServer {
   // wins; "/" takes everything else). Without a match: 404. A plain GET "/" reaches the handler
   // of "/"; a WebSocket upgrade on "/" is the Foxglove protocol.
   void AddHttpHandler(std::string path_prefix, HttpHandler handler);
+
+  // What civetweb's request handler does with a request it has read (method, URL-decoded path,
+  // query, headers, body within max_request_body_bytes): the access token check under /api/, the
+  // handler of the longest matching prefix (none: 404), a handler's exception as 500. Also the
+  // entry for tests and the fuzz target, which have no socket.
+  HttpResponse HandleHttp(const HttpRequest& request) const;
+
+  // A WebSocket client without a socket, for tests and the fuzz target: the server serves it as
+  // a connection that has completed the handshake (serverInfo and the channels are queued at
+  // once). Receive() is what civetweb's data handler gets for each frame; what the server would
+  // write waits until TakeSent() (there is no sender thread). Destroy it before its server.
+  class LocalClient {
+   public:
+    struct Frame {
+      int opcode = 0;  // RFC 6455: 0x1 text, 0x2 binary, 0x8 close
+      std::string payload;
+    };
+    ~LocalClient();  // as when the connection closes: its subscriptions end
+    LocalClient(const LocalClient&) = delete;
+    LocalClient& operator=(const LocalClient&) = delete;
+
+    // One frame as received: `bits` its first byte (FIN 0x80, the opcode in the low four bits),
+    // `payload` unmasked. False when the server ends the connection (civetweb then closes it).
+    bool Receive(uint8_t bits, std::string_view payload);
+    // The frames the server sent since the last call, in order; after the server closed the
+    // connection, its Close frame (if it sends one) comes last.
+    std::vector<Frame> TakeSent();
+
+   private:
+    friend class FoxgloveServer;
+    struct State;
+    explicit LocalClient(std::unique_ptr<State> state);
+    std::unique_ptr<State> state_;
+  };
+  std::unique_ptr<LocalClient> ConnectLocal();
 
   struct Stats {
     size_t clients = 0;             // open WebSocket connections

@@ -46,6 +46,14 @@ client::ClientOptions WithToken(client::ClientOptions options, const std::string
   return options;
 }
 
+// An operator token gRPC can carry: a metadata value is printable ASCII, and gRPC aborts the
+// process on any other byte ("API misuse"), so the token (typed into the page) is checked first.
+grpc::Status CheckOperatorToken(const std::string& token) {
+  if (client::IsPrintableAscii(token)) return grpc::Status::OK;
+  return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                      "operator_token: must be printable ASCII");
+}
+
 }  // namespace
 
 RigLink::RigLink(std::string name, client::ClientOptions options, PreviewSettings previews,
@@ -294,6 +302,7 @@ grpc::Status RigLink::GetConfig(v1::PipelineConfig* config) {
 
 grpc::Status RigLink::SetConfig(const v1::PipelineConfig& update, const std::string& operator_token,
                                 v1::PipelineConfig* active) {
+  if (grpc::Status bad = CheckOperatorToken(operator_token); !bad.ok()) return bad;
   client::Client c(WithToken(options_, operator_token));
   return c.SetPipelineConfig(update, active);
 }
@@ -308,6 +317,7 @@ grpc::Status RigLink::ListCalibrations(v1::ListCalibrationsResponse* response) {
 
 grpc::Status RigLink::ActivateCalibration(const std::string& id, const std::string& operator_token,
                                           v1::CalibrationRecord* record) {
+  if (grpc::Status bad = CheckOperatorToken(operator_token); !bad.ok()) return bad;
   client::Client c(WithToken(options_, operator_token));
   return c.ActivateCalibration(id, record);
 }

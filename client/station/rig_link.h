@@ -54,7 +54,8 @@ class RigLink {
 
   v1::StationRigStatus Status() const;
 
-  // The page's calls. The control calls carry `operator_token` (and only they do).
+  // The page's calls. The control calls carry `operator_token` (and only they do); a token that
+  // is not printable ASCII gets INVALID_ARGUMENT without a call.
   grpc::Status GetConfig(v1::PipelineConfig* config);
   grpc::Status SetConfig(const v1::PipelineConfig& update, const std::string& operator_token,
                          v1::PipelineConfig* active);

@@ -39,6 +39,11 @@ std::string ProtoJson(const pb::Message& message) {
   return out;
 }
 
+// JSON text of `json`, with invalid UTF-8 (from a request's path, say) replaced instead of thrown.
+std::string Dump(const nlohmann::json& json) {
+  return json.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
 HttpResponse JsonResponse(int status, std::string body) {
   HttpResponse r;
   r.status = status;
@@ -48,7 +53,7 @@ HttpResponse JsonResponse(int status, std::string body) {
 }
 
 HttpResponse ErrorResponse(int status, const std::string& code, const std::string& message) {
-  return JsonResponse(status, nlohmann::json{{"code", code}, {"message", message}}.dump());
+  return JsonResponse(status, Dump(nlohmann::json{{"code", code}, {"message", message}}));
 }
 
 int HttpStatusOf(grpc::StatusCode code) {
@@ -150,7 +155,7 @@ HttpResponse RpcError(const grpc::Status& status) {
     }
     body["problems"] = problems;
   }
-  return JsonResponse(HttpStatusOf(status.error_code()), body.dump());
+  return JsonResponse(HttpStatusOf(status.error_code()), Dump(body));
 }
 
 std::string QueryValue(const std::string& query, const std::string& key) {
@@ -217,6 +222,10 @@ Station::Station(StationOptions options) : options_(std::move(options)) {}
 Station::~Station() { Stop(); }
 
 int Station::port() const { return server_ ? server_->port() : 0; }
+
+HttpResponse Station::HandleHttp(const HttpRequest& request) const {
+  return server_->HandleHttp(request);
+}
 
 void Station::Stop() {
   for (auto& rig : rigs_) rig->link->Stop();
@@ -434,7 +443,7 @@ HttpResponse Station::Api(const HttpRequest& request) {
       rigs.push_back({{"rig", rig->link->name()}, {"address", rig->link->address()}});
     }
     return JsonResponse(
-        200, nlohmann::json{{"rigs", rigs}, {"site", !options_.site_geojson.empty()}}.dump());
+        200, Dump(nlohmann::json{{"rigs", rigs}, {"site", !options_.site_geojson.empty()}}));
   }
   const std::optional<std::pair<std::string, std::string>> rig_path = SplitRigPath(request.path);
   if (!rig_path) return ErrorResponse(404, "NOT_FOUND", "no such API path: " + request.path);

@@ -36,6 +36,10 @@ class Station {
   int port() const;
   void Stop();
 
+  // One HTTP request as civetweb's handler passes it on (FoxgloveServer::HandleHttp): the access
+  // token, the page, Leaflet and the API. For tests and the fuzz target, which have no socket.
+  HttpResponse HandleHttp(const HttpRequest& request) const;
+
   struct Rig;  // a RigLink and its channels (station.cc)
 
  private:

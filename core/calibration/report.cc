@@ -1,6 +1,7 @@
 #include "core/calibration/report.h"
 
 #include "core/common/format.h"
+#include "core/geometry/calibration_io.h"
 
 #include <cstdio>
 #include <cstdlib>
@@ -21,6 +22,48 @@ std::string Percent(double fraction) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.0f %%", 100.0 * fraction);
   return buf;
+}
+
+// A report's text as the YAML carries it: OpenCV's parser refuses quoted strings of 4096 bytes or
+// more and mangles its numeric escapes, so the text is cut to kMaxReportText bytes (at a UTF-8
+// character boundary) and control characters other than newline, return and tab become '?'.
+// Applied when writing and when reading, so a report reads back as it was written.
+constexpr std::size_t kMaxReportText = 1024;
+
+std::string ReportText(const std::string& text) {
+  std::size_t end = text.size();
+  if (end > kMaxReportText) {
+    end = kMaxReportText;
+    while (end > 0 && (static_cast<unsigned char>(text[end]) & 0xC0) == 0x80) --end;
+  }
+  std::string out = text.substr(0, end);
+  for (char& c : out) {
+    if (static_cast<unsigned char>(c) < 0x20 && c != '\n' && c != '\r' && c != '\t') c = '?';
+  }
+  return out;
+}
+
+// Writes a string value (`key` empty inside a list) double-quoted, with the escapes OpenCV's
+// parser reads back. FileStorage's own `fs << text` takes a text starting with '[', '{', ']' or
+// '}' for a structure, drops a backslash before one, and writes a text framed by quotes, or ending
+// in spaces, unquoted, so that it reads back different (or not at all).
+void WriteText(cv::FileStorage& fs, const std::string& key, const std::string& text) {
+  std::string quoted = "\"";
+  for (const char c : ReportText(text)) {
+    switch (c) {
+      case '"':
+      case '\\':
+        quoted += '\\';
+        quoted += c;
+        break;
+      case '\n': quoted += "\\n"; break;
+      case '\r': quoted += "\\r"; break;
+      case '\t': quoted += "\\t"; break;
+      default: quoted += c;
+    }
+  }
+  quoted += '"';
+  cv::write(fs, key, quoted);  // a text framed by '"' is written as it is
 }
 
 // Readers that append "key: problem" and return a default on failure. OpenCV may throw on
@@ -68,7 +111,7 @@ class Reader {
       problems_.push_back(where + key + ": expected a string");
       return {};
     }
-    return static_cast<std::string>(node);
+    return ReportText(static_cast<std::string>(node));
   }
 
   // A sequence (possibly empty); problems when it is something else.
@@ -183,7 +226,7 @@ Result<std::string> ReportToYaml(const CalibrationReport& r) {
        << "{"
        << "inner_cols" << r.board.inner_cols << "inner_rows" << r.board.inner_rows
        << "square_size_m" << r.board.square_size_m << "}";
-    fs << "detector" << r.detector;
+    WriteText(fs, "detector", r.detector);
     fs << "pairs_given" << r.pairs_given;
     fs << "pairs_used" << r.pairs_used;
     fs << "rms_px" << r.rms_px;
@@ -206,30 +249,37 @@ Result<std::string> ReportToYaml(const CalibrationReport& r) {
     fs << "failures"
        << "[";
     for (const GateFailure& f : r.failures) {
-      fs << "{"
-         << "gate" << f.gate << "measured" << f.measured << "limit" << f.limit << "message"
-         << f.message << "}";
+      fs << "{";
+      WriteText(fs, "gate", f.gate);
+      fs << "measured" << f.measured << "limit" << f.limit;
+      WriteText(fs, "message", f.message);
+      fs << "}";
     }
     fs << "]";
     fs << "warnings"
        << "[";
-    for (const std::string& w : r.warnings) fs << w;
+    for (const std::string& w : r.warnings) WriteText(fs, "", w);
     fs << "]";
     fs << "rejected"
        << "[";
     for (const RejectedPair& p : r.rejected) {
       fs << "{"
-         << "index" << p.index << "name" << p.name << "reason"
-         << std::string(RejectReasonName(p.reason)) << "detail" << p.detail << "}";
+         << "index" << p.index;
+      WriteText(fs, "name", p.name);
+      fs << "reason" << std::string(RejectReasonName(p.reason));
+      WriteText(fs, "detail", p.detail);
+      fs << "}";
     }
     fs << "]";
     fs << "pairs"
        << "[";
     for (const PairReport& p : r.pairs) {
       fs << "{"
-         << "index" << p.index << "name" << p.name << "rms_left_px" << p.rms_left_px
-         << "rms_right_px" << p.rms_right_px << "epipolar_mean_px" << p.epipolar_mean_px
-         << "coverage_left" << p.coverage_left << "coverage_right" << p.coverage_right << "}";
+         << "index" << p.index;
+      WriteText(fs, "name", p.name);
+      fs << "rms_left_px" << p.rms_left_px << "rms_right_px" << p.rms_right_px << "epipolar_mean_px"
+         << p.epipolar_mean_px << "coverage_left" << p.coverage_left << "coverage_right"
+         << p.coverage_right << "}";
     }
     fs << "]";
     return fs.releaseAndGetString();
@@ -242,6 +292,10 @@ namespace {
 
 // Opens the YAML text for reading ("%YAML:1.0" is put in front of a text without it).
 std::optional<Error> OpenYaml(const std::string& yaml_text, cv::FileStorage& fs) {
+  if (std::string problem = geometry::YamlTextProblem(yaml_text); !problem.empty()) {
+    return Error{ErrorCode::kInvalidArgument,
+                 "calibration report: not valid YAML (" + problem + ")"};
+  }
   try {
     std::string text = yaml_text;
     if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
@@ -251,6 +305,9 @@ std::optional<Error> OpenYaml(const std::string& yaml_text, cv::FileStorage& fs)
     }
   } catch (const cv::Exception& e) {
     return Error{ErrorCode::kInvalidArgument, "calibration report: not valid YAML (" + e.err + ")"};
+  } catch (const std::exception& e) {
+    return Error{ErrorCode::kInvalidArgument,
+                 std::string("calibration report: not valid YAML (") + e.what() + ")"};
   }
   return std::nullopt;
 }
@@ -323,7 +380,7 @@ std::vector<std::string> ReadWarnings(Reader& read, const cv::FileNode& root) {
   if (warnings.isSeq()) {
     for (const cv::FileNode& w : warnings) {
       if (w.isString()) {
-        out.push_back(static_cast<std::string>(w));
+        out.push_back(ReportText(static_cast<std::string>(w)));
       } else {
         read.Problem("warnings: expected strings");
       }
@@ -388,6 +445,8 @@ Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
     }
   } catch (const cv::Exception& e) {
     problems.push_back("unreadable (" + e.err + ")");
+  } catch (const std::exception& e) {
+    problems.push_back(std::string("unreadable (") + e.what() + ")");
   }
   if (!problems.empty()) {
     Error e = Error::Invalid(problems);

@@ -6,11 +6,14 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <sstream>
 
 namespace stevi::geometry {
@@ -90,6 +93,26 @@ std::optional<cv::Mat> ReadMatrix(const cv::FileNode& root, const std::string& k
       return std::nullopt;
     }
   } else if (node.isMap()) {
+    // OpenCV allocates rows x cols (whatever it makes of them) before it compares the data's
+    // length with them, so a file announcing a huge matrix would allocate gigabytes: only a map
+    // announcing an accepted shape is handed over.
+    const cv::FileNode rows = Lookup(node, "rows");
+    const cv::FileNode cols = Lookup(node, "cols");
+    if (!rows.isInt() || !cols.isInt()) {
+      problems.push_back(
+          key + ": expected " + expected +
+          " (an !!opencv-matrix with rows, cols, dt and data, or a list of numbers)");
+      return std::nullopt;
+    }
+    const int r = static_cast<int>(rows);
+    const int c = static_cast<int>(cols);
+    const bool accepted = std::any_of(shapes.begin(), shapes.end(), [&](const cv::Size& s) {
+      return s.height == r && s.width == c;
+    });
+    if (!accepted) {
+      problems.push_back(key + ": expected " + expected + ", got " + ShapeText(r, c));
+      return std::nullopt;
+    }
     try {
       node >> m;
     } catch (const cv::Exception&) {
@@ -304,6 +327,43 @@ std::vector<std::string> StereoCalibration::Validate() const {
   return problems;
 }
 
+std::string YamlTextProblem(std::string_view text) {
+  std::size_t root_indent = std::string_view::npos;  // of the first line with content
+  std::size_t number = 1;
+  for (std::size_t start = 0; start < text.size(); ++number) {
+    std::size_t end = text.find('\n', start);
+    if (end == std::string_view::npos) end = text.size();
+    std::string_view line = text.substr(start, end - start);
+    start = end + 1;
+    const std::size_t indent = std::min(line.find_first_not_of(' '), line.size());
+    line.remove_prefix(indent);
+    const std::string at = "line " + std::to_string(number) + ": ";
+    if (line.empty() || line[0] == '\r' || line[0] == '#') continue;
+    if (line[0] == ':') return at + "an empty key (the line starts with ':')";
+    if (line.substr(0, 3) == "...") {
+      return at + "'...' (the end of a YAML document) is not supported";
+    }
+    if (root_indent == std::string_view::npos) {
+      if (line[0] == '%') continue;  // a directive
+      if (line.substr(0, 3) == "---") {
+        line.remove_prefix(3);
+        const std::size_t after = line.find_first_not_of(' ');
+        if (after == std::string_view::npos || line[after] == '\r' || line[after] == '#') continue;
+        return at + "content on the '---' line (start it on the next line)";
+      }
+      if (line[0] == '{' || line[0] == '[') {
+        return at + "expected a map at the top level, as 'key: value' lines (not '" +
+               std::string(1, line[0]) + "')";
+      }
+      root_indent = indent;
+    } else if (indent < root_indent) {
+      return at + "indented less than the first line (" + std::to_string(indent) + " < " +
+             std::to_string(root_indent) + " spaces): the top level must be one map";
+    }
+  }
+  return {};
+}
+
 Result<StereoCalibration> LoadCalibrationYaml(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) {
@@ -311,6 +371,14 @@ Result<StereoCalibration> LoadCalibrationYaml(const std::string& path) {
   }
   if (std::filesystem::is_directory(path, ec)) {
     return Error{ErrorCode::kInvalidArgument, path + ": is a directory, not a calibration file"};
+  }
+  {
+    std::ifstream in(path, std::ios::binary);
+    const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+    if (std::string problem = YamlTextProblem(text); !problem.empty()) {
+      return Error{ErrorCode::kInvalidArgument,
+                   path + ": not a valid calibration YAML file (" + problem + ")"};
+    }
   }
   cv::FileStorage fs;
   try {
@@ -320,6 +388,9 @@ Result<StereoCalibration> LoadCalibrationYaml(const std::string& path) {
   } catch (const cv::Exception& e) {
     return Error{ErrorCode::kInvalidArgument,
                  path + ": not a valid calibration YAML file (" + OpenCvReason(e) + ")"};
+  } catch (const std::exception& e) {
+    return Error{ErrorCode::kInvalidArgument,
+                 path + ": not a valid calibration YAML file (" + e.what() + ")"};
   }
   Result<StereoCalibration> result = ParseStorage(fs);
   if (!result.ok()) return WithPrefix(result.error(), path + ": ");
@@ -327,6 +398,9 @@ Result<StereoCalibration> LoadCalibrationYaml(const std::string& path) {
 }
 
 Result<StereoCalibration> ParseCalibrationYaml(const std::string& yaml_text) {
+  if (std::string problem = YamlTextProblem(yaml_text); !problem.empty()) {
+    return Error{ErrorCode::kInvalidArgument, "calibration YAML: not valid YAML (" + problem + ")"};
+  }
   cv::FileStorage fs;
   int header_lines = 0;
   try {
@@ -343,6 +417,9 @@ Result<StereoCalibration> ParseCalibrationYaml(const std::string& yaml_text) {
   } catch (const cv::Exception& e) {
     return Error{ErrorCode::kInvalidArgument,
                  "calibration YAML: not valid YAML (" + OpenCvReason(e, header_lines) + ")"};
+  } catch (const std::exception& e) {
+    return Error{ErrorCode::kInvalidArgument,
+                 std::string("calibration YAML: not valid YAML (") + e.what() + ")"};
   }
   return ParseStorage(fs);
 }

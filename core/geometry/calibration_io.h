@@ -3,6 +3,8 @@
 
 #include <optional>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -36,6 +38,17 @@ Result<StereoCalibration> LoadCalibrationYaml(const std::string& path);
 
 // Parses calibration YAML held in memory (same rules as LoadCalibrationYaml).
 Result<StereoCalibration> ParseCalibrationYaml(const std::string& yaml_text);
+
+// Why YAML text must not be handed to OpenCV's parser (cv::FileStorage, OpenCV 4.6), or empty.
+// Its YAMLParser mishandles two things no calibration or report file needs:
+//   - an empty key, a line starting with ':' after its indentation: parseKey scans backwards
+//     over spaces past the start of the key (and of its line buffer: a read out of bounds), then
+//     throws std::length_error;
+//   - text after the first document's top-level collection (a line indented less than the first,
+//     a "..." end marker, a flow collection at the top): parse() can loop forever on a '-' there.
+// So text is refused unless it is one top-level block map (or list): nothing indented less than
+// its first line, no '...', no '{' or '[' first, no empty key. Returns "line N: problem".
+std::string YamlTextProblem(std::string_view text);
 
 // The YAML text SaveCalibrationYaml writes (kInvalidArgument for an invalid calibration).
 Result<std::string> CalibrationYamlText(const StereoCalibration& calibration);

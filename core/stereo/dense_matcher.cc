@@ -272,7 +272,9 @@ template <int kBytes>
           const auto darker = n < centre;
           U8 mask;
           std::memcpy(&mask, &darker, sizeof mask);
-          p[i / 8] |= mask & static_cast<uint8_t>(1 << (i % 8));
+          // A named uint8_t: under -fsanitize=shift, g++ sees the shift's int in a cast inline.
+          const uint8_t bit = static_cast<uint8_t>(1u << (i % 8));
+          p[i / 8] |= mask & bit;
           ++i;
         }
       }

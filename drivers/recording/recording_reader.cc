@@ -195,9 +195,14 @@ Result<v1::RecordedRig> RecordedRigOf(const geometry::StereoRig& rig) {
 Result<geometry::StereoRig> RigFromRecorded(const v1::RecordedRig& recorded) {
   std::vector<std::string> problems;
   const int w = recorded.image_width(), h = recorded.image_height();
-  if (w <= 0 || h <= 0 || w > kMaxImageSide || h > kMaxImageSide) {
+  // Also bounded in pixels, as the frames are: a rig that is not rectified builds remap tables
+  // of 12 bytes per pixel when it opens (3 GiB and most of a minute for 16384x16384).
+  if (w <= 0 || h <= 0 || w > kMaxImageSide || h > kMaxImageSide ||
+      int64_t{w} * h > kMaxImagePixels) {
     problems.push_back("image_width, image_height: must be in [1, " +
-                       std::to_string(kMaxImageSide) + "] (got " + SizeText(w, h) + ")");
+                       std::to_string(kMaxImageSide) + "] and at most " +
+                       std::to_string(kMaxImagePixels) + " pixels in all (got " + SizeText(w, h) +
+                       ")");
   }
   if (recorded.has_ideal()) {
     const v1::IdealRig& ideal = recorded.ideal();

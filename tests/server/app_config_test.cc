@@ -75,6 +75,30 @@ TEST(LoadServerConfig, NamesTheFileLineAndProblem) {
   EXPECT_THAT(missing.error().message, HasSubstr("/nonexistent/stevi.textproto"));
 }
 
+// Fuzz regression (tests/fuzz/corpus/config/regression-invalid-utf8): the text format parser
+// took bytes that are not UTF-8 into string fields, which JSON then dropped ("192.168.1\260.12"
+// came back as "192.168.1.12") and binary serialisation refuses.
+TEST(ParseConfigText, RefusesStringsThatAreNotUtf8) {
+  v1::ServerConfig config;
+  const Status raw = ParseConfigText("source { right: \"192.168.1\xb0.12\" }", "config c", config);
+  ASSERT_FALSE(raw.ok());
+  EXPECT_EQ(raw.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(raw.error().message, HasSubstr("config c: source.right: not valid UTF-8"));
+  const Status escaped = ParseConfigText(
+      "auth { allowed_client_names: \"ok\" allowed_client_names: \"\\355\\240\\200\" }", "config c",
+      config);
+  ASSERT_FALSE(escaped.ok());
+  EXPECT_THAT(escaped.error().message,
+              HasSubstr("config c: auth.allowed_client_names[1]: not valid UTF-8"));
+  const Status json = ParseConfigText("{\"listen\": \"caf\xc3\"}", "config j", config);
+  EXPECT_FALSE(json.ok());
+
+  v1::PipelineConfig pipeline;
+  EXPECT_TRUE(ParseConfigText("", "empty", pipeline).ok());
+  ASSERT_TRUE(ParseConfigText("source { left: \"caf\xc3\xa9 \xe2\x9c\x93\" }", "c", config).ok());
+  EXPECT_EQ(config.source().left(), "caf\xc3\xa9 \xe2\x9c\x93");
+}
+
 TEST(BuildPipelineConfig, NamesEveryBadField) {
   v1::PipelineConfig config;
   config.mutable_matcher()->mutable_block_matching()->set_num_disparities(50);
@@ -162,13 +186,17 @@ TEST(ApplyFlags, OverridesTheFileAndNamesBadValues) {
   EXPECT_EQ(config.pipeline().algorithm(), v1::ALGORITHM_CANONICAL);
   EXPECT_DOUBLE_EQ(config.source().fps(), 30);
 
-  Result<Flags> bad = Parse({"--algorithm", "magic", "--fps", "-3", "--source", "camera"});
+  // Good flags beside bad ones: none is applied (tests/fuzz/flags found the good ones applied).
+  Result<Flags> bad = Parse({"--listen", "127.0.0.1:3", "--algorithm", "magic", "--fps", "-3",
+                             "--source", "camera", "--left", "cam7"});
   ASSERT_TRUE(bad.ok());
+  const std::string before = config.SerializeAsString();
   const Status applied = ApplyFlags(*bad, config);
   ASSERT_FALSE(applied.ok());
   EXPECT_THAT(applied.error().message,
               AllOf(HasSubstr("--algorithm"), HasSubstr("--fps"), HasSubstr("--source")));
   EXPECT_EQ(config.listen(), "127.0.0.1:2") << "nothing applied from a bad set of flags";
+  EXPECT_EQ(config.SerializeAsString(), before) << "nothing applied from a bad set of flags";
 }
 
 TEST(ApplyFlags, CamerasReplayAndRecording) {

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 namespace stevi::client::mavlink {
 namespace {
@@ -225,6 +226,44 @@ GlobalPositionInt Position(uint32_t boot_ms) {
   p.vy = -40;
   p.vz = 10;
   return p;
+}
+
+// Found by tests/fuzz/mavlink (regression-geoid-overflow, regression-unix-time-overflow): heights
+// 2^31 mm apart overflowed the undulation's int subtraction, a SYSTEM_TIME near 2^63 us the
+// boot-to-Unix offset. An impossible undulation, a non-finite attitude and a position
+// outside the Earth are each dropped, named, and change nothing.
+TEST(PoseJoiner, DropsImpossibleMessagesAndKeepsTheLastGoodState) {
+  PoseJoiner joiner({.geoid_undulation_m = 40.0});
+  const int64_t host = 1'800'000'000'000'000'000;
+  GpsRawInt g;
+  g.fix_type = kGpsFixType3dFix;
+  g.alt = -2'097'152'000;
+  g.alt_ellipsoid = 185'207'048;
+  joiner.OnMessage(FrameOf(g), host);
+  EXPECT_EQ(joiner.geoid_undulation_m(), 40.0) << "a 2287 km undulation is no geoid";
+  Attitude a;
+  a.time_boot_ms = 1000;
+  a.roll = 0.1f;
+  joiner.OnMessage(FrameOf(a), host);
+  Attitude bad = a;
+  bad.time_boot_ms = 1005;
+  bad.pitch = std::numeric_limits<float>::quiet_NaN();
+  joiner.OnMessage(FrameOf(bad), host);
+  EXPECT_NE(joiner.rejected().find("ATTITUDE with a non-finite angle"), std::string::npos)
+      << joiner.rejected();
+  SystemTime far_future;  // found by the fuzzer: 2^63 us overflowed the boot-to-Unix offset
+  far_future.time_unix_usec = 0x8000'0001'E000'0000ULL;
+  far_future.time_boot_ms = 531'085'119;
+  joiner.OnMessage(FrameOf(far_future), host);
+  EXPECT_STREQ(joiner.time_source(), "host");
+  GlobalPositionInt outside = Position(1010);
+  outside.lat = 950'000'000;
+  EXPECT_FALSE(joiner.OnMessage(FrameOf(outside), host));
+  EXPECT_NE(joiner.rejected().find("outside the Earth"), std::string::npos) << joiner.rejected();
+  const std::optional<v1::VehicleState> s = joiner.OnMessage(FrameOf(Position(1010)), host);
+  ASSERT_TRUE(s.has_value()) << joiner.waiting();
+  EXPECT_NEAR(s->roll_deg(), 0.1 * 180.0 / 3.14159265358979323846, 1e-4);
+  EXPECT_EQ(s->pitch_deg(), 0.0) << "the NaN attitude did not replace the good one";
 }
 
 TEST(PoseJoiner, JoinsPositionAttitudeEllipsoidHeightAndUnixTime) {

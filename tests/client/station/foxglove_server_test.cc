@@ -622,6 +622,48 @@ TEST(FoxgloveServer, AnswersTheClientsCloseWithACloseEchoingItsCode) {
   EXPECT_TRUE(Eventually([&] { return server->stats().clients == 0; }));
 }
 
+// A Close whose body cannot be echoed (RFC 6455 7.4): one byte (no whole status code), or a code
+// no endpoint may send (1005, 1006, 1015 only report; 0..999, 1016..2999 and 5000 and up are not
+// defined). It is answered with 1002 (protocol error), not echoed into a malformed Close; an empty
+// body gets an empty one. (Found by tests/fuzz/foxglove_ws: the server echoed "\x03".)
+TEST(FoxgloveServer, AnswersACloseItCannotEchoWithProtocolError) {
+  std::unique_ptr<FoxgloveServer> server = StartServer({});
+  const std::pair<std::string, int> cases[] = {
+      {std::string("\x03", 1), 1002},      // a byte: no whole code
+      {std::string("\x03\xed", 2), 1002},  // 1005
+      {std::string("\x03\xee", 2), 1002},  // 1006
+      {std::string("\x03\xf7", 2), 1002},  // 1015
+      {std::string("\x00\x00", 2), 1002},  // 0
+      {std::string("\x13\x88", 2), 1002},  // 5000
+      {std::string("\x03\xe9 bye", 6), 1001},
+      {std::string("\x0f\xa0", 2), 4000},
+      {std::string(), 0},  // no code: an empty Close
+  };
+  for (const auto& [body, answer] : cases) {
+    SCOPED_TRACE(::testing::PrintToString(body));
+    std::unique_ptr<WsClient> client = ConnectAndGreet(*server, false);
+    ASSERT_TRUE(client->SendFrame(WsMessage::kClose, body, true));
+    std::optional<WsMessage> reply;
+    do {
+      reply = client->Receive(kTimeout);
+    } while (reply && reply->opcode != WsMessage::kClose && reply->opcode != WsMessage::kEnd);
+    ASSERT_TRUE(reply.has_value());
+    ASSERT_EQ(reply->opcode, WsMessage::kClose);
+    EXPECT_EQ(reply->close_code(), answer);
+    EXPECT_EQ(reply->payload.size(), answer == 0 ? 0u : 2u);
+
+    // The same without a socket (FoxgloveServer::LocalClient, as the fuzz target drives it).
+    std::unique_ptr<FoxgloveServer::LocalClient> local = server->ConnectLocal();
+    EXPECT_FALSE(local->Receive(0x88, body));
+    const std::vector<FoxgloveServer::LocalClient::Frame> sent = local->TakeSent();
+    ASSERT_FALSE(sent.empty());
+    EXPECT_EQ(sent.back().opcode, WsMessage::kClose);
+    const std::string expected =
+        answer == 0 ? "" : std::string{char(answer >> 8), char(answer & 0xff)};
+    EXPECT_EQ(sent.back().payload, expected);
+  }
+}
+
 TEST(FoxgloveServer, ClosesAConnectionThatSendsAnOversizeMessage) {
   FoxgloveServerOptions options;
   options.max_incoming_message_bytes = 1024;

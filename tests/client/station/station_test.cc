@@ -487,6 +487,59 @@ TEST_F(StationTest, ExportsTheGeoreferencedTracksItReceived) {
   EXPECT_GE(placemarks, confirmed_geo.size());
 }
 
+// Bytes the page's calls may carry that once took the station down, found by
+// tests/fuzz/station_http, with no server behind the rig (127.0.0.1:1: nobody listens): a path that
+// is not UTF-8 gets its 404 (its error's JSON threw, so it got 500), and an operator token that is
+// not printable ASCII gets 400 naming it (gRPC aborted the whole station on it: "API misuse ...
+// INVALID_METADATA").
+TEST(StationApi, BadBytesInPathsAndOperatorTokensGetTheirErrorsAndTheStationStaysUp) {
+  station::StationOptions options;
+  options.servers = {"127.0.0.1:1"};
+  options.web.listen = "127.0.0.1:0";
+  std::string error;
+  std::unique_ptr<station::Station> station = station::Station::Start(options, &error);
+  ASSERT_TRUE(station != nullptr) << error;
+  const int port = station->port();
+
+  std::optional<testing::HttpReply> r =
+      testing::HttpRequestOnce("127.0.0.1", port, "GET", "/api/rigs/rig1/%C3%28", {}, "", error);
+  ASSERT_TRUE(r) << error;
+  EXPECT_EQ(r->status, 404) << r->body;
+  EXPECT_EQ(nlohmann::json::parse(r->body)["code"], "NOT_FOUND");
+  station::HttpRequest get;
+  get.method = "GET";
+  get.path = "/api/rig\xc3/rig1/frobnicate";
+  EXPECT_EQ(station->HandleHttp(get).status, 404);
+
+  const std::pair<std::string, std::string> calls[] = {
+      {"/api/rigs/rig1/config", R"({"algorithm":"ALGORITHM_STEVIS"})"},
+      {"/api/rigs/rig1/calibrations/activate", R"({"id":"cal-000001"})"}};
+  for (const auto& [path, body] : calls) {
+    SCOPED_TRACE(path);
+    r = testing::HttpRequestOnce(
+        "127.0.0.1", port, "POST", path,
+        {{"Content-Type", "application/json"}, {"X-Stevi-Operator-Token", "operator-\xc9-token"}},
+        body, error);
+    ASSERT_TRUE(r) << error;
+    EXPECT_EQ(r->status, 400) << r->body;
+    const nlohmann::json reply = nlohmann::json::parse(r->body);
+    EXPECT_EQ(reply["code"], "INVALID_ARGUMENT");
+    ASSERT_EQ(reply["problems"].size(), 1u) << r->body;
+    EXPECT_EQ(reply["problems"][0]["field"], "operator_token");
+    station::HttpRequest post;
+    post.method = "POST";
+    post.path = path;
+    post.body = body;
+    post.headers["x-stevi-operator-token"] = std::string(
+        "tok\x01"
+        "en");
+    EXPECT_EQ(station->HandleHttp(post).status, 400);
+  }
+  r = testing::HttpRequestOnce("127.0.0.1", port, "GET", "/api/rigs", {}, "", error);
+  ASSERT_TRUE(r) << error;
+  EXPECT_EQ(r->status, 200);
+}
+
 TEST(StationCommand, RefusesUnsafeOrBadFlagsNamingTheProblem) {
   const std::string dir = testing::MakeTempDir("stevi-station-flags");
   std::ofstream(dir + "/short") << "short\n";

@@ -532,6 +532,68 @@ TEST(CalibrateStereo, ClearErrorsForUnusableInput) {
               HasSubstr("54 and 53 corners, the board of 9x6 has 54"));
 }
 
+// Fuzz regressions (tests/fuzz/corpus/calibration_yaml/regression-report-text-*): texts that
+// FileStorage's `fs << text` takes for a structure ('[', '{', ']', '}' first), writes unquoted
+// so that they read back different (framed by quotes, trailing spaces), or cannot write (over
+// 4 KiB). Pair names come from the client, so any text must survive the store.
+TEST(CalibrationReport, AnyTextRoundTripsThroughYaml) {
+  const std::vector<std::string> texts = {"[left]",
+                                          "{x",
+                                          "]",
+                                          "}",
+                                          "\\[x]",
+                                          "'quoted'",
+                                          "\"quoted\"",
+                                          "trailing  ",
+                                          " leading",
+                                          "",
+                                          "tab\tnew\nline\rreturn",
+                                          "back\\slash",
+                                          "12",
+                                          "-3",
+                                          "é ü ✓",
+                                          "a: b, [c]"};
+  for (const std::string& text : texts) {
+    CalibrationReport r;
+    r.detector = text;
+    r.warnings = {text, text + text};
+    r.failures.push_back({text, 1.5, 1.0, text});
+    r.rejected.push_back({3, text, RejectReason::kNoBoard, text});
+    r.pairs.push_back({0, text, 0.1, 0.2, 0.3, 0.4, 0.5});
+    r.pairs_used = 1;
+    const Result<std::string> yaml = ReportToYaml(r);
+    ASSERT_TRUE(yaml.ok()) << text << ": " << yaml.error().message;
+    const Result<CalibrationReport> back = ParseReportYaml(*yaml);
+    ASSERT_TRUE(back.ok()) << text << ": " << back.error().message << "\n" << *yaml;
+    EXPECT_EQ(back->detector, text);
+    EXPECT_EQ(back->warnings, r.warnings);
+    EXPECT_EQ(back->failures.at(0).gate, text);
+    EXPECT_EQ(back->failures.at(0).message, text);
+    EXPECT_EQ(back->rejected.at(0).name, text);
+    EXPECT_EQ(back->rejected.at(0).detail, text);
+    EXPECT_EQ(back->pairs.at(0).name, text);
+  }
+  // Control characters the format cannot carry become '?'; a text is kept to 1 KiB (whole UTF-8
+  // characters), when written and when read alike.
+  CalibrationReport r;
+  r.detector = std::string("a\x01z\x1f", 4);
+  r.warnings = {std::string(1023, 'x') + "é" + std::string(3000, 'y')};
+  const Result<std::string> yaml = ReportToYaml(r);
+  ASSERT_TRUE(yaml.ok()) << yaml.error().message;
+  const Result<CalibrationReport> back = ParseReportYaml(*yaml);
+  ASSERT_TRUE(back.ok()) << back.error().message;
+  EXPECT_EQ(back->detector, "a?z?");
+  EXPECT_EQ(back->warnings.at(0), std::string(1023, 'x'));
+  std::string long_yaml = *yaml;
+  const std::string detector = "detector: \"a?z?\"";
+  ASSERT_NE(long_yaml.find(detector), std::string::npos) << long_yaml;
+  long_yaml.replace(long_yaml.find(detector), detector.size(),
+                    "detector: " + std::string(5000, 'd'));
+  const Result<CalibrationReport> long_text = ParseReportYaml(long_yaml);
+  ASSERT_TRUE(long_text.ok()) << long_text.error().message;
+  EXPECT_EQ(long_text->detector, std::string(1024, 'd'));
+}
+
 TEST(CalibrationReport, RoundTripsThroughYaml) {
   const Dataset& d = Synthetic();
   DetectedPairs detected = d.detected;

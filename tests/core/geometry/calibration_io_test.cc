@@ -81,6 +81,66 @@ TEST(ParseCalibrationYaml, MalformedMatrixIsNamedWithItsShape) {
   EXPECT_THAT(c.error().message, HasSubstr("M1: expected a 3x3 matrix, got 3x2"));
 }
 
+// Fuzz regression (tests/fuzz/corpus/calibration_yaml/regression-huge-matrix): OpenCV allocates
+// the announced rows x cols before it checks the data, so the shape is checked before reading.
+TEST(ParseCalibrationYaml, AHugeAnnouncedMatrixIsRefusedBeforeItIsAllocated) {
+  const std::string text = Replace(
+      kIdealYaml,
+      "   rows: 3\n   cols: 3\n   dt: d\n   data: [ 500., 0., 320., 0., 500., 240., 0., 0., 1. ]",
+      "   rows: 100000\n   cols: 100000\n   dt: d\n   data: [ 1. ]");
+  Result<StereoCalibration> c = ParseCalibrationYaml(text);
+  ASSERT_FALSE(c.ok());
+  EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(c.error().message, HasSubstr("M1: expected a 3x3 matrix, got 100000x100000"));
+
+  // A size OpenCV would read from something else than an integer is not handed over either
+  // (regression-huge-matrix-text-cols).
+  const std::string text_cols = Replace(
+      kIdealYaml,
+      "   rows: 3\n   cols: 3\n   dt: d\n   data: [ 500., 0., 320., 0., 500., 240., 0., 0., 1. ]",
+      "   rows: 30000\n   cols: ____30000\n   dt: d\n   data: [ 1. ]");
+  Result<StereoCalibration> t = ParseCalibrationYaml(text_cols);
+  ASSERT_FALSE(t.ok());
+  EXPECT_THAT(t.error().message, HasSubstr("M1: expected a 3x3 matrix (an !!opencv-matrix"));
+}
+
+// Fuzz regression (tests/fuzz/corpus/calibration_yaml/regression-empty-key): OpenCV's parser
+// reads a line starting with ':' backwards past its buffer and throws std::length_error, which
+// escaped the parser; such text is refused before OpenCV sees it.
+TEST(ParseCalibrationYaml, AnEmptyKeyIsRefusedBeforeOpenCvParsesIt) {
+  for (const std::string& line :
+       {std::string(":dt d"), std::string("   :dt d"), std::string(": 3")}) {
+    const std::string text = Replace(kIdealYaml, "   dt: d", line);
+    Result<StereoCalibration> c = ParseCalibrationYaml(text);
+    ASSERT_FALSE(c.ok()) << line;
+    EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
+    EXPECT_THAT(c.error().message, HasSubstr("line 8: an empty key")) << line;
+  }
+  EXPECT_THAT(YamlTextProblem("a: 1\n  b: 2\n  :c: 3\n"), HasSubstr("line 3: an empty key"));
+  EXPECT_EQ(YamlTextProblem("a: \":x\"\nb: [1, 2]\n"), "");
+  const std::string path = WriteFile(testing::MakeTempDir("stevi_rig"), "empty-key.yaml",
+                                     Replace(kIdealYaml, "   dt: d", "   : d"));
+  Result<StereoCalibration> loaded = LoadCalibrationYaml(path);
+  ASSERT_FALSE(loaded.ok());
+  EXPECT_THAT(loaded.error().message, AllOf(HasSubstr(path), HasSubstr("an empty key")));
+}
+
+// Fuzz regression (tests/fuzz/corpus/calibration_yaml/regression-parser-hang-after-dedent):
+// OpenCV's parser looped forever on text after the first document's top-level map; only one
+// top-level map is handed over.
+TEST(ParseCalibrationYaml, TextBeyondTheTopLevelMapIsRefusedBeforeOpenCvLoopsOnIt) {
+  const std::string hang = "%YAML:1.0\n---\n \n   rows: 1\nM2v-matrix\n   rowsM";
+  Result<StereoCalibration> c = ParseCalibrationYaml(hang);
+  ASSERT_FALSE(c.ok());
+  EXPECT_THAT(c.error().message, HasSubstr("line 5: indented less than the first line"));
+  EXPECT_THAT(YamlTextProblem("a: 1\n...\n-x\n"), HasSubstr("line 2: '...'"));
+  EXPECT_THAT(YamlTextProblem("{a: 1}\n-x\n"), HasSubstr("line 1: expected a map"));
+  EXPECT_THAT(YamlTextProblem("--- a: 1\n"), HasSubstr("line 1: content on the '---' line"));
+  // What the format needs stays accepted: directives, comments, an indented top level.
+  EXPECT_EQ(YamlTextProblem("%YAML:1.0\n---\n# c\n  a: 1\n  b:\n     - 2\n# d\n"), "");
+  EXPECT_TRUE(ParseCalibrationYaml(kIdealYaml).ok());
+}
+
 TEST(ParseCalibrationYaml, ReportsEveryKeyProblemAtOnce) {
   std::string text = Replace(kIdealYaml, "image_width: 640", "image_width: wide");
   text = Replace(text, "rows: 1\n   cols: 5", "rows: 1\n   cols: 6");  // D1 of 6 is not allowed

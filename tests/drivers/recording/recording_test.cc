@@ -359,6 +359,37 @@ TEST(RecordedRig, IdealAndCalibratedRigsRebuildBitForBit) {
   EXPECT_EQ(parsed->M1, rectified->calibration().M1);
 }
 
+// Found by fuzzing (tests/fuzz/corpus/recording/regression-huge-rig): a 20 KB manifest naming a
+// 16384x16384 rig with a distortion made Open() build 3 GiB of remap tables for most of a
+// minute. The rig is bounded in pixels like the frames, before anything is built.
+TEST(RecordedRig, ARigOverThePixelLimitIsRefusedBeforeItIsBuilt) {
+  geometry::StereoCalibration c = geometry::IdealCalibration(cv::Size(64, 48), 50, 0.12, 32, 24);
+  c.D1.at<double>(0) = 0.01;
+  c.R1.reset();
+  c.R2.reset();
+  c.P1.reset();
+  c.P2.reset();
+  c.Q.reset();
+  Result<geometry::StereoRig> rig = geometry::StereoRig::FromCalibration(c, "small");
+  ASSERT_TRUE(rig.ok()) << rig.error().message;
+  Result<v1::RecordedRig> recorded = RecordedRigOf(*rig);
+  ASSERT_TRUE(recorded.ok()) << recorded.error().message;
+  ASSERT_FALSE(recorded->has_ideal());
+  std::string yaml = recorded->calibration_yaml();
+  yaml.replace(yaml.find("image_width: 64"), 15, "image_width: 16384");
+  yaml.replace(yaml.find("image_height: 48"), 16, "image_height: 16384");
+  recorded->set_calibration_yaml(yaml);
+  recorded->set_image_width(16384);
+  recorded->set_image_height(16384);
+  const auto start = std::chrono::steady_clock::now();
+  Result<geometry::StereoRig> rebuilt = RigFromRecorded(*recorded);
+  ASSERT_FALSE(rebuilt.ok());
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(1));
+  EXPECT_EQ(rebuilt.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_TRUE(Contains(rebuilt.error().message, "at most 67108864 pixels in all (got 16384x16384)"))
+      << rebuilt.error().message;
+}
+
 TEST(Recorder, CalibrationChangesAreRecordedInOrderAndBadOnesRefused) {
   const std::string dir = testing::MakeTempDir("stevi-rec-calib") + "/rec";
   SyntheticSource source(SmallSynthetic(64, 48));

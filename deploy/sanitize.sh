@@ -1,0 +1,52 @@
+#!/usr/bin/env bash
+# Builds the tests with sanitizers, in a folder of their own, and runs them. A sanitizer report
+# ends the process that made it (halt_on_error), so it fails its test.
+#
+# Usage: bash deploy/sanitize.sh address|thread [extra ctest arguments]
+#   address  AddressSanitizer with LeakSanitizer, and UndefinedBehaviorSanitizer: every test,
+#            the fuzz corpora's replay among them. CI runs this (deploy/test.sh).
+#   thread   ThreadSanitizer: the tests of the concurrent code (STEVI_TSAN_TESTS below).
+# The build folder is build-asan or build-tsan beside build (STEVI_SANITIZE_BUILD_DIR overrides).
+# The compiler is the project's g++; the reference data is read as by deploy/test.sh. Warnings
+# are not errors here: the instrumented code gives g++ false ones, and deploy/test.sh's normal
+# build is the one held to -Werror.
+#
+# Suppressions live in deploy/sanitizers/*.supp, each entry with the reason it is there. Only
+# third-party code is suppressed. Debian's gRPC, protobuf, GLib and OpenCV are not built with
+# the sanitizer: ThreadSanitizer cannot see their synchronisation, so a report whose every stack
+# frame on one side is inside such a library is theirs to explain (see tsan.supp); a report with
+# a stevi frame on both sides is ours, and is fixed, never suppressed.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+kind="${1:-}"
+shift || true
+case "$kind" in
+  address) flags="address,undefined"; default_dir=build-asan ;;
+  thread) flags="thread"; default_dir=build-tsan ;;
+  *) echo "usage: bash deploy/sanitize.sh address|thread [ctest arguments]" >&2; exit 2 ;;
+esac
+build_dir="${STEVI_SANITIZE_BUILD_DIR:-$default_dir}"
+supp="$PWD/deploy/sanitizers"
+jobs="$(nproc)"
+
+cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSTEVI_BUILD_TESTS=ON \
+  -DSTEVI_BUILD_BENCHMARKS=OFF -DSTEVI_WERROR=OFF "-DSTEVI_SANITIZE=$flags"
+cmake --build "$build_dir" -j"$jobs"
+
+export ASAN_OPTIONS="halt_on_error=1:detect_leaks=1:strict_init_order=1:detect_stack_use_after_return=1"
+export LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0"
+export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1:suppressions=$supp/ubsan.supp"
+export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:suppressions=$supp/tsan.supp"
+# The concurrent code: the engine, broadcaster and the rest of the server's runtime, the servers,
+# the station and its Foxglove server, the Aravis source (the fake GigE camera), the MAVLink links
+# and bridge, the client's streams and reconnect loop, the recording, the mailbox, the pose buffer.
+STEVI_TSAN_TESTS='^(server/|client/|drivers/aravis/|drivers/recording/|core/common/|core/geo/pose_buffer)'
+select=()
+if [[ "$kind" == thread ]]; then
+  select=(-R "$STEVI_TSAN_TESTS")
+fi
+start=$(date +%s)
+ctest --test-dir "$build_dir" --output-on-failure -j"$jobs" "${select[@]}" "$@" 2>&1 | tee "$build_dir/sanitize-$kind.log"
+status=${PIPESTATUS[0]}
+echo "sanitize.sh $kind: $(( $(date +%s) - start )) s of tests, exit $status"
+exit "$status"
