@@ -77,14 +77,16 @@ Commands:
                                than 400 ms is sent; status lines (logfmt) on stderr
   station [--server A,B] [--listen HOST:PORT] [--token-file FILE | --allow-insecure]
           [--site GEOJSON] [--max-clients N] [--preview-rate HZ] [--preview-width PX]
-          [--preview-quality Q]
+          [--preview-quality Q] [--export-points N]
                                the ground station for one or more servers (--server after
                                `station` takes a comma-separated list): a web page with each
                                rig's live video, disparity, plan view, map, tracks, status and
                                controls, and a Foxglove WebSocket (Foxglove, Lichtblick), both on
                                --listen (127.0.0.1:8080). Another address needs --token-file
                                (the page asks for that token) or --allow-insecure. The page's
-                               control calls carry the operator token typed into the page
+                               control calls carry the operator token typed into the page.
+                               --export-points N: each rig's export history keeps the newest
+                               N georeferenced track points (200000)
 
 --server defaults to 127.0.0.1:50051; --timeout (seconds, default 5) bounds each call.
 Exit status: 0 on success, 1 when the server fails or cannot be reached, 2 on bad usage.

@@ -1,6 +1,7 @@
 // stevi station [--server A,B] [--listen HOST:PORT] [--token-file FILE | --allow-insecure]
 // [--site GEOJSON] [--max-clients N] [--preview-rate HZ] [--preview-width PX]
-// [--preview-quality Q]: the ground station, a web page and a Foxglove WebSocket on one port.
+// [--preview-quality Q] [--export-points N]: the ground station, a web page and a Foxglove
+// WebSocket on one port.
 #include "client/station/station.h"
 
 #include <condition_variable>
@@ -37,6 +38,8 @@ std::string ParseArgs(const Args& args, StationArgs& a) {
              [&a](std::int64_t px) { a.options.previews.max_width_px = static_cast<int>(px); })
       .Whole("--preview-quality", {.lo = 10, .hi = 100},
              [&a](std::int64_t q) { a.options.previews.jpeg_quality = static_cast<int>(q); })
+      .Whole("--export-points", {.lo = 1, .hi = 10'000'000},
+             [&a](std::int64_t n) { a.options.export_points = static_cast<size_t>(n); })
       .Parse(args);
 }
 

@@ -57,11 +57,12 @@ grpc::Status CheckOperatorToken(const std::string& token) {
 }  // namespace
 
 RigLink::RigLink(std::string name, client::ClientOptions options, PreviewSettings previews,
-                 RigCallbacks callbacks)
+                 RigCallbacks callbacks, size_t max_track_points)
     : name_(std::move(name)),
       options_(std::move(options)),
       previews_(previews),
       callbacks_(std::move(callbacks)),
+      max_track_points_(max_track_points),
       tracks_client_(options_),
       control_client_(options_) {
   status_.set_rig(name_);
@@ -135,7 +136,7 @@ void RigLink::TracksLoop() {
             std::vector<client::TrackPoint> points;
             client::CollectTrackPoints(frame, points);
             for (client::TrackPoint& p : points) points_.push_back(p);
-            while (points_.size() > kMaxTrackPoints) points_.pop_front();
+            while (points_.size() > max_track_points_) points_.pop_front();
           }
           if (callbacks_.on_frame) callbacks_.on_frame(frame);
           return true;

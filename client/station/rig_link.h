@@ -37,8 +37,9 @@ struct RigCallbacks {
 class RigLink {
  public:
   // `name` is "rig1", ...; `options` the address, TLS and token of the reading calls.
+  // `max_track_points` bounds the export history (TrackPoints()).
   RigLink(std::string name, client::ClientOptions options, PreviewSettings previews,
-          RigCallbacks callbacks);
+          RigCallbacks callbacks, size_t max_track_points = kMaxTrackPoints);
   ~RigLink();
   RigLink(const RigLink&) = delete;
   RigLink& operator=(const RigLink&) = delete;
@@ -64,8 +65,9 @@ class RigLink {
   grpc::Status ActivateCalibration(const std::string& id, const std::string& operator_token,
                                    v1::CalibrationRecord* record);
 
-  // The georeferenced track points received so far (the newest kMaxTrackPoints).
+  // The georeferenced track points received so far (the newest max_track_points).
   std::vector<client::TrackPoint> TrackPoints() const;
+  // The default bound (`stevi station --export-points`).
   static constexpr size_t kMaxTrackPoints = 200'000;
 
  private:
@@ -94,6 +96,7 @@ class RigLink {
   const client::ClientOptions options_;
   const PreviewSettings previews_;
   const RigCallbacks callbacks_;
+  const size_t max_track_points_;
 
   client::Client tracks_client_;
   client::Client control_client_;

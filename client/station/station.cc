@@ -300,7 +300,8 @@ std::unique_ptr<Station::Rig> Station::MakeRig(size_t i) {
   };
   client::ClientOptions client = options_.client;
   client.address = options_.servers[i];
-  rig->link = std::make_unique<RigLink>(name, client, options_.previews, callbacks);
+  rig->link =
+      std::make_unique<RigLink>(name, client, options_.previews, callbacks, options_.export_points);
   return rig;
 }
 

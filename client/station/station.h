@@ -18,6 +18,8 @@ struct StationOptions {
   client::ClientOptions client;      // TLS, token and timeout of the reading calls
   FoxgloveServerOptions web;         // --listen, the limits, the station's access token
   PreviewSettings previews;
+  // Each rig's export history: the newest this many georeferenced track points.
+  size_t export_points = RigLink::kMaxTrackPoints;
   std::string site_geojson;  // a GeoJSON overlay of the site ("" = none), already checked
   std::string leaflet_dir = "/usr/share/javascript/leaflet";
 };

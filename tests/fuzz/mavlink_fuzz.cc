@@ -67,8 +67,8 @@ std::vector<uint8_t> EncodeMessages(std::span<const uint8_t> spec) {
   std::size_t at = 0;
   while (at + 2 <= spec.size()) {
     const mav::MessageInfo& info = known[spec[at] % known.size()];
-    const std::size_t n = std::min<std::size_t>(
-        {spec[at + 1], info.max_length, spec.size() - at - 2});
+    const std::size_t n =
+        std::min<std::size_t>({spec[at + 1], info.max_length, spec.size() - at - 2});
     const std::vector<uint8_t> frame =
         mav::EncodeFrame(sequence++, 1, 1, info.id, spec.subspan(at + 2, n));
     stream.insert(stream.end(), frame.begin(), frame.end());

@@ -487,6 +487,41 @@ TEST_F(StationTest, ExportsTheGeoreferencedTracksItReceived) {
   EXPECT_GE(placemarks, confirmed_geo.size());
 }
 
+// --export-points bounds each rig's export history: it fills up to the bound and stays there (the
+// soak, tests/bench/soak.cc, lowers it to see the station's memory level off).
+TEST_F(StationTest, TheExportHistoryKeepsTheNewestPointsUpToItsBound) {
+  station::StationOptions options;
+  options.servers = {server_.address()};
+  options.web.listen = "127.0.0.1:0";
+  options.export_points = 40;
+  std::string error;
+  station_ = station::Station::Start(options, &error);
+  ASSERT_TRUE(station_ != nullptr) << error;
+  const auto exported_points = [&] {
+    std::string e;
+    const std::optional<testing::HttpReply> r = testing::HttpRequestOnce(
+        "127.0.0.1", station_->port(), "GET", "/api/rigs/rig1/export.geojson", {}, "", e);
+    EXPECT_TRUE(r && r->status == 200) << e;
+    uint64_t points = 0;
+    if (!r) return points;
+    const nlohmann::json geojson = nlohmann::json::parse(r->body);
+    for (const auto& f : geojson["features"]) {
+      points += f["properties"]["points"].get<uint64_t>();
+    }
+    return points;
+  };
+  // The synthetic rig gives several georeferenced confirmed tracks a frame: 40 points fill in a
+  // few seconds; then the count stays at the bound while frames go on arriving.
+  uint64_t points = 0;
+  for (int i = 0; i < 600 && points < 40; ++i) {
+    std::this_thread::sleep_for(100ms);
+    points = exported_points();
+  }
+  EXPECT_EQ(points, 40u);
+  std::this_thread::sleep_for(1s);
+  EXPECT_EQ(exported_points(), 40u);
+}
+
 // Bytes the page's calls may carry that once took the station down, found by
 // tests/fuzz/station_http, with no server behind the rig (127.0.0.1:1: nobody listens): a path that
 // is not UTF-8 gets its 404 (its error's JSON threw, so it got 500), and an operator token that is
@@ -554,6 +589,7 @@ TEST(StationCommand, RefusesUnsafeOrBadFlagsNamingTheProblem) {
       {{"--site", dir + "/bad.geojson"}, "unknown GeoJSON type"},
       {{"--preview-rate", "0"}, "--preview-rate"},
       {{"--max-clients", "0"}, "--max-clients"},
+      {{"--export-points", "0"}, "--export-points"},
       {{"--server", ","}, "at least one"},
   };
   for (const auto& c : cases) {
