@@ -57,18 +57,21 @@ void FuzzFlagSet(const std::vector<std::string>& args) {
   set.Switch("--verbose", &verbose)
       .Stop("--help", &help)
       .Text("--name", &name)
-      .Real("--range", metres, [&](double v) {
-        Require(InRange(v, metres));
-        range_m = v;
-      })
-      .Real("--every", seconds, [&](double v) {
-        Require(InRange(v, seconds));
-        every_s = v;
-      })
-      .Whole("--count", count, [&](std::int64_t v) {
-        Require(v >= count.lo && v <= count.hi);
-        n = v;
-      })
+      .Real("--range", metres,
+            [&](double v) {
+              Require(InRange(v, metres));
+              range_m = v;
+            })
+      .Real("--every", seconds,
+            [&](double v) {
+              Require(InRange(v, seconds));
+              every_s = v;
+            })
+      .Whole("--count", count,
+             [&](std::int64_t v) {
+               Require(v >= count.lo && v <= count.hi);
+               n = v;
+             })
       .Value("--board", [&](const std::string& v) -> std::string {
         const auto p = flags::ParseNumberPair(v, 'x', {2, 100, "corners"});
         if (!p.ok()) return "watch --board: " + std::string(flags::NumberProblemName(p.problem));
