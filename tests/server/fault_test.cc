@@ -522,7 +522,8 @@ class ConfigFuzzer {
                                    -16};
     switch (rng_() % 4) {
       case 0: return static_cast<int32_t>(rng_());
-      case 1: return base * 1000;
+      case 1:  // wraps as the wire would; a signed overflow here was UB (UBSan found it)
+        return static_cast<int32_t>(static_cast<uint32_t>(base) * 1000u);
       default: return kOdd[rng_() % std::size(kOdd)];
     }
   }

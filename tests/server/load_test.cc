@@ -32,7 +32,17 @@ using testing::Seconds;
 
 // 12 fps: on the 2-core reference machine the pipeline (canonical, block matching, 640x480) and
 // 32 streams use well under the two cores, even with ctest running another test beside this one.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+// Instrumented code (deploy/sanitize.sh) runs 2-15 times slower: a rate the machine keeps with 32
+// clients there. What this test asserts besides the rate holds at any rate. Resident memory is
+// not checked there: AddressSanitizer holds freed memory in its quarantine (up to 256 MB) on
+// purpose, to catch a use after free, and LeakSanitizer checks for leaks instead.
+constexpr bool kSanitized = true;
+constexpr double kFps = 4;
+#else
+constexpr bool kSanitized = false;
 constexpr double kFps = 12;
+#endif
 constexpr int kClients = 32;                  // one of them slow
 constexpr auto kLoadDuration = 60s;           // all 32 streaming, after the warm-up
 constexpr auto kSlowConsumerDelay = 300ms;    // the slow client's time per frame
@@ -315,7 +325,9 @@ TEST(ServerLoad, ThirtyTwoClientsForAMinuteOneSlow) {
   EXPECT_NEAR(ratio_start, 1.0, kRateTolerance);
   EXPECT_NEAR(ratio_end, 1.0, kRateTolerance);
   // Resident memory (server and clients, the same 32 connected at both points).
-  EXPECT_LT(growth, kLoadRssBoundKiB) << "resident memory grew by " << growth << " KiB";
+  if (!kSanitized) {
+    EXPECT_LT(growth, kLoadRssBoundKiB) << "resident memory grew by " << growth << " KiB";
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -443,7 +455,9 @@ TEST(ServerLoad, ThousandConnectStreamCancelCyclesLeaveNothingBehind) {
   EXPECT_EQ(status.source_state(), v1::SOURCE_STATE_RUNNING);
 
   const long growth = rss_after - rss_before;
-  EXPECT_LT(growth, kChurnRssBoundKiB) << "resident memory grew by " << growth << " KiB";
+  if (!kSanitized) {
+    EXPECT_LT(growth, kChurnRssBoundKiB) << "resident memory grew by " << growth << " KiB";
+  }
   std::printf(
       "churn: %d cycles in %.1f s on %d threads (connect only %d, cancel at once %d, cancel "
       "after a frame %d, deadline %d), %d unexpected; 0 subscribers %.2f s after\n"
