@@ -226,15 +226,18 @@ void Server::Shutdown() {
   }
   // 2. End the streams, each with a final status (UNAVAILABLE "server shutting down": a client
   //    reconnects to the next server), so that the calls in progress finish without waiting.
-  //    The preview streams likewise; the hub's thread is joined.
+  //    The preview streams likewise; the hub's thread is joined. And the vehicle state streams,
+  //    which would otherwise wait for their clients' next state.
   const size_t streams = broadcaster_ ? broadcaster_->Close() : 0;
   const size_t preview_streams = previews_ ? previews_->Close() : 0;
+  const size_t vehicle_streams = service_ ? service_->EndVehicleStreams() : 0;
   if (stop_accepting.joinable()) stop_accepting.join();
   if (grpc_server_) grpc_server_->Wait();
   Log(LogLevel::kInfo, "shutdown",
       {{"step", "streams_ended"},
        {"streams", std::to_string(streams)},
        {"preview_streams", std::to_string(preview_streams)},
+       {"vehicle_streams", std::to_string(vehicle_streams)},
        {"ms", elapsed_ms()}});
   // 3. Stop the cameras (the source and the pipeline) and the calibration worker.
   if (calibration_) calibration_->Stop();

@@ -118,17 +118,25 @@ grpc::Status Refusal(bool closed, const std::string& limit) {
                 : ToGrpcStatus(ErrorCode::kResourceExhausted, limit);
 }
 
+}  // namespace
+
 // PublishVehicleState: each state into the pose source; refusals are counted, the stream goes on.
+// A client stream waits for its client's next state, so a shutdown ends it (End) rather than
+// leave the server's stop to gRPC's grace. Lifetime: deleted in OnDone(), after `on_done`
+// removes it from the service's set.
 class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleState> {
  public:
-  VehicleStateReactor(PoseSource& poses, v1::PublishVehicleStateResponse* response)
-      : poses_(poses), response_(response) {
+  VehicleStateReactor(PoseSource& poses, v1::PublishVehicleStateResponse* response,
+                      std::function<void()> on_done)
+      : poses_(poses), response_(response), on_done_(std::move(on_done)) {
     StartRead(&state_);
   }
 
   void OnReadDone(bool ok) override {
+    std::lock_guard lock(mu_);
+    if (finished_) return;
     if (!ok) {
-      Finish(grpc::Status::OK);
+      FinishLocked(grpc::Status::OK);
       return;
     }
     if (Status added = poses_.Publish(FromProto(state_)); added.ok()) {
@@ -140,13 +148,33 @@ class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleStat
     StartRead(&state_);
   }
 
-  void OnDone() override { delete this; }
+  // From any thread; the first status given is the call's.
+  void End(const grpc::Status& status) {
+    std::lock_guard lock(mu_);
+    FinishLocked(status);
+  }
+
+  void OnDone() override {
+    on_done_();
+    delete this;
+  }
 
  private:
+  void FinishLocked(const grpc::Status& status) {
+    if (finished_) return;
+    finished_ = true;
+    Finish(status);
+  }
+
   PoseSource& poses_;
   v1::PublishVehicleStateResponse* response_;
+  const std::function<void()> on_done_;
+  std::mutex mu_;
+  bool finished_ = false;
   v1::VehicleState state_;
 };
+
+namespace {
 
 grpc::ServerUnaryReactor* Reply(grpc::CallbackServerContext* context, const grpc::Status& status) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
@@ -361,7 +389,28 @@ grpc::ServerReadReactor<v1::VehicleState>* ObstacleServiceImpl::PublishVehicleSt
   if (grpc::Status allowed = auth_.CheckControl(*context, "PublishVehicleState"); !allowed.ok()) {
     return new RefusedReadReactor<v1::VehicleState>(std::move(allowed));
   }
-  return new VehicleStateReactor(poses_, response);
+  std::lock_guard lock(vehicle_mu_);
+  if (vehicle_closed_) {
+    return new RefusedReadReactor<v1::VehicleState>(
+        ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
+  }
+  auto* reactor = new VehicleStateReactor(poses_, response, [this, context] {
+    std::lock_guard done_lock(vehicle_mu_);
+    vehicle_streams_.erase(context);
+  });
+  vehicle_streams_.emplace(context, reactor);
+  return reactor;
+}
+
+size_t ObstacleServiceImpl::EndVehicleStreams() {
+  // Under the lock: a reactor's OnDone runs on a gRPC thread, never inside End(), and removes
+  // it under this lock before deleting it, so every reactor in the set is alive here.
+  std::lock_guard lock(vehicle_mu_);
+  vehicle_closed_ = true;
+  for (const auto& [context, reactor] : vehicle_streams_) {
+    reactor->End(ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
+  }
+  return vehicle_streams_.size();
 }
 
 }  // namespace stevi::server

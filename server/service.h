@@ -2,6 +2,7 @@
 // function of (engine, request, response), testable without a channel.
 #pragma once
 
+#include <map>
 #include <memory>
 #include <mutex>
 
@@ -43,6 +44,8 @@ grpc::Status GetDisparitySnapshotImpl(const Engine& engine,
                                       const v1::GetDisparitySnapshotRequest& request,
                                       v1::DisparitySnapshot* response);
 
+class VehicleStateReactor;
+
 class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
  public:
   ObstacleServiceImpl(Engine& engine, FrameBroadcaster& broadcaster, PreviewHub& previews,
@@ -80,6 +83,11 @@ class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
                                           const v1::StopRecordingRequest* request,
                                           v1::RecordingStatus* response) override;
 
+  // Ends the PublishVehicleState calls in progress with UNAVAILABLE "server shutting down", and
+  // refuses new ones likewise; returns how many were ended. A client stream otherwise holds the
+  // server's stop until gRPC's grace cancels it.
+  size_t EndVehicleStreams();
+
  private:
   Engine& engine_;
   FrameBroadcaster& broadcaster_;
@@ -88,6 +96,9 @@ class ObstacleServiceImpl final : public v1::ObstacleService::CallbackService {
   RecordingManager& recording_;
   const Authorizer& auth_;
   std::mutex config_mu_;
+  std::mutex vehicle_mu_;
+  bool vehicle_closed_ = false;
+  std::map<const grpc::CallbackServerContext*, VehicleStateReactor*> vehicle_streams_;
 };
 
 }  // namespace stevi::server

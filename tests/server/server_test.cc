@@ -577,6 +577,59 @@ TEST(ServerPublish, PublishedVehicleStatesGeoreferenceTheTracks) {
   EXPECT_GT(geodetic, 0);
 }
 
+// A PublishVehicleState stream whose client sends no more states is ended by the shutdown
+// itself (UNAVAILABLE "server shutting down", as the track streams are), not left to gRPC's
+// grace, which would cancel it and hold the stop for kShutdownGrace.
+TEST(ServerShutdown, EndsAnOpenVehicleStateStreamWithTheShutdownStatus) {
+  v1::ServerConfig config = TestConfig();
+  config.mutable_geo()->set_max_age_s(30);
+  Result<std::unique_ptr<Server>> server = Server::Start(config);
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  const client::ClientOptions options = LoopbackOptions(**server, std::chrono::seconds(20));
+  std::unique_ptr<v1::ObstacleService::Stub> stub =
+      v1::ObstacleService::NewStub(grpc::CreateChannel(options.address, grpc::InsecureChannelCredentials()));
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));  // bounded
+  v1::PublishVehicleStateResponse response;
+  std::unique_ptr<grpc::ClientWriter<v1::VehicleState>> writer =
+      stub->PublishVehicleState(&context, &response);
+  const int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                          .count();
+  for (int k = -10; k <= 200; ++k) {  // 10 Hz from 1 s ago to 20 s ahead; the stream stays open
+    v1::VehicleState s;
+    s.set_unix_time_ns(now + k * 100'000'000LL);
+    s.mutable_position()->set_lat_deg(45.0);
+    s.mutable_position()->set_lon_deg(9.0);
+    s.mutable_position()->set_alt_m(300);
+    ASSERT_TRUE(writer->Write(s));
+  }
+  // The server has taken the states once a frame is georeferenced with them.
+  client::Client watcher(options);
+  bool published = false;
+  client::StreamOptions stream;
+  stream.max_frames = 200;  // bounded: 10 s at the test's rate
+  (void)watcher.StreamTracks(
+      [&](const v1::TrackFrame& f) {
+        published = f.geo_status() == v1::GEO_STATUS_OK &&
+                    std::abs(f.vehicle().position().lat_deg() - 45.0) < 1e-9;
+        return !published;
+      },
+      stream);
+  ASSERT_TRUE(published) << "no frame was georeferenced with the published states";
+
+  const auto t0 = std::chrono::steady_clock::now();
+  (*server)->Shutdown();
+  const double took_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const grpc::Status status = writer->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE) << status.error_message();
+  EXPECT_THAT(status.error_message(), HasSubstr("server shutting down"));
+  std::printf("shutdown with an open vehicle state stream: %.3f s, the stream ended %s \"%s\"\n",
+              took_s, status.error_code() == grpc::StatusCode::UNAVAILABLE ? "UNAVAILABLE" : "?",
+              status.error_message().c_str());
+}
+
 TEST_F(ServerTest, StreamFiltersAreAppliedAndABadOneIsRefused) {
   client::StreamOptions options;
   options.max_frames = 10;
