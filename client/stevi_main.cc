@@ -6,6 +6,7 @@
 
 #include "client/client.h"
 #include "client/commands/commands.h"
+#include "client/commands/memory.h"
 
 namespace {
 
@@ -114,6 +115,7 @@ constexpr Command kCommands[] = {
 }  // namespace
 
 int main(int argc, char** argv) {
+  commands::ShareMallocArenas();  // first: before any thread starts
   commands::HandleStopSignals();
   const commands::Args args(argv + 1, argv + argc);
   commands::GlobalOptions global;

@@ -4,6 +4,7 @@
 // WebSocket on one port.
 #include "client/station/station.h"
 
+#include <chrono>
 #include <condition_variable>
 #include <iostream>
 #include <mutex>
@@ -12,6 +13,7 @@
 #include <vector>
 
 #include "client/commands/commands.h"
+#include "client/commands/memory.h"
 #include "client/flags.h"
 
 namespace stevi::client::commands {
@@ -121,7 +123,9 @@ int Station(Client& client, const Args& args) {
   });
   {
     std::unique_lock lock(mu);
-    cv.wait(lock, [&] { return stop; });
+    while (!cv.wait_for(lock, std::chrono::seconds(10), [&] { return stop; })) {
+      ReturnFreeMemory();
+    }
   }
   OnStopSignal(nullptr);
   st->Stop();

@@ -5,10 +5,7 @@
 // Run it inside tests/drivers/fake_camera_netns.sh (the fake GigE cameras need 127.0.0.2 and a
 // private GVCP port), e.g.
 //   tests/drivers/fake_camera_netns.sh build/bin/stevi-soak --out /tmp/soak
-#include <netinet/in.h>
-#include <poll.h>
 #include <signal.h>
-#include <sys/socket.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -40,6 +37,7 @@
 #include "drivers/synthetic/scenarios.h"
 #include "tests/bench/soak_process.h"
 #include "tests/bench/soak_report.h"
+#include "tests/testing/test_autopilot.h"
 #include "tests/testing/ws_client.h"
 
 namespace stevi::soak {
@@ -477,126 +475,6 @@ class WsClient {
 };
 
 // ---------------------------------------------------------------------------------------------
-// A test autopilot on loopback UDP speaking MAVLink 2 (the project's codec): HEARTBEAT and
-// SYSTEM_TIME at 1 Hz, GPS_RAW_INT at 5 Hz, ATTITUDE and GLOBAL_POSITION_INT at 20 Hz (what the
-// bridge asks a real one for), the hover pose of the synthetic rig; counts what the bridge sends.
-
-class TestAutopilot {
- public:
-  static constexpr uint8_t kSystem = 7;
-  static constexpr double kUndulationM = 47.5;
-
-  explicit TestAutopilot(geo::VehicleState pose) : pose_(pose) {
-    fd_ = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-    socklen_t length = sizeof addr;
-    getsockname(fd_, reinterpret_cast<sockaddr*>(&addr), &length);
-    port_ = ntohs(addr.sin_port);
-    thread_ = std::thread([this] { Loop(); });
-  }
-  ~TestAutopilot() {
-    stop_ = true;
-    thread_.join();
-    close(fd_);
-  }
-  int port() const { return port_; }
-  uint64_t obstacle_distance() const { return obstacle_distance_; }
-  uint64_t heartbeats() const { return heartbeats_; }
-
- private:
-  template <class T>
-  void Send(const T& m) {
-    const std::vector<uint8_t> bytes = ml::Encode(m, sequence_++, kSystem, 1);
-    sendto(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL, reinterpret_cast<const sockaddr*>(&peer_),
-           sizeof peer_);
-  }
-
-  void Receive() {
-    uint8_t buffer[2048];
-    sockaddr_in from{};
-    socklen_t length = sizeof from;
-    const ssize_t n =
-        recvfrom(fd_, buffer, sizeof buffer, 0, reinterpret_cast<sockaddr*>(&from), &length);
-    if (n <= 0) return;
-    peer_ = from;
-    has_peer_ = true;
-    parser_.Feed(std::span<const uint8_t>(buffer, static_cast<size_t>(n)), [&](const ml::Frame& f) {
-      if (f.message_id == ml::ObstacleDistance::kId) ++obstacle_distance_;
-      if (f.message_id == ml::Heartbeat::kId) ++heartbeats_;
-    });
-  }
-
-  void Loop() {
-    const auto start = Clock::now();
-    auto next_20hz = start, next_5hz = start, next_1hz = start;
-    while (!stop_) {
-      pollfd fd{fd_, POLLIN, 0};
-      if (poll(&fd, 1, 10) > 0) Receive();
-      if (!has_peer_) continue;
-      const auto now = Clock::now();
-      const auto boot_ms = static_cast<uint32_t>((now - start) / 1ms) + 1;
-      const int64_t unix_us = UnixNowNs() / 1000;
-      if (now >= next_1hz) {
-        ml::Heartbeat hb;
-        hb.type = 2;        // MAV_TYPE_QUADROTOR
-        hb.autopilot = 12;  // MAV_AUTOPILOT_PX4
-        hb.system_status = ml::kMavStateActive;
-        Send(hb);
-        ml::SystemTime t;
-        t.time_unix_usec = static_cast<uint64_t>(unix_us);
-        t.time_boot_ms = boot_ms;
-        Send(t);
-        next_1hz += 1s;
-      }
-      if (now >= next_5hz) {
-        ml::GpsRawInt g;
-        g.time_usec = static_cast<uint64_t>(unix_us);
-        g.fix_type = ml::kGpsFixType3dFix;
-        g.lat = static_cast<int32_t>(std::lround(pose_.lat_deg * 1e7));
-        g.lon = static_cast<int32_t>(std::lround(pose_.lon_deg * 1e7));
-        g.alt = static_cast<int32_t>(std::lround((pose_.alt_m - kUndulationM) * 1000));
-        g.alt_ellipsoid = static_cast<int32_t>(std::lround(pose_.alt_m * 1000));
-        g.h_acc = 350;
-        g.v_acc = 600;
-        g.satellites_visible = 14;
-        Send(g);
-        next_5hz += 200ms;
-      }
-      if (now >= next_20hz) {
-        ml::Attitude a;
-        a.time_boot_ms = boot_ms;
-        a.roll = static_cast<float>(pose_.roll_deg * M_PI / 180);
-        a.pitch = static_cast<float>(pose_.pitch_deg * M_PI / 180);
-        a.yaw = static_cast<float>(std::remainder(pose_.yaw_deg, 360.0) * M_PI / 180);
-        Send(a);
-        ml::GlobalPositionInt p;
-        p.time_boot_ms = boot_ms;
-        p.lat = static_cast<int32_t>(std::lround(pose_.lat_deg * 1e7));
-        p.lon = static_cast<int32_t>(std::lround(pose_.lon_deg * 1e7));
-        p.alt = static_cast<int32_t>(std::lround((pose_.alt_m - kUndulationM) * 1000));
-        p.hdg = static_cast<uint16_t>(std::lround(std::fmod(pose_.yaw_deg + 360, 360) * 100));
-        Send(p);
-        next_20hz += 50ms;
-      }
-    }
-  }
-
-  const geo::VehicleState pose_;
-  int fd_ = -1;
-  int port_ = 0;
-  std::thread thread_;
-  std::atomic<bool> stop_{false};
-  bool has_peer_ = false;  // the loop's thread only
-  sockaddr_in peer_{};
-  uint8_t sequence_ = 0;
-  ml::Parser parser_;
-  std::atomic<uint64_t> obstacle_distance_{0}, heartbeats_{0};
-};
-
-// ---------------------------------------------------------------------------------------------
 
 // The station's rig1 export history: the sum of the features' "points" (-1 when unreadable).
 int64_t ExportPoints(int station_port) {
@@ -649,7 +527,7 @@ class Soak {
   std::string address_a_, address_b_;
   int station_port_ = 0;
   std::unique_ptr<Outages> outages_a_, outages_b_;
-  std::unique_ptr<TestAutopilot> autopilot_;
+  std::unique_ptr<testing::TestAutopilot> autopilot_;
   std::vector<std::unique_ptr<GrpcClient>> grpc_a_, grpc_b_;
   std::vector<std::unique_ptr<WsClient>> ws_;
   std::unique_ptr<client::Client> status_a_, status_b_;
@@ -753,7 +631,11 @@ bool Soak::StartAll(std::string& error) {
 
   geo::VehicleState pose;
   if (const std::optional<geo::VehicleState> p = drivers::SceneRigPose("airfield")) pose = *p;
-  autopilot_ = std::make_unique<TestAutopilot>(pose);
+  autopilot_ = std::make_unique<testing::TestAutopilot>(pose, /*keep_frames=*/false);
+  if (!autopilot_->error().empty()) {
+    error = autopilot_->error();
+    return false;
+  }
   procs_[kMavlink] = std::make_unique<ChildProcess>(
       "mavlink",
       std::vector<std::string>{stevi, "--server", address_a_, "mavlink", "--link",
@@ -845,7 +727,7 @@ void Soak::TakeSample(Sample& s, double t_rel) {
     c->Flush(0, s.streams[2]);
     if (o_.cameras) c->Flush(1, s.streams[3]);
   }
-  const uint64_t od = autopilot_->obstacle_distance();
+  const uint64_t od = autopilot_->count(ml::ObstacleDistance::kId);
   s.obstacle_distance = od - last_obstacle_distance_;
   last_obstacle_distance_ = od;
   s.export_points = ExportPoints(station_port_);

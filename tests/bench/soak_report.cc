@@ -76,24 +76,32 @@ struct Series {
   std::vector<cv::Point2d> points;  // (minutes, value); NaN values break the line
 };
 
+// `bound`, when finite, is drawn as a dashed red line (a check's limit) and kept in view.
 void DrawPanel(cv::Mat& img, cv::Rect area, const std::string& title, const std::string& unit,
-               const std::vector<Series>& series, const SoakResult& r, double end_min) {
+               const std::vector<Series>& series, const SoakResult& r, double end_min,
+               double bound = NAN) {
   const int left = area.x + 70, right = area.x + area.width - 170, top = area.y + 24,
             bottom = area.y + area.height - 28;
-  double ymax = 0;
+  double ymin = 0, ymax = std::isfinite(bound) ? bound : 0;
   for (const Series& s : series) {
     for (const cv::Point2d& p : s.points) {
-      if (std::isfinite(p.y)) ymax = std::max(ymax, p.y);
+      if (!std::isfinite(p.y)) continue;
+      ymax = std::max(ymax, p.y);
+      ymin = std::min(ymin, p.y);
     }
   }
   ymax = ymax <= 0 ? 1 : ymax * 1.15;
+  ymin *= 1.15;
   // A round step for the y ticks.
-  const double raw = ymax / 5, mag = std::pow(10, std::floor(std::log10(raw)));
+  const double raw = (ymax - ymin) / 5, mag = std::pow(10, std::floor(std::log10(raw)));
   const double step = raw / mag < 2 ? 2 * mag : raw / mag < 5 ? 5 * mag : 10 * mag;
   ymax = std::ceil(ymax / step) * step;
+  ymin = std::floor(ymin / step) * step;
   const double xmax = std::max(end_min, 1e-3);
   auto X = [&](double m) { return left + static_cast<int>((right - left) * m / xmax); };
-  auto Y = [&](double v) { return bottom - static_cast<int>((bottom - top) * v / ymax); };
+  auto Y = [&](double v) {
+    return bottom - static_cast<int>((bottom - top) * (v - ymin) / (ymax - ymin));
+  };
   // Warm-up, the compared periods, outages.
   const Periods p = PeriodsOf(r);
   cv::Mat overlay = img.clone();
@@ -117,7 +125,7 @@ void DrawPanel(cv::Mat& img, cv::Rect area, const std::string& title, const std:
   }
   // Axes, grid, ticks.
   cv::rectangle(img, {left, top}, {right, bottom}, {0, 0, 0}, 1);
-  for (double v = 0; v <= ymax + 1e-9; v += step) {
+  for (double v = ymin; v <= ymax + 1e-9; v += step) {
     cv::line(img, {left, Y(v)}, {right, Y(v)}, {210, 210, 210}, 1);
     cv::putText(img, Format("%g", v), {area.x + 4, Y(v) + 4}, cv::FONT_HERSHEY_SIMPLEX, 0.4,
                 {0, 0, 0}, 1, cv::LINE_AA);
@@ -130,6 +138,11 @@ void DrawPanel(cv::Mat& img, cv::Rect area, const std::string& title, const std:
   }
   cv::putText(img, title + " (" + unit + ")", {left, area.y + 16}, cv::FONT_HERSHEY_SIMPLEX, 0.55,
               {0, 0, 0}, 1, cv::LINE_AA);
+  if (std::isfinite(bound)) {
+    for (int x = left; x < right; x += 12) {
+      cv::line(img, {x, Y(bound)}, {std::min(x + 6, right), Y(bound)}, {30, 30, 220}, 1);
+    }
+  }
   // The series, and their legend.
   for (size_t i = 0; i < series.size(); ++i) {
     const cv::Scalar colour = kColours[i % std::size(kColours)];
@@ -158,10 +171,19 @@ void DrawPlot(const SoakResult& r, const std::string& path) {
   for (size_t i = 0; i < r.process_names.size(); ++i) {
     Series a{r.process_names[i], {}}, b = a, c = a;
     bool any = false;
+    // Memory as the change from the process's last sample of the warm-up: the growth the check
+    // judges, at a scale where a few per cent show.
+    double reference_kb = NAN;
+    for (const Sample& s : r.samples) {
+      if (s.procs[i].ok && s.t_s <= r.warmup_minutes * 60 + 1) {
+        reference_kb = static_cast<double>(s.procs[i].rss_kb);
+      }
+    }
     for (const Sample& s : r.samples) {
       const ProcSample& p = s.procs[i];
       any = any || p.ok;
-      a.points.push_back({s.t_s / 60, p.ok ? p.rss_kb / 1024.0 : NAN});
+      a.points.push_back(
+          {s.t_s / 60, p.ok ? 100.0 * (static_cast<double>(p.rss_kb) / reference_kb - 1) : NAN});
       b.points.push_back({s.t_s / 60, p.ok ? p.fds : NAN});
       c.points.push_back({s.t_s / 60, p.ok ? p.threads : NAN});
     }
@@ -181,7 +203,9 @@ void DrawPlot(const SoakResult& r, const std::string& path) {
     }
     if (any) latency.push_back(s);
   }
-  DrawPanel(img, {0, 40, width, panel}, "resident memory per process", "MB", rss, r, end_min);
+  DrawPanel(img, {0, 40, width, panel},
+            "resident memory per process, change since the warm-up's end; dashed: the 5 % bound",
+            "%", rss, r, end_min, 5.0);
   DrawPanel(img, {0, 40 + panel, width, panel}, "open file descriptors", "count", fds, r, end_min);
   DrawPanel(img, {0, 40 + 2 * panel, width, panel}, "threads", "count", threads, r, end_min);
   DrawPanel(img, {0, 40 + 3 * panel, width, panel},

@@ -33,6 +33,7 @@
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/server/server_process.h"
 #include "tests/testing/subprocess.h"
+#include "tests/testing/test_autopilot.h"
 #include "tests/testing/truth_match.h"
 
 namespace stevi {
@@ -46,172 +47,10 @@ using ::testing::HasSubstr;
 using testing::Subprocess;
 
 constexpr double kFps = 10;
-constexpr uint8_t kAutopilotSystem = 7;  // not 1: the bridge must take it from the heartbeat
-constexpr double kUndulationM = 47.5;    // the geoid at Pisa, about
-constexpr double kHorizontalAccuracyM = 0.35;
-constexpr double kVerticalAccuracyM = 0.6;
-
-int64_t UnixNowUs() {
-  return std::chrono::duration_cast<std::chrono::microseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
-// A flight controller on 127.0.0.1: a UDP socket that answers whoever sent to it (as PX4 and
-// ArduPilot do on their companion links), sending its heartbeat at 1 Hz and the hover pose of the
-// synthetic rig at 20 Hz, and keeping every frame it receives with its arrival time.
-class TestAutopilot {
- public:
-  struct Received {
-    ml::Frame frame;
-    Clock::time_point at;
-  };
-
-  explicit TestAutopilot(geo::VehicleState pose) : pose_(pose) {
-    fd_ = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-    socklen_t length = sizeof addr;
-    getsockname(fd_, reinterpret_cast<sockaddr*>(&addr), &length);
-    port_ = ntohs(addr.sin_port);
-    thread_ = std::thread([this] { Loop(); });
-  }
-  ~TestAutopilot() {
-    stop_ = true;
-    thread_.join();
-    close(fd_);
-  }
-
-  int port() const { return port_; }
-  void set_silent(bool silent) { silent_ = silent; }
-
-  // Waits until `done` holds over the frames received (bounded).
-  template <class Pred>
-  bool WaitFor(Pred done, std::chrono::milliseconds timeout) {
-    std::unique_lock lock(mu_);
-    return cv_.wait_for(lock, timeout, [&] { return done(received_); });
-  }
-  std::vector<Received> received() {
-    std::lock_guard lock(mu_);
-    return received_;
-  }
-
- private:
-  void SendMessage(const std::vector<uint8_t>& bytes) {
-    sendto(fd_, bytes.data(), bytes.size(), 0, reinterpret_cast<const sockaddr*>(&peer_),
-           sizeof peer_);
-  }
-  template <class T>
-  void Send(const T& m) {
-    SendMessage(ml::Encode(m, sequence_++, kAutopilotSystem, 1));
-  }
-
-  // Whether the bridge asked for message `id` (SET_MESSAGE_INTERVAL): a message is only sent once
-  // asked for, so that the test sees the bridge ask.
-  bool Asked(uint32_t id) {
-    std::lock_guard lock(mu_);
-    return asked_.count(id) > 0;
-  }
-
-  void SendPose(uint32_t boot_ms) {
-    const double msl_m = pose_.alt_m - kUndulationM;
-    ml::GlobalPositionInt p;
-    p.time_boot_ms = boot_ms;
-    p.lat = static_cast<int32_t>(std::lround(pose_.lat_deg * 1e7));
-    p.lon = static_cast<int32_t>(std::lround(pose_.lon_deg * 1e7));
-    p.alt = static_cast<int32_t>(std::lround(msl_m * 1000));
-    p.hdg = static_cast<uint16_t>(std::lround(std::fmod(pose_.yaw_deg + 360, 360) * 100));
-    ml::Attitude a;
-    a.time_boot_ms = boot_ms;
-    a.roll = static_cast<float>(pose_.roll_deg * M_PI / 180);
-    a.pitch = static_cast<float>(pose_.pitch_deg * M_PI / 180);
-    a.yaw = static_cast<float>(std::remainder(pose_.yaw_deg, 360.0) * M_PI / 180);
-    if (Asked(ml::Attitude::kId)) Send(a);
-    if (Asked(ml::GlobalPositionInt::kId)) Send(p);
-  }
-
-  void SendSlowMessages(uint32_t boot_ms) {
-    ml::GpsRawInt g;
-    g.time_usec = static_cast<uint64_t>(UnixNowUs());
-    g.fix_type = ml::kGpsFixType3dFix;
-    g.lat = static_cast<int32_t>(std::lround(pose_.lat_deg * 1e7));
-    g.lon = static_cast<int32_t>(std::lround(pose_.lon_deg * 1e7));
-    g.alt = static_cast<int32_t>(std::lround((pose_.alt_m - kUndulationM) * 1000));
-    g.alt_ellipsoid = static_cast<int32_t>(std::lround(pose_.alt_m * 1000));
-    g.h_acc = static_cast<uint32_t>(kHorizontalAccuracyM * 1000);
-    g.v_acc = static_cast<uint32_t>(kVerticalAccuracyM * 1000);
-    g.satellites_visible = 14;
-    if (Asked(ml::GpsRawInt::kId)) Send(g);
-    ml::SystemTime t;
-    t.time_unix_usec = static_cast<uint64_t>(UnixNowUs());
-    t.time_boot_ms = boot_ms;
-    if (Asked(ml::SystemTime::kId)) Send(t);
-  }
-
-  void Receive() {
-    uint8_t buffer[2048];
-    sockaddr_in from{};
-    socklen_t length = sizeof from;
-    const ssize_t n =
-        recvfrom(fd_, buffer, sizeof buffer, 0, reinterpret_cast<sockaddr*>(&from), &length);
-    if (n <= 0) return;
-    const auto at = Clock::now();
-    std::lock_guard lock(mu_);
-    peer_ = from;
-    has_peer_ = true;
-    parser_.Feed(std::span<const uint8_t>(buffer, static_cast<size_t>(n)), [&](const ml::Frame& f) {
-      received_.push_back({f, at});
-      const std::optional<ml::CommandLong> c = ml::Decode<ml::CommandLong>(f);
-      if (c && c->command == ml::kMavCmdSetMessageInterval &&
-          c->target_system == kAutopilotSystem) {
-        asked_.insert(static_cast<uint32_t>(c->param1));
-      }
-    });
-    cv_.notify_all();
-  }
-
-  void Loop() {
-    const auto start = Clock::now();
-    auto next_fast = start, next_slow = start;
-    while (!stop_) {
-      pollfd fd{fd_, POLLIN, 0};
-      if (poll(&fd, 1, 10) > 0) Receive();  // a 10 ms tick paces the sending, below
-      const auto now = Clock::now();
-      const auto boot_ms = static_cast<uint32_t>((now - start) / 1ms) + 1;
-      if (!has_peer_ || silent_) continue;
-      if (now >= next_slow) {  // 1 Hz: the heartbeat first, so that the bridge knows who we are
-        ml::Heartbeat hb;
-        hb.type = 2;        // MAV_TYPE_QUADROTOR
-        hb.autopilot = 12;  // MAV_AUTOPILOT_PX4
-        hb.system_status = ml::kMavStateActive;
-        Send(hb);
-        SendSlowMessages(boot_ms);
-        next_slow += 1s;
-      }
-      if (now >= next_fast) {
-        SendPose(boot_ms);
-        next_fast += 50ms;
-      }
-    }
-  }
-
-  const geo::VehicleState pose_;
-  int fd_ = -1;
-  int port_ = 0;
-  std::thread thread_;
-  std::atomic<bool> stop_{false};
-  std::atomic<bool> silent_{false};
-  std::atomic<bool> has_peer_{false};
-  sockaddr_in peer_{};
-  uint8_t sequence_ = 0;
-  std::mutex mu_;
-  std::condition_variable cv_;
-  ml::Parser parser_;
-  std::vector<Received> received_;
-  std::set<uint32_t> asked_;  // message ids the bridge asked for
-};
+using testing::TestAutopilot;
+constexpr uint8_t kAutopilotSystem = TestAutopilot::kSystem;
+constexpr double kUndulationM = TestAutopilot::kUndulationM;
+constexpr double kHorizontalAccuracyM = TestAutopilot::kHorizontalAccuracyM;
 
 template <class T>
 std::vector<std::pair<T, Clock::time_point>> All(
@@ -296,6 +135,7 @@ class MavlinkBridgeTest : public ::testing::Test {
     ASSERT_NO_FATAL_FAILURE(server_.Start({"--fps", std::to_string(static_cast<int>(kFps))}));
     pose_ = *drivers::SceneRigPose("airfield");
     autopilot_ = std::make_unique<TestAutopilot>(pose_);
+    ASSERT_EQ(autopilot_->error(), "");
     bridge_ = std::make_unique<Subprocess>(std::vector<std::string>{
         BinaryPath("stevi"), "--server", server_.address(), "--timeout", "5", "mavlink", "--link",
         "udp://127.0.0.1:" + std::to_string(autopilot_->port()), "--adsb", "--status-every", "1"});
