@@ -134,7 +134,10 @@ int main(int argc, char** argv) {
   const commands::Args rest(args.begin() + static_cast<long>(global.command) + 1, args.end());
   stevi::client::Client client(global.client);
   for (const Command& command : kCommands) {
-    if (command.name == name) return command.run(client, rest);
+    if (command.name != name) continue;
+    const int code = command.run(client, rest);
+    commands::OnStopSignal(nullptr);  // a stop handler refers to `client`: done with it first
+    return code;
   }
   return commands::Usage("unknown command '" + name + "'");
 }

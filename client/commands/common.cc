@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <csignal>
 #include <cstdlib>
+#include <condition_variable>
 #include <mutex>
 #include <thread>
 #include <cctype>
@@ -41,7 +42,9 @@ int RpcFailed(const Client& client, const std::string& what, const grpc::Status&
 namespace {
 
 std::mutex stop_mu;
+std::condition_variable stop_cv;
 std::function<void()> stop_handler;  // guarded by stop_mu
+bool stop_handler_running = false;   // guarded by stop_mu
 
 }  // namespace
 
@@ -60,15 +63,25 @@ void HandleStopSignals() {
       {
         std::lock_guard lock(stop_mu);
         handler = stop_handler;
+        stop_handler_running = handler != nullptr;
       }
       if (received > 0 || !handler) std::_Exit(128 + signal_number);
       handler();
+      {
+        std::lock_guard lock(stop_mu);
+        stop_handler_running = false;
+      }
+      stop_cv.notify_all();
     }
   }).detach();
 }
 
 void OnStopSignal(std::function<void()> handler) {
-  std::lock_guard lock(stop_mu);
+  // A handler refers to the command's objects: it must have returned before the command replaces
+  // it and destroys them (`stevi mavlink` crashed at a SIGTERM when its Bridge went away while the
+  // signal thread was still in Bridge::Stop()).
+  std::unique_lock lock(stop_mu);
+  stop_cv.wait(lock, [] { return !stop_handler_running; });
   stop_handler = std::move(handler);
 }
 

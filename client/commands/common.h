@@ -36,6 +36,8 @@ StreamOptions LiveStreamOptions(const std::string& what, int attempts_before_fir
 // calls the handler set by OnStopSignal (a streaming command ends its stream and exits cleanly);
 // with none set, or at a second signal, the process exits with 128 + the signal number.
 void HandleStopSignals();
+// Sets the handler (nullptr: none). Waits first for a handler that is running to return, so that
+// after OnStopSignal(nullptr) nothing refers to what the old handler captured.
 void OnStopSignal(std::function<void()> handler);
 
 // The message as one line of JSON, with the proto field names and every primitive field.
