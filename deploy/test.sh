@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Sets up a fresh Debian 12 machine, checks the code (format, function size), builds stevi with its
-# tests and benchmarks, and runs every test.
+# tests and benchmarks, and runs every test; then builds the tests again under AddressSanitizer
+# with UndefinedBehaviorSanitizer and runs them all again (deploy/sanitize.sh address, in
+# build-asan; STEVI_SANITIZE_BUILD_DIR picks another folder).
 # Usage: bash deploy/test.sh        (STEVI_BUILD_DIR picks the build folder; default ./build)
 # The reference data is read from $STEVI_DATA_DIR (default ../shared/data); tests that need it
 # skip with a message when it is absent.
@@ -16,3 +18,4 @@ cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSTEVI_BUILD_TESTS
 cmake --build "$build_dir" -j"$jobs"
 bash deploy/check-code.sh "$build_dir"
 ctest --test-dir "$build_dir" --output-on-failure -j"$jobs"
+bash deploy/sanitize.sh address
