@@ -10,6 +10,7 @@
 #include <string_view>
 
 #include "core/common/error.h"
+#include "server/tsan_handover.h"
 #include "stevi/v1/config.pb.h"
 
 namespace stevi::server {
@@ -54,8 +55,14 @@ class Authorizer {
 template <typename Request>
 class RefusedReadReactor final : public grpc::ServerReadReactor<Request> {
  public:
-  explicit RefusedReadReactor(grpc::Status status) { this->Finish(std::move(status)); }
-  void OnDone() override { delete this; }
+  explicit RefusedReadReactor(grpc::Status status) {
+    HandOver(this);
+    this->Finish(std::move(status));
+  }
+  void OnDone() override {
+    TakeOver(this);
+    delete this;
+  }
 };
 
 }  // namespace stevi::server

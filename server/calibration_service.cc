@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "server/grpc_status.h"
+#include "server/tsan_handover.h"
 
 namespace stevi::server {
 namespace {
@@ -23,10 +24,12 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
  public:
   CalibrateReactor(CalibrationManager& manager, v1::CalibrationReport* response)
       : manager_(manager), response_(response) {
+    HandOver(this);
     StartRead(&upload_);
   }
 
   void OnReadDone(bool ok) override {
+    TakeOver(this);
     if (!ok) {  // the client has sent everything (or went away: then Finish is a no-op)
       Run();
       return;
@@ -40,30 +43,41 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
       v1::ImagePair& pair = *upload_.mutable_pair();
       bytes_ += static_cast<int64_t>(pair.left().size() + pair.right().size());
       if (static_cast<int>(pairs_.size()) >= kMaxCalibrationPairs) {
-        return Finish(ToGrpcStatus(
+        return End(ToGrpcStatus(
             ErrorCode::kResourceExhausted,
             "more than " + std::to_string(kMaxCalibrationPairs) + " pairs in one upload"));
       }
       if (bytes_ > kMaxCalibrationUploadBytes) {
-        return Finish(ToGrpcStatus(ErrorCode::kResourceExhausted,
-                                   "the upload exceeds 1 GiB of images in all"));
+        return End(ToGrpcStatus(ErrorCode::kResourceExhausted,
+                                "the upload exceeds 1 GiB of images in all"));
       }
       pairs_.push_back(calibration::ImagePair{std::move(*pair.mutable_left()),
                                               std::move(*pair.mutable_right()), pair.name()});
     } else {
       return Refuse("a message with neither settings nor a pair");
     }
+    HandOver(this);
     StartRead(&upload_);
   }
 
   // The client cancelled or its deadline passed: the calibration job (queued or running) stores
   // and applies nothing.
-  void OnCancel() override { cancelled_ = true; }
+  void OnCancel() override {
+    TakeOver(this);
+    cancelled_ = true;
+  }
 
-  void OnDone() override { delete this; }
+  void OnDone() override {
+    TakeOver(this);
+    delete this;
+  }
 
  private:
-  void Refuse(const std::string& why) { Finish(ToGrpcStatus(ErrorCode::kInvalidArgument, why)); }
+  void End(const grpc::Status& status) {
+    HandOver(this);
+    Finish(status);
+  }
+  void Refuse(const std::string& why) { End(ToGrpcStatus(ErrorCode::kInvalidArgument, why)); }
 
   void Run() {
     if (!have_settings_) return Refuse("no settings were sent");
@@ -72,9 +86,9 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
           manager_.Calibrate(settings_, pairs_, [this] { return cancelled_.load(); });
       pairs_.clear();
       if (report.ok()) *response_ = std::move(report).value();
-      Finish(report.ok() ? grpc::Status::OK : ToGrpcStatus(report.error()));
+      End(report.ok() ? grpc::Status::OK : ToGrpcStatus(report.error()));
     });
-    if (!posted) Finish(ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
+    if (!posted) End(ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
   }
 
   CalibrationManager& manager_;
@@ -103,6 +117,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
 
   explicit CaptureReactor(const grpc::Status& refusal) : shared_(std::make_shared<Shared>()) {
     shared_->finished = true;
+    HandOver(this);
     Finish(refusal);
   }
 
@@ -129,6 +144,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
   }
 
   void OnWriteDone(bool ok) override {
+    TakeOver(this);
     std::lock_guard lock(shared_->mu);
     shared_->writing = false;
     if (!ok) {
@@ -136,6 +152,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
       shared_->queue.clear();
       if (!shared_->finished) {
         shared_->finished = true;
+        HandOver(this);
         Finish(ToGrpcStatus(ErrorCode::kUnavailable, "stream write failed"));
       }
       return;
@@ -144,11 +161,13 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
   }
 
   void OnCancel() override {
+    TakeOver(this);
     std::lock_guard lock(shared_->mu);
     shared_->cancelled = true;
   }
 
   void OnDone() override {
+    TakeOver(this);
     {
       std::lock_guard lock(shared_->mu);
       shared_->reactor = nullptr;
@@ -174,6 +193,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
     s.reactor->current_ = std::move(s.queue.front());
     s.queue.pop_front();
     s.writing = true;
+    HandOver(s.reactor);
     s.reactor->StartWrite(&s.reactor->current_);
   }
 
@@ -183,6 +203,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
       return;
     }
     s.finished = true;
+    HandOver(s.reactor);
     s.reactor->Finish(*s.final_status);
   }
 

@@ -7,6 +7,7 @@
 
 #include "server/convert.h"
 #include "server/grpc_status.h"
+#include "server/tsan_handover.h"
 
 namespace stevi::server {
 namespace {
@@ -33,17 +34,20 @@ class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
   // A refusal: finishes at once with `status`.
   explicit QueueStreamReactor(const grpc::Status& status) {
     finished_ = true;
+    HandOver(this);
     this->Finish(status);
   }
 
   QueueStreamReactor(std::shared_ptr<Subscription<Item>> sub, ToMessage to_message,
                      std::function<void()> on_done)
       : sub_(std::move(sub)), to_message_(std::move(to_message)), on_done_(std::move(on_done)) {
+    HandOver(this);
     sub_->SetNotify([this] { WriteNext(); });
     WriteNext();
   }
 
   void OnWriteDone(bool ok) override {
+    TakeOver(this);
     {
       std::lock_guard lock(mu_);
       writing_ = false;
@@ -56,12 +60,14 @@ class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
   }
 
   void OnCancel() override {
+    TakeOver(this);
     std::lock_guard lock(mu_);
     cancelled_ = true;
     if (!writing_) FinishLocked(grpc::Status::CANCELLED);
   }
 
   void OnDone() override {
+    TakeOver(this);
     if (sub_ != nullptr) sub_->Detach();
     if (on_done_) on_done_();
     delete this;
@@ -87,6 +93,7 @@ class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
         current_.Clear();
         to_message_(*popped.item, popped.dropped, current_);
         writing_ = true;
+        HandOver(this);
         this->StartWrite(&current_);
         return;
     }
@@ -95,6 +102,7 @@ class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
   void FinishLocked(const grpc::Status& status) {
     if (finished_) return;
     finished_ = true;
+    HandOver(this);
     this->Finish(status);
   }
 
@@ -129,10 +137,12 @@ class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleStat
   VehicleStateReactor(PoseSource& poses, v1::PublishVehicleStateResponse* response,
                       std::function<void()> on_done)
       : poses_(poses), response_(response), on_done_(std::move(on_done)) {
+    HandOver(this);
     StartRead(&state_);
   }
 
   void OnReadDone(bool ok) override {
+    TakeOver(this);
     std::lock_guard lock(mu_);
     if (finished_) return;
     if (!ok) {
@@ -145,6 +155,7 @@ class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleStat
       response_->set_refused(response_->refused() + 1);
       response_->set_last_error(added.error().message);
     }
+    HandOver(this);
     StartRead(&state_);
   }
 
@@ -155,6 +166,7 @@ class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleStat
   }
 
   void OnDone() override {
+    TakeOver(this);
     on_done_();
     delete this;
   }
@@ -163,6 +175,7 @@ class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleStat
   void FinishLocked(const grpc::Status& status) {
     if (finished_) return;
     finished_ = true;
+    HandOver(this);
     Finish(status);
   }
 

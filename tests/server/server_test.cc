@@ -586,8 +586,8 @@ TEST(ServerShutdown, EndsAnOpenVehicleStateStreamWithTheShutdownStatus) {
   Result<std::unique_ptr<Server>> server = Server::Start(config);
   ASSERT_TRUE(server.ok()) << server.error().message;
   const client::ClientOptions options = LoopbackOptions(**server, std::chrono::seconds(20));
-  std::unique_ptr<v1::ObstacleService::Stub> stub =
-      v1::ObstacleService::NewStub(grpc::CreateChannel(options.address, grpc::InsecureChannelCredentials()));
+  std::unique_ptr<v1::ObstacleService::Stub> stub = v1::ObstacleService::NewStub(
+      grpc::CreateChannel(options.address, grpc::InsecureChannelCredentials()));
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));  // bounded
   v1::PublishVehicleStateResponse response;

@@ -26,7 +26,7 @@ namespace stevi::testing {
 class TestAutopilot {
  public:
   using Clock = std::chrono::steady_clock;
-  static constexpr uint8_t kSystem = 7;  // not 1: the bridge must take it from the heartbeat
+  static constexpr uint8_t kSystem = 7;         // not 1: the bridge must take it from the heartbeat
   static constexpr double kUndulationM = 47.5;  // the geoid at Pisa, about
   static constexpr double kHorizontalAccuracyM = 0.35;
   static constexpr double kVerticalAccuracyM = 0.6;
