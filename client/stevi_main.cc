@@ -6,7 +6,6 @@
 
 #include "client/client.h"
 #include "client/commands/commands.h"
-#include "client/commands/memory.h"
 
 namespace {
 
@@ -115,7 +114,6 @@ constexpr Command kCommands[] = {
 }  // namespace
 
 int main(int argc, char** argv) {
-  commands::ShareMallocArenas();  // first: before any thread starts
   commands::HandleStopSignals();
   const commands::Args args(argv + 1, argv + argc);
   commands::GlobalOptions global;

@@ -4,7 +4,6 @@
 // WebSocket on one port.
 #include "client/station/station.h"
 
-#include <chrono>
 #include <condition_variable>
 #include <iostream>
 #include <mutex>
@@ -13,7 +12,6 @@
 #include <vector>
 
 #include "client/commands/commands.h"
-#include "client/commands/memory.h"
 #include "client/flags.h"
 
 namespace stevi::client::commands {
@@ -123,9 +121,7 @@ int Station(Client& client, const Args& args) {
   });
   {
     std::unique_lock lock(mu);
-    while (!cv.wait_for(lock, std::chrono::seconds(10), [&] { return stop; })) {
-      ReturnFreeMemory();
-    }
+    cv.wait(lock, [&] { return stop; });
   }
   OnStopSignal(nullptr);
   st->Stop();
