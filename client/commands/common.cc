@@ -41,10 +41,17 @@ int RpcFailed(const Client& client, const std::string& what, const grpc::Status&
 
 namespace {
 
-std::mutex stop_mu;
-std::condition_variable stop_cv;
-std::function<void()> stop_handler;  // guarded by stop_mu
-bool stop_handler_running = false;   // guarded by stop_mu
+// Shared with the detached signal thread, which may outlive main(): never destroyed.
+struct StopState {
+  std::mutex mu;
+  std::condition_variable cv;
+  std::function<void()> handler;  // guarded by mu
+  bool running = false;           // guarded by mu: the handler is being called
+};
+StopState& StopSignalState() {
+  static StopState* state = new StopState;
+  return *state;
+}
 
 }  // namespace
 
@@ -55,23 +62,25 @@ void HandleStopSignals() {
   sigaddset(&stop_signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
   // Detached: the process exits when the command returns.
+  StopSignalState();  // made before the thread starts
   std::thread([stop_signals] {
     for (int received = 0;; ++received) {
       int signal_number = 0;
       if (sigwait(&stop_signals, &signal_number) != 0) continue;
+      StopState& stop = StopSignalState();
       std::function<void()> handler;
       {
-        std::lock_guard lock(stop_mu);
-        handler = stop_handler;
-        stop_handler_running = handler != nullptr;
+        std::lock_guard lock(stop.mu);
+        handler = stop.handler;
+        stop.running = handler != nullptr;
       }
       if (received > 0 || !handler) std::_Exit(128 + signal_number);
       handler();
       {
-        std::lock_guard lock(stop_mu);
-        stop_handler_running = false;
+        std::lock_guard lock(stop.mu);
+        stop.running = false;
       }
-      stop_cv.notify_all();
+      stop.cv.notify_all();
     }
   }).detach();
 }
@@ -80,9 +89,10 @@ void OnStopSignal(std::function<void()> handler) {
   // A handler refers to the command's objects: it must have returned before the command replaces
   // it and destroys them (`stevi mavlink` crashed at a SIGTERM when its Bridge went away while the
   // signal thread was still in Bridge::Stop()).
-  std::unique_lock lock(stop_mu);
-  stop_cv.wait(lock, [] { return !stop_handler_running; });
-  stop_handler = std::move(handler);
+  StopState& stop = StopSignalState();
+  std::unique_lock lock(stop.mu);
+  stop.cv.wait(lock, [&stop] { return !stop.running; });
+  stop.handler = std::move(handler);
 }
 
 StreamOptions LiveStreamOptions(const std::string& what, int attempts_before_first_frame) {
