@@ -20,6 +20,7 @@
 
 #include "client/client.h"
 #include "tests/server/load_helpers.h"
+#include "tests/testing/sanitized.h"
 #include "tests/testing/data.h"
 
 namespace stevi::server {
@@ -32,17 +33,12 @@ using testing::Seconds;
 
 // 12 fps: on the 2-core reference machine the pipeline (canonical, block matching, 640x480) and
 // 32 streams use well under the two cores, even with ctest running another test beside this one.
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-// Instrumented code (deploy/sanitize.sh) runs 2-15 times slower: a rate the machine keeps with 32
+// Under a sanitizer (instrumented code runs 2-15 times slower): a rate the machine keeps with 32
 // clients there. What this test asserts besides the rate holds at any rate. Resident memory is
 // not checked there: AddressSanitizer holds freed memory in its quarantine (up to 256 MB) on
 // purpose, to catch a use after free, and LeakSanitizer checks for leaks instead.
-constexpr bool kSanitized = true;
-constexpr double kFps = 4;
-#else
-constexpr bool kSanitized = false;
-constexpr double kFps = 12;
-#endif
+using testing::kSanitized;
+constexpr double kFps = kSanitized ? 4 : 12;
 constexpr int kClients = 32;                  // one of them slow
 constexpr auto kLoadDuration = 60s;           // all 32 streaming, after the warm-up
 constexpr auto kSlowConsumerDelay = 300ms;    // the slow client's time per frame

@@ -8,6 +8,7 @@
 #include <mutex>
 
 #include "tests/server/flaky_source.h"
+#include "tests/testing/sanitized.h"
 
 namespace stevi::server {
 namespace {
@@ -113,7 +114,8 @@ TEST(Engine, TheCaptureTapSeesEveryFrameAndCanBeChangedWhileRunning) {
 // SetRig() mid-run: once a frame is processed with the new rig, every later frame is, and its
 // ranges follow the new rig's geometry (a doubled baseline doubles every depth for a disparity).
 TEST(Engine, ARigSwappedMidRunRangesEveryLaterFrame) {
-  constexpr int kFrames = 40;
+  // Enough frames that 10 reach the sink after the swap, also where more are dropped.
+  constexpr int kFrames = testing::kSanitized ? 400 : 40;
   Collector collector;
   auto source = std::make_unique<FlakySource>(0, kFrames, 100);
   const std::shared_future<void> ended = source->Ended();
@@ -191,7 +193,7 @@ class AlternatingSource : public drivers::StereoSource {
 };
 
 TEST(Engine, FramesThatFinishOutOfOrderReachTheSinkInCaptureOrder) {
-  constexpr int kFrames = 90;
+  constexpr int kFrames = testing::kSanitized ? 900 : 90;
   Collector collector;
   pipeline::PipelineConfig config;
   config.algorithm = pipeline::Algorithm::kSteViE;
