@@ -176,7 +176,7 @@ class AlternatingSource : public drivers::StereoSource {
     if (next_ >= frames_) return Error{ErrorCode::kOutOfRange, "end"};
     StereoFrame f;
     f.index = next_;
-    f.t_ns = next_ * 2'500'000;
+    f.t_ns = int64_t{next_} * 2'500'000;
     f.rectified = true;
     // Two of every three frames are noise (slow), the third is flat (fast).
     const cv::Mat1b& image = next_ % 3 == 2 ? flat_ : noise_;
