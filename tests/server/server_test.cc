@@ -523,6 +523,20 @@ TEST(ServerFlight, AStandingTowerKeepsItsPlaceWhileTheRigFlies) {
   for (double e : errors) EXPECT_LT(e, 0.03 * 45) << "within 3 % of its range";
 }
 
+// 10 Hz states at 45 N 9 E, 300 m, from 1 s before `now_ns` to 20 s after.
+std::vector<v1::VehicleState> StatesAround(int64_t now_ns) {
+  std::vector<v1::VehicleState> states;
+  for (int k = -10; k <= 200; ++k) {
+    v1::VehicleState s;
+    s.set_unix_time_ns(now_ns + k * 100'000'000LL);
+    s.mutable_position()->set_lat_deg(45.0);
+    s.mutable_position()->set_lon_deg(9.0);
+    s.mutable_position()->set_alt_m(300);
+    states.push_back(s);
+  }
+  return states;
+}
+
 // An autopilot's states take over from the fixed pose; bad ones are refused and counted.
 TEST(ServerPublish, PublishedVehicleStatesGeoreferenceTheTracks) {
   // States published ahead of time: the frames' age against the newest state is allowed up to
@@ -536,17 +550,11 @@ TEST(ServerPublish, PublishedVehicleStatesGeoreferenceTheTracks) {
   const int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(
                           std::chrono::system_clock::now().time_since_epoch())
                           .count();
-  std::vector<v1::VehicleState> states;
-  for (int k = -10; k <= 200; ++k) {  // 10 Hz from 1 s ago to 20 s ahead
-    v1::VehicleState s;
-    s.set_unix_time_ns(now + k * 100'000'000LL);
-    s.mutable_position()->set_lat_deg(45.0);
-    s.mutable_position()->set_lon_deg(9.0);
-    s.mutable_position()->set_alt_m(300);
+  std::vector<v1::VehicleState> states = StatesAround(now);
+  for (v1::VehicleState& s : states) {
     s.set_yaw_deg(90);
     s.set_position_sigma_horizontal_m(1.0);
     s.set_position_sigma_vertical_m(2.0);
-    states.push_back(s);
   }
   v1::VehicleState bad = states.back();
   bad.set_unix_time_ns(bad.unix_time_ns() + 1);
@@ -596,14 +604,7 @@ TEST(ServerShutdown, EndsAnOpenVehicleStateStreamWithTheShutdownStatus) {
   const int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(
                           std::chrono::system_clock::now().time_since_epoch())
                           .count();
-  for (int k = -10; k <= 200; ++k) {  // 10 Hz from 1 s ago to 20 s ahead; the stream stays open
-    v1::VehicleState s;
-    s.set_unix_time_ns(now + k * 100'000'000LL);
-    s.mutable_position()->set_lat_deg(45.0);
-    s.mutable_position()->set_lon_deg(9.0);
-    s.mutable_position()->set_alt_m(300);
-    ASSERT_TRUE(writer->Write(s));
-  }
+  for (const v1::VehicleState& s : StatesAround(now)) ASSERT_TRUE(writer->Write(s));  // kept open
   // The server has taken the states once a frame is georeferenced with them.
   client::Client watcher(options);
   bool published = false;
