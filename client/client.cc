@@ -38,8 +38,12 @@ Client::Client(ClientOptions options) : options_(std::move(options)) {
   // backoff (1 s growing to 120 s by default) would otherwise fail calls for minutes, or hold a
   // stream's consumer silent as long.
   args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 100);
-  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 100);
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 1000);
+  // Despite its name, gRPC's "minimum reconnect backoff" is the least time a connection attempt
+  // (TCP, TLS, HTTP/2) is given before it is abandoned. At 100 ms a TLS connection over a link
+  // with a long round trip (satellite, congested LTE) was never made. A refused connection (the
+  // server restarting) still fails at once and is retried within the backoff above.
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, kMinConnectTimeoutMs);
   channel_ = grpc::CreateCustomChannel(options_.address, credentials, args);
   stub_ = v1::ObstacleService::NewStub(channel_);
   calibration_stub_ = v1::CalibrationService::NewStub(channel_);

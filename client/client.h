@@ -21,6 +21,9 @@ namespace stevi::client {
 // as a bearer token. gRPC aborts the process on any other byte.
 bool IsPrintableAscii(const std::string& text);
 
+// How long one connection attempt (TCP, TLS, HTTP/2) may take before gRPC abandons it and tries
+// again: long enough for a TLS handshake over a satellite link's round trip of a second or more.
+inline constexpr int kMinConnectTimeoutMs = 10'000;
 // The HTTP/2 receive window of StreamTracks (BDP probing off): how far a slow reader may fall
 // behind before the server starts dropping frames for it. 16 KiB holds about 7 TrackFrames of ten
 // tracks. Other clients of the API should do the same (see README, "Slow readers").

@@ -55,12 +55,14 @@ class Authorizer {
 template <typename Request>
 class RefusedReadReactor final : public grpc::ServerReadReactor<Request> {
  public:
+  // Not bound to its call until the handler returns it: no callback runs before HandOver.
   explicit RefusedReadReactor(grpc::Status status) {
-    HandOver(this);
     this->Finish(std::move(status));
+    HandOver(this);
   }
   void OnDone() override {
     TakeOver(this);
+    CallEnded();
     delete this;
   }
 };

@@ -24,8 +24,8 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
  public:
   CalibrateReactor(CalibrationManager& manager, v1::CalibrationReport* response)
       : manager_(manager), response_(response) {
-    HandOver(this);
     StartRead(&upload_);
+    HandOver(this);  // not bound to its call until the handler returns it
   }
 
   void OnReadDone(bool ok) override {
@@ -69,6 +69,7 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
 
   void OnDone() override {
     TakeOver(this);
+    CallEnded();
     delete this;
   }
 
@@ -173,6 +174,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
       shared_->reactor = nullptr;
       shared_->cancelled = true;
     }
+    CallEnded();
     delete this;
   }
 

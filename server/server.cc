@@ -7,10 +7,12 @@
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 
-#include "server/app_config.h"
+#include "core/common/thread_name.h"
 #include "drivers/synthetic/scenarios.h"
+#include "server/app_config.h"
 #include "server/convert.h"
 #include "server/runtime/log.h"
+#include "server/tsan_handover.h"
 
 namespace stevi::server {
 
@@ -105,7 +107,10 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   server->engine_->Start(
       config.has_pipeline_workers() ? config.pipeline_workers() : 0,
       config.has_opencv_threads() ? static_cast<int>(config.opencv_threads()) : 0);
-  server->health_thread_ = std::thread([raw = server.get()] { raw->HealthLoop(); });
+  server->health_thread_ = std::thread([raw = server.get()] {
+    NameThisThread("stevi-health");
+    raw->HealthLoop();
+  });
   return server;
 }
 
@@ -221,8 +226,10 @@ void Server::Shutdown() {
   Log(LogLevel::kInfo, "shutdown", {{"step", "stop_accepting"}});
   std::thread stop_accepting;
   if (grpc_server_) {
-    stop_accepting = std::thread(
-        [this] { grpc_server_->Shutdown(std::chrono::system_clock::now() + kShutdownGrace); });
+    stop_accepting = std::thread([this] {
+      NameThisThread("stevi-shutdown");
+      grpc_server_->Shutdown(std::chrono::system_clock::now() + kShutdownGrace);
+    });
   }
   // 2. End the streams, each with a final status (UNAVAILABLE "server shutting down": a client
   //    reconnects to the next server), so that the calls in progress finish without waiting.
@@ -233,6 +240,7 @@ void Server::Shutdown() {
   const size_t vehicle_streams = service_ ? service_->EndVehicleStreams() : 0;
   if (stop_accepting.joinable()) stop_accepting.join();
   if (grpc_server_) grpc_server_->Wait();
+  AllCallsEnded();
   Log(LogLevel::kInfo, "shutdown",
       {{"step", "streams_ended"},
        {"streams", std::to_string(streams)},

@@ -70,6 +70,7 @@ class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
     TakeOver(this);
     if (sub_ != nullptr) sub_->Detach();
     if (on_done_) on_done_();
+    CallEnded();
     delete this;
   }
 
@@ -168,6 +169,7 @@ class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleStat
   void OnDone() override {
     TakeOver(this);
     on_done_();
+    CallEnded();
     delete this;
   }
 

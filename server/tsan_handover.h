@@ -10,6 +10,9 @@ extern "C" void __tsan_release(void* addr);
 #endif
 
 namespace stevi::server {
+namespace internal {
+inline char calls_ended;  // only its address is used
+}  // namespace internal
 
 // What this thread did so far happens before a later TakeOver(object) on any thread. Call it once
 // the object is ready and before the operation whose callback will take it over.
@@ -25,5 +28,13 @@ inline void TakeOver([[maybe_unused]] const void* object) {
   __tsan_acquire(const_cast<void*>(object));
 #endif
 }
+
+// The end of a call's OnDone, handed over to the thread that shuts the server down: gRPC's
+// Server::Shutdown() returns only after every call's OnDone has returned (it counts them in
+// its own, uninstrumented, code), and the services are destroyed after it. Last thing in each
+// reactor's OnDone, before it deletes itself.
+inline void CallEnded() { HandOver(&internal::calls_ended); }
+// After grpc::Server::Shutdown() and Wait(): every OnDone happened before.
+inline void AllCallsEnded() { TakeOver(&internal::calls_ended); }
 
 }  // namespace stevi::server

@@ -15,6 +15,7 @@
 #include "client/commands/commands.h"
 #include "client/flags.h"
 #include "client/local_ned.h"
+#include "client/thread_name.h"
 
 namespace stevi::client::commands {
 namespace {
@@ -90,6 +91,7 @@ int Avoid(Client& client, const Args& args) {
   // no_data_after_ns it prints NO_DATA at every tick (10 Hz) until they come back.
   std::atomic<bool> done{false};
   std::thread watchdog([&] {
+    NameThisThread("stevi-watchdog");
     while (!done) {
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
       std::lock_guard lock(mu);

@@ -17,6 +17,7 @@
 #include <sstream>
 
 #include "client/flags.h"
+#include "client/thread_name.h"
 
 namespace stevi::client::commands {
 
@@ -64,6 +65,7 @@ void HandleStopSignals() {
   // Detached: the process exits when the command returns.
   StopSignalState();  // made before the thread starts
   std::thread([stop_signals] {
+    NameThisThread("stevi-signals");
     for (int received = 0;; ++received) {
       int signal_number = 0;
       if (sigwait(&stop_signals, &signal_number) != 0) continue;

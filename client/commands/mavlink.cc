@@ -34,6 +34,7 @@
 #include "client/mavlink/codec.h"
 #include "client/mavlink/link.h"
 #include "client/mavlink/messages.h"
+#include "client/thread_name.h"
 
 namespace stevi::client::commands {
 namespace {
@@ -503,11 +504,18 @@ int Bridge::Run() {
   std::promise<void> stream_ended;
   std::future<void> stream_done = stream_ended.get_future();
   std::thread stream([this, &stream_ended] {
+    NameThisThread("stevi-mav-strm");
     StreamLoop();
     stream_ended.set_value();
   });
-  std::thread reader([this] { LinkLoop(); });
-  std::thread publisher([this] { PublishLoop(); });
+  std::thread reader([this] {
+    NameThisThread("stevi-mav-link");
+    LinkLoop();
+  });
+  std::thread publisher([this] {
+    NameThisThread("stevi-mav-pub");
+    PublishLoop();
+  });
   const auto period = std::chrono::duration_cast<Clock::duration>(
       std::chrono::duration<double>(1.0 / args_.rate_hz));
   const auto status_period = std::chrono::duration_cast<Clock::duration>(

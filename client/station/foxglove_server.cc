@@ -23,6 +23,8 @@
 #include <google/protobuf/descriptor.pb.h>
 #include <nlohmann/json.hpp>
 
+#include "client/thread_name.h"
+
 namespace stevi::station {
 namespace {
 
@@ -683,7 +685,10 @@ struct FoxgloveServer::Impl {
     auto* client = static_cast<Client*>(mg_get_user_connection_data(conn));
     if (client == nullptr) return;
     client->conn = conn;
-    client->sender = std::thread([this, client] { SenderLoop(*client); });
+    client->sender = std::thread([this, client] {
+      client::NameThisThread("stevi-ws-send");
+      SenderLoop(*client);
+    });
     std::lock_guard lock(mutex_);
     Greet(*client);
   }
@@ -1118,6 +1123,7 @@ void FoxgloveServer::Stop() {
   std::condition_variable cv;
   bool stopped = false;
   std::thread waker([&] {
+    client::NameThisThread("stevi-ws-waker");
     std::unique_lock lock(mutex);
     while (!stopped) {
       lock.unlock();

@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "client/track_points.h"
+#include "client/thread_name.h"
 
 namespace stevi::station {
 namespace {
@@ -76,8 +77,14 @@ void RigLink::Start() {
   std::lock_guard lock(mu_);
   if (started_ || stopping_) return;
   started_ = true;
-  tracks_thread_ = std::thread([this] { TracksLoop(); });
-  status_thread_ = std::thread([this] { StatusLoop(); });
+  tracks_thread_ = std::thread([this] {
+    client::NameThisThread("stevi-tracks");
+    TracksLoop();
+  });
+  status_thread_ = std::thread([this] {
+    client::NameThisThread("stevi-status");
+    StatusLoop();
+  });
 }
 
 void RigLink::Stop() {
@@ -234,6 +241,7 @@ void RigLink::SetPreviewWanted(v1::PreviewKind kind, bool wanted) {
   const std::atomic<bool>* stop = stream.stop.get();
   std::shared_ptr<std::atomic<bool>> done = stream.done;
   stream.thread = std::thread([this, kind, c, stop, done] {
+    client::NameThisThread("stevi-preview");
     PreviewLoop(kind, c, stop);
     done->store(true);
   });

@@ -15,6 +15,7 @@
 #endif
 
 #include "core/common/error.h"
+#include "core/common/thread_name.h"
 #include "core/stereo/vector_memory.h"
 
 // What cv::StereoBM (OpenCV 4.6, modules/calib3d/src/stereobm.cpp) computes, as implemented here:
@@ -683,7 +684,12 @@ void SadBlockMatcher::RunKernel(int x0, int x1, int y0, int y1, cv::Mat& dispari
                           : static_cast<void*>(cost32_.data() + cost_size * s);
   }
   std::vector<std::thread> helpers;
-  for (int s = 1; s < stripes; ++s) helpers.emplace_back(kernel, std::cref(jobs[s]));
+  for (int s = 1; s < stripes; ++s) {
+    helpers.emplace_back([kernel, &stripe = jobs[static_cast<size_t>(s)]] {
+      NameThisThread("stevi-bm-stripe");
+      kernel(stripe);
+    });
+  }
   kernel(jobs[0]);
   for (std::thread& helper : helpers) helper.join();
 }

@@ -12,6 +12,8 @@
 #include <thread>
 #include <utility>
 
+#include "core/common/thread_name.h"
+
 namespace stevi::drivers {
 namespace {
 
@@ -369,7 +371,10 @@ Result<std::unique_ptr<AravisStereoSource>> AravisStereoSource::Open(
   impl->trigger_epoch = Clock::now();
   std::unique_ptr<AravisStereoSource> source(new AravisStereoSource(std::move(impl)));
   for (Impl::Slot& s : source->impl_->slots) {
-    s.thread = std::thread([impl = source->impl_.get(), &s] { impl->Run(s); });
+    s.thread = std::thread([impl = source->impl_.get(), &s] {
+      NameThisThread("stevi-aravis");
+      impl->Run(s);
+    });
   }
   return source;
 }

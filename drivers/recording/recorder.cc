@@ -17,6 +17,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/common/atomic_file.h"
+#include "core/common/thread_name.h"
 #include "core/geometry/calibration_io.h"
 
 namespace stevi::drivers {
@@ -143,7 +144,10 @@ Result<std::unique_ptr<Recorder>> Recorder::Start(const std::string& dir, Record
   }
 
   auto recorder = std::unique_ptr<Recorder>(new Recorder(dir, options, std::move(manifest), fd));
-  recorder->writer_ = std::thread([r = recorder.get()] { r->WriterLoop(); });
+  recorder->writer_ = std::thread([r = recorder.get()] {
+    NameThisThread("stevi-recorder");
+    r->WriterLoop();
+  });
   return recorder;
 }
 

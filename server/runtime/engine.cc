@@ -2,6 +2,7 @@
 
 #include "core/common/format.h"
 
+#include "core/common/thread_name.h"
 #include "server/runtime/log.h"
 
 #include <algorithm>
@@ -119,7 +120,10 @@ void Engine::Start(size_t workers, int opencv_threads) {
   std::lock_guard lock(mu_);
   if (started_threads_ || stopping_) return;
   started_threads_ = true;
-  capture_thread_ = std::thread([this] { CaptureLoop(); });
+  capture_thread_ = std::thread([this] {
+    NameThisThread("stevi-capture");
+    CaptureLoop();
+  });
   // By default one worker per core (at least 1, at most kDefaultWorkers): each keeps a frame's
   // worth of buffers.
   if (workers == 0) {
@@ -142,9 +146,15 @@ void Engine::Start(size_t workers, int opencv_threads) {
   // (and move) under it.
   for (size_t i = 0; i < workers; ++i) fronts_.push_back(std::make_unique<pipeline::FrontEnd>());
   for (size_t i = 0; i < workers; ++i) {
-    worker_threads_.emplace_back([this, i] { WorkerLoop(i); });
+    worker_threads_.emplace_back([this, i] {
+      NameThisThread("stevi-worker-" + std::to_string(i));
+      WorkerLoop(i);
+    });
   }
-  finish_thread_ = std::thread([this] { FinishLoop(); });
+  finish_thread_ = std::thread([this] {
+    NameThisThread("stevi-finish");
+    FinishLoop();
+  });
 }
 
 void Engine::Stop() {

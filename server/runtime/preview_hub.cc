@@ -15,6 +15,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/error.h"
+#include "core/common/thread_name.h"
 #include "core/pipeline/annotate.h"
 #include "core/stereo/disparity.h"
 
@@ -101,7 +102,10 @@ struct PreviewHub::Subscriber {
 };
 
 PreviewHub::PreviewHub(PreviewHubOptions options) : options_(options) {
-  thread_ = std::thread([this] { Loop(); });
+  thread_ = std::thread([this] {
+    NameThisThread("stevi-preview");
+    Loop();
+  });
 }
 
 PreviewHub::~PreviewHub() { Close(); }

@@ -171,6 +171,15 @@ ProcSample ReadProc(pid_t pid) {
   // Reading our own fd folder holds one descriptor open: not counted.
   if (pid == getpid()) --n;
   s.fds = n;
+  if (DIR* tasks = opendir((dir + "/task").c_str())) {
+    while (const dirent* e = readdir(tasks)) {
+      if (e->d_name[0] == '.') continue;
+      std::ifstream comm(dir + "/task/" + e->d_name + "/comm");
+      std::string name;
+      if (std::getline(comm, name)) ++s.thread_names[name];
+    }
+    closedir(tasks);
+  }
   s.ok = rss && threads;
   return s;
 }

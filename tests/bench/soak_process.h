@@ -7,6 +7,7 @@
 #include <sys/types.h>
 
 #include <chrono>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -63,6 +64,9 @@ struct ProcSample {
   long rss_kb = 0;
   int fds = 0;
   int threads = 0;
+  // Threads by name (/proc/PID/task/TID/comm): stevi's are "stevi-*", a library's carry its own
+  // name or, unnamed, the program's.
+  std::map<std::string, int> thread_names;
 };
 ProcSample ReadProc(pid_t pid);
 

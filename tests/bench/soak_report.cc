@@ -289,6 +289,16 @@ void WriteCsvFiles(const SoakResult& r, const std::string& out_dir) {
                   p.ok ? 1 : 0, p.rss_kb, p.fds, p.threads);
     }
   }
+  std::ofstream t(out_dir + "/threads.csv");
+  t << "t_s,process,thread_name,count\n";
+  for (const Sample& s : r.samples) {
+    for (size_t i = 0; i < r.process_names.size(); ++i) {
+      if (s.pids[i] <= 0 || !s.procs[i].ok) continue;
+      for (const auto& [name, count] : s.procs[i].thread_names) {
+        t << Format("%.1f,%s,%s,%d\n", s.t_s, r.process_names[i].c_str(), name.c_str(), count);
+      }
+    }
+  }
   std::ofstream w(out_dir + "/windows.csv");
   w << "window,t_from_s,t_to_s,group,clients,delivered,fewest_per_client,delivered_in_outage,"
        "lost,lost_in_outage,dropped,dropped_in_outage,resets,images,p50_ms,p99_ms,max_ms\n";
@@ -400,6 +410,25 @@ void PrintEvents(Out& out, const SoakResult& r) {
   for (const std::string& s : r.shutdown) out.Line("  " + s);
 }
 
+// A process's most memory, descriptors and threads (and threads of each name) in a period.
+struct ProcessMaxima {
+  bool any = false;
+  long rss_kb = 0;
+  int fds = 0;
+  int threads = 0;
+  std::map<std::string, int> thread_names;
+
+  void Add(const ProcSample& p) {
+    any = true;
+    rss_kb = std::max(rss_kb, p.rss_kb);
+    fds = std::max(fds, p.fds);
+    threads = std::max(threads, p.threads);
+    for (const auto& [name, count] : p.thread_names) {
+      thread_names[name] = std::max(thread_names[name], count);
+    }
+  }
+};
+
 // The done-when checks; true when all pass.
 bool Checks(Out& out, const SoakResult& r, const std::vector<size_t>& groups) {
   // The checks.
@@ -417,35 +446,28 @@ bool Checks(Out& out, const SoakResult& r, const std::vector<size_t>& groups) {
   const bool long_enough = per.first_to <= per.last_to + 1 && r.samples.size() > 2;
   if (!long_enough) check(false, "the run is shorter than the warm-up and the compared period");
   for (size_t i = 0; i < r.process_names.size() && long_enough; ++i) {
-    long rss_first = 0, rss_last = 0;
-    int fd_first = 0, fd_last = 0, thr_first = 0, thr_last = 0;
-    bool first = false, last = false;
+    ProcessMaxima first, last;
     for (const Sample& s : r.samples) {
-      const ProcSample& p = s.procs[i];
-      if (!p.ok) continue;
-      if (In(s.t_s, per.first_from, per.first_to)) {
-        first = true;
-        rss_first = std::max(rss_first, p.rss_kb);
-        fd_first = std::max(fd_first, p.fds);
-        thr_first = std::max(thr_first, p.threads);
-      }
-      if (In(s.t_s, per.last_from, per.last_to)) {
-        last = true;
-        rss_last = std::max(rss_last, p.rss_kb);
-        fd_last = std::max(fd_last, p.fds);
-        thr_last = std::max(thr_last, p.threads);
-      }
+      if (!s.procs[i].ok) continue;
+      if (In(s.t_s, per.first_from, per.first_to)) first.Add(s.procs[i]);
+      if (In(s.t_s, per.last_from, per.last_to)) last.Add(s.procs[i]);
     }
-    if (!first || !last) continue;
+    if (!first.any || !last.any) continue;
+    const char* name = r.process_names[i].c_str();
     const double growth =
-        100.0 * (static_cast<double>(rss_last) / static_cast<double>(rss_first) - 1);
-    check(growth < 5,
-          Format("%-9s resident memory %.1f -> %.1f MB (%+.1f %%, bound < 5 %%)",
-                 r.process_names[i].c_str(), rss_first / 1024.0, rss_last / 1024.0, growth));
-    check(fd_last <= fd_first, Format("%-9s file descriptors %d -> %d (must not grow)",
-                                      r.process_names[i].c_str(), fd_first, fd_last));
-    check(thr_last <= thr_first, Format("%-9s threads %d -> %d (must not grow)",
-                                        r.process_names[i].c_str(), thr_first, thr_last));
+        100.0 * (static_cast<double>(last.rss_kb) / static_cast<double>(first.rss_kb) - 1);
+    check(growth < 5, Format("%-9s resident memory %.1f -> %.1f MB (%+.1f %%, bound < 5 %%)", name,
+                             first.rss_kb / 1024.0, last.rss_kb / 1024.0, growth));
+    check(last.fds <= first.fds,
+          Format("%-9s file descriptors %d -> %d (must not grow)", name, first.fds, last.fds));
+    std::string grew;  // the names with more threads at most in the last period
+    for (const auto& [thread, count] : last.thread_names) {
+      const auto before = first.thread_names.find(thread);
+      const int was = before == first.thread_names.end() ? 0 : before->second;
+      if (count > was) grew += Format(", %s %d -> %d", thread.c_str(), was, count);
+    }
+    check(last.threads <= first.threads, Format("%-9s threads %d -> %d (must not grow)%s", name,
+                                                first.threads, last.threads, grew.c_str()));
   }
   // The station's export history: full (at its bound) from the warm-up's end on.
   {

@@ -5,7 +5,17 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <atomic>
 #include <fstream>
+#include <iostream>
+#include <mutex>
+#include <thread>
+#include <vector>
 
 #include "client/client.h"
 #include "server/app_config.h"
@@ -199,6 +209,109 @@ TEST_F(SecurityTest, MutualTlsAllowsNamedClientCertificates) {
   client::Client no_certificate(TlsClient(*pki_, port));
   EXPECT_EQ(no_certificate.GetStatus(&status).error_code(), grpc::StatusCode::UNAVAILABLE)
       << "mutual TLS: no certificate, no connection";
+}
+
+// A radio link on loopback: a TCP relay that holds every chunk `delay` before passing it on, in
+// each direction. Each chunk is read only after the previous one was delivered, so a burst waits
+// longer still, as on a narrow link.
+class SlowLink {
+ public:
+  SlowLink(int upstream_port, std::chrono::milliseconds delay)
+      : upstream_port_(upstream_port), delay_(delay) {
+    listen_fd_ = socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t len = sizeof(a);
+    if (bind(listen_fd_, reinterpret_cast<sockaddr*>(&a), len) != 0 || listen(listen_fd_, 8) != 0 ||
+        getsockname(listen_fd_, reinterpret_cast<sockaddr*>(&a), &len) != 0) {
+      ADD_FAILURE() << "SlowLink: cannot listen on loopback";
+      return;
+    }
+    port_ = ntohs(a.sin_port);
+    accept_thread_ = std::thread([this] { AcceptLoop(); });
+  }
+  ~SlowLink() {
+    stop_ = true;
+    shutdown(listen_fd_, SHUT_RDWR);
+    {
+      std::lock_guard lock(mu_);
+      for (int fd : fds_) shutdown(fd, SHUT_RDWR);
+    }
+    if (accept_thread_.joinable()) accept_thread_.join();
+    for (std::thread& t : pumps_) t.join();
+    close(listen_fd_);
+    for (int fd : fds_) close(fd);
+  }
+  int port() const { return port_; }
+
+ private:
+  void AcceptLoop() {
+    while (!stop_) {
+      pollfd p{listen_fd_, POLLIN, 0};
+      if (poll(&p, 1, 100) <= 0) continue;
+      const int in = accept(listen_fd_, nullptr, nullptr);
+      if (in < 0) continue;
+      const int out = socket(AF_INET, SOCK_STREAM, 0);
+      sockaddr_in a{};
+      a.sin_family = AF_INET;
+      a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+      a.sin_port = htons(static_cast<uint16_t>(upstream_port_));
+      if (connect(out, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0) {
+        close(in);
+        close(out);
+        continue;
+      }
+      std::lock_guard lock(mu_);
+      fds_.push_back(in);
+      fds_.push_back(out);
+      pumps_.emplace_back([this, in, out] { Pump(in, out); });
+      pumps_.emplace_back([this, in, out] { Pump(out, in); });
+    }
+  }
+  void Pump(int from, int to) {
+    char buffer[16384];
+    while (!stop_) {
+      const ssize_t n = recv(from, buffer, sizeof(buffer), 0);
+      if (n <= 0) break;
+      std::this_thread::sleep_for(delay_);  // the link's latency, not a synchronisation
+      if (send(to, buffer, static_cast<size_t>(n), MSG_NOSIGNAL) != n) break;
+    }
+    shutdown(to, SHUT_WR);
+  }
+
+  int upstream_port_;
+  std::chrono::milliseconds delay_;
+  int listen_fd_ = -1;
+  int port_ = 0;
+  std::atomic<bool> stop_{false};
+  std::mutex mu_;
+  std::vector<int> fds_;
+  std::vector<std::thread> pumps_;  // added by the accept thread only, joined after it
+  std::thread accept_thread_;
+};
+
+// A TLS connection over a link with a 1.6 s round trip (a satellite link, a congested LTE one)
+// takes longer than a second to set up. gRPC abandons a connection attempt after its "minimum
+// reconnect backoff" (GRPC_ARG_MIN_RECONNECT_BACKOFF_MS is also its minimum connect timeout);
+// the client once set that to 100 ms, for quick reconnection, and never connected over such a
+// link (nor under ThreadSanitizer, where the handshake is that slow).
+TEST_F(SecurityTest, ATlsClientConnectsOverALinkWithALongRoundTrip) {
+  ASSERT_FALSE(HasFailure());
+  Result<std::unique_ptr<Server>> server = Server::Start(SecureConfig(*pki_));
+  ASSERT_TRUE(server.ok()) << server.error().message;
+  SlowLink link((*server)->port(), std::chrono::milliseconds(800));
+  client::ClientOptions options = TlsClient(*pki_, link.port());
+  options.address = "127.0.0.1:" + std::to_string(link.port());
+  options.timeout = std::chrono::seconds(30);
+  client::Client slow(options);
+  v1::GetStatusResponse status;
+  const auto start = std::chrono::steady_clock::now();
+  const grpc::Status got = slow.GetStatus(&status);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_TRUE(got.ok()) << got.error_message() << " after " << seconds << " s";
+  std::cout << "[ figures ] GetStatus over TLS with a 1.6 s round trip: " << seconds << " s\n";
 }
 
 TEST(ListenRule, NonLoopbackNeedsAuthenticationOrAnExplicitInsecureFlag) {
