@@ -157,7 +157,10 @@ void AravisStereoSource::Impl::Lose(Slot& s, const std::string& reason) {
   // Releasing a lost GigE camera blocks for Aravis's control timeout; do it aside so that
   // reopening starts at once.
   s.releases.push_back(
-      std::async(std::launch::async, [camera = std::move(s.camera)]() mutable { camera.reset(); }));
+      std::async(std::launch::async, [camera = std::move(s.camera)]() mutable {
+        NameThisThread("stevi-arv-free");
+        camera.reset();
+      }));
   PublishStats(s, CameraStats{});
   {
     std::lock_guard lock(mu);

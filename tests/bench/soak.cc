@@ -829,7 +829,8 @@ int Soak::Run(const std::string& command_line) {
   r.export_points_bound = o_.export_points;
   r.fps = o_.fps;
   r.camera_fps = o_.cameras ? o_.camera_fps : 0;
-  r.process_names = {"server-A", "server-B", "station", "mavlink", "camera-L", "camera-R", "soak"};
+  r.process_names = {"server-A", "server-B", "station",   "mavlink",
+                     "camera-L", "camera-R", kHarnessName};
   r.server_names = {"server-A", "server-B"};
   r.group_names = {"gRPC A", "gRPC B", "WS rig1 (A)", "WS rig2 (B)"};
   r.group_server = {0, 1, 0, 1};

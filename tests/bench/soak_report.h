@@ -73,6 +73,9 @@ struct Event {
   double first_frame_s = -1;  // -1: frames never resumed
 };
 
+// The soak's own process among process_names: sampled and plotted, not judged (it is the load).
+inline constexpr char kHarnessName[] = "soak";
+
 struct SoakResult {
   double minutes = 30, warmup_minutes = 5, compare_minutes = 5, sample_every_s = 60;
   double outage_margin_s = 2;
