@@ -329,10 +329,12 @@ TEST(ServerLimits, StreamsBeyondMaxStreamsAreRefusedAndAFreedPlaceIsReused) {
   std::mutex mu;
   std::condition_variable cv;
   std::vector<int> received(2, 0);
+  // Every client exists before any thread starts: a thread reads its holder, which a later
+  // push_back would move under it (ThreadSanitizer found that).
+  for (int i = 0; i < 2; ++i) holders.push_back(std::make_unique<client::Client>(options));
   for (int i = 0; i < 2; ++i) {
-    holders.push_back(std::make_unique<client::Client>(options));
-    threads.emplace_back([&, i] {
-      holders[i]->StreamTracks([&, i](const v1::TrackFrame&) {
+    threads.emplace_back([&, i, c = holders[static_cast<size_t>(i)].get()] {
+      c->StreamTracks([&, i](const v1::TrackFrame&) {
         {
           std::lock_guard lock(mu);
           ++received[i];
