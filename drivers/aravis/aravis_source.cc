@@ -156,11 +156,10 @@ void AravisStereoSource::Impl::Lose(Slot& s, const std::string& reason) {
   s.camera->MarkLost();
   // Releasing a lost GigE camera blocks for Aravis's control timeout; do it aside so that
   // reopening starts at once.
-  s.releases.push_back(
-      std::async(std::launch::async, [camera = std::move(s.camera)]() mutable {
-        NameThisThread("stevi-arv-free");
-        camera.reset();
-      }));
+  s.releases.push_back(std::async(std::launch::async, [camera = std::move(s.camera)]() mutable {
+    NameThisThread("stevi-arv-free");
+    camera.reset();
+  }));
   PublishStats(s, CameraStats{});
   {
     std::lock_guard lock(mu);
