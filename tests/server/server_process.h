@@ -78,7 +78,25 @@ class ServerProcess {
     ASSERT_TRUE(line.has_value()) << "the server did not restart: " << server_->DrainStderr();
   }
 
-  void Stop() { server_.reset(); }
+  ~ServerProcess() { CheckForSanitizerReport(); }
+  void Stop() {
+    CheckForSanitizerReport();
+    server_.reset();
+  }
+  // A server that died of a sanitizer report (halt_on_error) leaves its clients reconnecting to
+  // nothing, and the test fails on a timeout with the cause unseen: the report is shown here.
+  void CheckForSanitizerReport() {
+    if (!server_ || !server_->Wait(std::chrono::milliseconds(0))) return;  // still running
+    const std::string err = server_->DrainStderr();
+    for (const char* marker : {"WARNING: ThreadSanitizer", "ERROR: AddressSanitizer",
+                               "ERROR: LeakSanitizer", "runtime error:"}) {
+      const size_t at = err.find(marker);
+      if (at == std::string::npos) continue;
+      ADD_FAILURE() << "the stevi-server child stopped on a sanitizer report:\n"
+                    << err.substr(at, 8000);
+      return;
+    }
+  }
   Subprocess* process() { return server_.get(); }
   const std::string& address() const { return address_; }
   const std::string& data_dir() const { return data_dir_; }
