@@ -86,7 +86,8 @@ class ServerProcess {
   // A server that died of a sanitizer report (halt_on_error) leaves its clients reconnecting to
   // nothing, and the test fails on a timeout with the cause unseen: the report is shown here.
   void CheckForSanitizerReport() {
-    if (!server_ || !server_->Wait(std::chrono::milliseconds(0))) return;  // still running
+    // A live server keeps its pipes open: Wait gives up after the 200 ms and it is killed later.
+    if (!server_ || !server_->Wait(std::chrono::milliseconds(200))) return;
     const std::string err = server_->DrainStderr();
     for (const char* marker : {"WARNING: ThreadSanitizer", "ERROR: AddressSanitizer",
                                "ERROR: LeakSanitizer", "runtime error:"}) {
