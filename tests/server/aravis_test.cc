@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cstdlib>
+#include <optional>
 
 #include "core/geometry/calibration_io.h"
 #include <grpcpp/grpcpp.h>
@@ -23,8 +24,10 @@ using ::testing::HasSubstr;
 using testing::ParseJsonLines;
 using Clock = std::chrono::steady_clock;
 
-// grpc.health.v1 Check of the obstacle service (what a load balancer or a watchdog asks).
-grpc::health::v1::HealthCheckResponse::ServingStatus Health(const std::string& address) {
+// grpc.health.v1 Check of the obstacle service (what a load balancer or a watchdog asks), or
+// nothing when the server does not answer.
+std::optional<grpc::health::v1::HealthCheckResponse::ServingStatus> Health(
+    const std::string& address) {
   auto stub = grpc::health::v1::Health::NewStub(
       grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
   grpc::ClientContext context;
@@ -34,14 +37,18 @@ grpc::health::v1::HealthCheckResponse::ServingStatus Health(const std::string& a
   grpc::health::v1::HealthCheckResponse response;
   const grpc::Status status = stub->Check(&context, request, &response);
   EXPECT_TRUE(status.ok()) << status.error_message();
+  if (!status.ok()) return std::nullopt;
   return response.status();
 }
 
-// Waits (a bounded number of checks, each a round trip) until the health is `want`.
+// Waits (a bounded number of checks, each a round trip) until the health is `want`. A server
+// that stops answering ends the wait at once.
 bool HealthBecomes(const std::string& address,
                    grpc::health::v1::HealthCheckResponse::ServingStatus want) {
   for (int i = 0; i < 2000; ++i) {
-    if (Health(address) == want) return true;
+    const auto health = Health(address);
+    if (!health) return false;
+    if (*health == want) return true;
   }
   return false;
 }

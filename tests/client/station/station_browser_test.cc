@@ -162,26 +162,29 @@ std::string PixelHash(const std::string& selector) {
   })())";
 }
 
+// The pixel hash of the image once one with at least `min_seq` has finished loading. The
+// page swaps an <img>'s source as each JPEG arrives, so "loaded" and "hashed" are one step in
+// the page: the hash is taken by the same expression that finds the image complete.
+nlohmann::json HashOnceLoaded(Browser& browser, const std::string& selector, int min_seq) {
+  const std::string take = "((window.__stevi_hash = " + PixelHash(selector) +
+                           ") !== null && window.__stevi_hash.seq >= " + std::to_string(min_seq) +
+                           ")";
+  if (!browser.WaitFor(take, kWait)) return nullptr;
+  const Browser::Eval e = browser.Evaluate("window.__stevi_hash", kWait);
+  EXPECT_TRUE(e.ok) << e.error;
+  return e.value;
+}
+
 TEST_F(StationBrowser, TheVideoAndTheDisparityViewChange) {
   for (const std::string kind : {"annotated", "disparity"}) {
     const std::string selector =
         "section.rig[data-rig=\"rig1\"] img.video[data-kind=\"" + kind + "\"]";
-    ASSERT_TRUE(browser_->WaitFor("Number(document.querySelector('" + selector +
-                                      "')?.dataset.seq || 0) >= 2 && document.querySelector('" +
-                                      selector + "').naturalWidth > 0",
-                                  kWait))
-        << kind << ": no image arrived";
-    const nlohmann::json first = Eval(PixelHash(selector));
-    ASSERT_TRUE(first.is_object()) << kind;
+    const nlohmann::json first = HashOnceLoaded(*browser_, selector, 2);
+    ASSERT_TRUE(first.is_object()) << kind << ": no image arrived and loaded";
     EXPECT_GT(first["width"].get<int>(), 100) << kind;
-    // Wait for three more images and compare the pixels: the synthetic scene moves.
-    const int seq = first["seq"].get<int>();
-    ASSERT_TRUE(browser_->WaitFor("Number(document.querySelector('" + selector +
-                                      "').dataset.seq) >= " + std::to_string(seq + 3) +
-                                      " && document.querySelector('" + selector + "').complete",
-                                  kWait));
-    const nlohmann::json later = Eval(PixelHash(selector));
-    ASSERT_TRUE(later.is_object()) << kind;
+    // Three images later the pixels differ: the synthetic scene moves.
+    const nlohmann::json later = HashOnceLoaded(*browser_, selector, first["seq"].get<int>() + 3);
+    ASSERT_TRUE(later.is_object()) << kind << ": three more images did not arrive";
     EXPECT_NE(first["hash"], later["hash"]) << kind << ": the pictures did not change";
     std::cout << "[ figures ] " << kind << ": " << later["width"] << "x" << later["height"]
               << " JPEG, seq " << first["seq"] << " -> " << later["seq"] << ", pixels changed\n";
