@@ -29,7 +29,7 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
   }
 
   void OnReadDone(bool ok) override {
-    TakeOver(this);
+    const CallbackScope scope(this);
     if (!ok) {  // the client has sent everything (or went away: then Finish is a no-op)
       Run();
       return;
@@ -63,7 +63,7 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
   // The client cancelled or its deadline passed: the calibration job (queued or running) stores
   // and applies nothing.
   void OnCancel() override {
-    TakeOver(this);
+    const CallbackScope scope(this);
     cancelled_ = true;
   }
 
@@ -145,7 +145,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
   }
 
   void OnWriteDone(bool ok) override {
-    TakeOver(this);
+    const CallbackScope scope(this);
     std::lock_guard lock(shared_->mu);
     shared_->writing = false;
     if (!ok) {
@@ -162,7 +162,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
   }
 
   void OnCancel() override {
-    TakeOver(this);
+    const CallbackScope scope(this);
     std::lock_guard lock(shared_->mu);
     shared_->cancelled = true;
   }

@@ -47,7 +47,7 @@ class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
   }
 
   void OnWriteDone(bool ok) override {
-    TakeOver(this);
+    const CallbackScope scope(this);
     {
       std::lock_guard lock(mu_);
       writing_ = false;
@@ -60,7 +60,7 @@ class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
   }
 
   void OnCancel() override {
-    TakeOver(this);
+    const CallbackScope scope(this);
     std::lock_guard lock(mu_);
     cancelled_ = true;
     if (!writing_) FinishLocked(grpc::Status::CANCELLED);
@@ -143,7 +143,7 @@ class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleStat
   }
 
   void OnReadDone(bool ok) override {
-    TakeOver(this);
+    const CallbackScope scope(this);
     std::lock_guard lock(mu_);
     if (finished_) return;
     if (!ok) {

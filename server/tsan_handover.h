@@ -29,6 +29,22 @@ inline void TakeOver([[maybe_unused]] const void* object) {
 #endif
 }
 
+// A reactor callback's whole body, for TSan: takes the object over on entry and hands it over
+// on exit, after the body's locks are released. gRPC calls the next callback, OnDone among
+// them, only after this one returned, but through its own executor, so without the mark at
+// the exit OnDone's delete would look unordered with this callback's last unlock. The first
+// statement of OnReadDone, OnWriteDone and OnCancel.
+class CallbackScope {
+ public:
+  explicit CallbackScope(const void* object) : object_(object) { TakeOver(object_); }
+  ~CallbackScope() { HandOver(object_); }
+  CallbackScope(const CallbackScope&) = delete;
+  CallbackScope& operator=(const CallbackScope&) = delete;
+
+ private:
+  const void* object_;
+};
+
 // The end of a call's OnDone, handed over to the thread that shuts the server down: gRPC's
 // Server::Shutdown() returns only after every call's OnDone has returned (it counts them in
 // its own, uninstrumented, code), and the services are destroyed after it. Last thing in each

@@ -6,6 +6,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <gtest/gtest.h>
+
 #include <stdexcept>
 
 namespace stevi::testing {
@@ -29,7 +31,8 @@ int RemainingMs(Clock::time_point deadline) {
 
 }  // namespace
 
-Subprocess::Subprocess(const std::vector<std::string>& argv) {
+Subprocess::Subprocess(const std::vector<std::string>& argv)
+    : program_(argv.empty() ? "" : argv[0]) {
   int out_pipe[2], err_pipe[2];
   if (pipe(out_pipe) != 0 || pipe(err_pipe) != 0) throw std::runtime_error("pipe failed");
   pid_ = fork();
@@ -55,11 +58,33 @@ Subprocess::Subprocess(const std::vector<std::string>& argv) {
 
 Subprocess::~Subprocess() {
   if (!reaped_ && pid_ > 0) {
-    kill(pid_, SIGKILL);
-    waitpid(pid_, nullptr, 0);
+    int status = 0;
+    if (waitpid(pid_, &status, WNOHANG) == pid_) {
+      // It had ended by itself: what it last wrote may be a sanitizer's report.
+      reaped_ = true;
+      const auto deadline = Clock::now() + std::chrono::milliseconds(200);
+      pollfd fd = {err_fd_, POLLIN, 0};
+      while (poll(&fd, 1, RemainingMs(deadline)) > 0 && ReadSome(err_fd_, err_)) {
+      }
+    } else {
+      kill(pid_, SIGKILL);
+      waitpid(pid_, nullptr, 0);
+    }
+  }
+  if (const std::string report = SanitizerReport(); !report.empty()) {
+    ADD_FAILURE() << program_ << " stopped on a sanitizer report:\n" << report;
   }
   if (out_fd_ >= 0) close(out_fd_);
   if (err_fd_ >= 0) close(err_fd_);
+}
+
+std::string Subprocess::SanitizerReport() const {
+  for (const char* marker : {"WARNING: ThreadSanitizer", "ERROR: AddressSanitizer",
+                             "ERROR: LeakSanitizer", "runtime error:"}) {
+    const size_t at = err_.find(marker);
+    if (at != std::string::npos) return err_.substr(at, 8000);
+  }
+  return "";
 }
 
 std::optional<std::string> Subprocess::WaitForStderrLine(const std::string& needle,

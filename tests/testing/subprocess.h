@@ -11,7 +11,9 @@
 namespace stevi::testing {
 
 // A child process with its stdout and stderr on pipes. Killed (SIGKILL) and reaped on destruction
-// if still running.
+// if still running. A child that stopped on a sanitizer's report (halt_on_error, as
+// deploy/sanitize.sh runs them) fails the test with the report when it is destroyed: otherwise a
+// test whose server died would fail on a timeout with the cause unseen.
 class Subprocess {
  public:
   // argv[0] is the program path. Aborts the test run (throws) if it cannot start.
@@ -32,11 +34,14 @@ class Subprocess {
   // All of stdout / stderr read so far plus what remains (call after Wait()).
   std::string DrainStdout();
   std::string DrainStderr();
+  // The sanitizer report in the stderr read so far, or "".
+  std::string SanitizerReport() const;
 
  private:
   std::optional<std::string> WaitForLine(bool from_stdout, const std::string& needle,
                                          std::chrono::milliseconds timeout);
 
+  std::string program_;
   pid_t pid_ = -1;
   int out_fd_ = -1, err_fd_ = -1;
   std::string out_, err_;
