@@ -291,7 +291,10 @@ TEST_F(MavlinkBridgeTest, TheAutopilotsPosesGeoreferenceTheFramesAndObstaclesRea
       std::chrono::duration<double>(distances.back().second - distances.front().second).count();
   const double rate_hz = (distances.size() - 1) / span_s;
   std::cout << "OBSTACLE_DISTANCE: " << distances.size() << " messages at " << rate_hz << " Hz\n";
-  EXPECT_GE(rate_hz, 9.5);
+  // A rate, so not held under a sanitizer, whose pipeline falls behind the camera.
+  if (!testing::kSanitized) {
+    EXPECT_GE(rate_hz, 9.5);
+  }
   const double fB = synthetic.f_px * synthetic.baseline_m;
   // Per obstacle (visible, within the trusted range of 8 px): the sector of its bearing, against
   // the nearest of what stands out there (the obstacle, or one nearer in front of it). Every
@@ -447,7 +450,9 @@ TEST_F(MavlinkBridgeTest, SilenceOnEitherSideStopsWhatDependsOnIt) {
   const auto last = distances.back().second;
   const double after_ms = std::chrono::duration<double, std::milli>(last - stopped_at).count();
   std::cout << "the last OBSTACLE_DISTANCE came " << after_ms << " ms after SIGTERM\n";
-  EXPECT_LE(after_ms, 500);
+  if (!testing::kSanitized) {  // a latency: not held under a sanitizer
+    EXPECT_LE(after_ms, 500);
+  }
 
   // The server comes back: the bridge reconnects and the obstacles flow again.
   const size_t at_restart = distances.size();

@@ -228,6 +228,18 @@ TEST_F(StationBrowser, TheTableShowsTheTracksTheServerStreams) {
             << rows_checked << " rows by id and range\n";
 }
 
+// What the rig's controls show: the selected algorithm and the result and error lines, for a
+// failure's message.
+std::string ControlMessages(Browser& browser, const std::string& rig) {
+  const Browser::Eval e = browser.Evaluate(
+      "[...document.querySelectorAll('" + rig + "select.algorithm, " + rig + ".control-result, " +
+          rig + "div.config-error, " + rig +
+          "span.field-error')].map(e => (e.className || e.tagName) + ': ' + (e.value ?? '') + ' ' "
+          "+ e.textContent).join(' | ')",
+      kWait);
+  return e.ok ? e.value.dump() : e.error;
+}
+
 TEST_F(StationBrowser, ControlsReachTheServerAndShowItsErrorsBesideTheField) {
   const std::string rig = "section.rig[data-rig=\"rig1\"] ";
   // The editor is built from the server's config.
@@ -267,7 +279,8 @@ TEST_F(StationBrowser, ControlsReachTheServerAndShowItsErrorsBesideTheField) {
     if (!switched) {
       ASSERT_TRUE(browser_->WaitFor("window.stevi.rigs.rig1.lastFrame.algorithm === " +
                                         std::to_string(static_cast<int>(target)),
-                                    kWait));
+                                    kWait))
+          << "the page says: " << ControlMessages(*browser_, rig);
     }
   }
   EXPECT_TRUE(switched) << "the server's algorithm is not " << target_name;
