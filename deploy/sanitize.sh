@@ -42,7 +42,11 @@ export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1:suppressions=$supp/ubsa
 # history_size=7 (the largest): the older access of a race keeps its stack. With the default, a
 # gRPC thread's access often came out as "failed to restore the stack", which no suppression
 # can match, so a report of gRPC's own (race:libgrpc above) could not be told from ours.
-export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:history_size=7:suppressions=$supp/tsan.supp"
+# suppress_equal_addresses=0: TSan keeps every reported address in one list that it scans under
+# a global lock before it looks at the suppressions. Each preview the station receives is parsed
+# out of a new gRPC buffer, so a new address each time (a report of gRPC's, suppressed), and the
+# station crawled until a page request waited a minute. Equal stacks are still reported once.
+export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:history_size=7:suppress_equal_addresses=0:suppressions=$supp/tsan.supp"
 # The concurrent code: the engine, broadcaster and the rest of the server's runtime, the servers,
 # the station and its Foxglove server, the Aravis source (the fake GigE camera), the MAVLink links
 # and bridge, the client's streams and reconnect loop, the recording, the mailbox, the pose buffer.
