@@ -66,6 +66,15 @@ Commands:
                                `stevi watch --json` lines: KML (opens in Google Earth; altitudes
                                are ellipsoid heights minus M, the geoid undulation at the site)
                                or a GeoJSON FeatureCollection (opens in QGIS)
+  export --format mcap --out FILE (--count N | --in FRAMES.jsonl | --in DIR) [--image-hz N]
+                               the flight for Foxglove (an indexed MCAP file with the station's
+                               channels): N live frames, a frames file, or a recording folder
+                               (its left images at N per second, default 5, its vehicle states
+                               and calibrations; stevi-process --mcap adds the tracks)
+  mcap info FILE               what an MCAP flight log holds: channels, counts, rates, and what
+                               was lost when it was cut short (a crash, a full disk)
+  mcap recover FILE --out FIXED
+                               an indexed copy of a file cut short, up to its last whole chunk
   calibration list [--json]    stored calibrations and the active one
   calibration get ID [--yaml]  one calibration: report, or its YAML file
   calibration activate ID      switch the running server to it (between two frames)
@@ -112,6 +121,7 @@ constexpr Command kCommands[] = {
     {"calibration", commands::Calibration},
     {"mavlink", commands::Mavlink},
     {"station", commands::Station},
+    {"mcap", commands::Mcap},
 };
 
 // `stevi station`, `mavlink` and `avoid` run for hours. glibc's malloc gives each thread that

@@ -15,6 +15,9 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev systemd
   clang-format clang-tidy
   clang libfuzzer-14-dev libclang-rt-14-dev
+  libgstreamer1.0-dev libgstreamer-plugins-base1.0-dev libgstrtspserver-1.0-dev
+  gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-tools
+  libzstd-dev liblz4-dev zlib1g-dev
 )
 
 missing=()

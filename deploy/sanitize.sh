@@ -50,12 +50,16 @@ export TSAN_OPTIONS="halt_on_error=1:second_deadlock_stack=1:history_size=7:supp
 # The concurrent code: the engine, broadcaster and the rest of the server's runtime, the servers,
 # the station and its Foxglove server, the Aravis source (the fake GigE camera), the MAVLink links
 # and bridge, the client's streams and reconnect loop, the recording, the mailbox, the pose buffer.
-STEVI_TSAN_TESTS='^(server/|client/|drivers/aravis/|drivers/recording/|core/common/|core/geo/pose_buffer)'
+STEVI_TSAN_TESTS='^(server/|client/|drivers/aravis/|drivers/recording/|drivers/mcap/|core/common/|core/geo/pose_buffer)'
+# Not the GStreamer source's: Debian's GStreamer plugins are not instrumented, and their own
+# hand-overs between streaming threads (through GLib's and GStreamer's locks) are reported as races
+# by the dozen, one suppression per plugin library; its tests run under ASan (CI) instead.
+STEVI_TSAN_EXCLUDED='^(server/gst_test|drivers/gstreamer/)'
 select=()
 if [[ "$kind" == thread ]]; then
   # One test at a time: each instrumented server already keeps both cores busy, and two of them
   # side by side starved each other into timeouts that say nothing about a race.
-  select=(-R "$STEVI_TSAN_TESTS")
+  select=(-R "$STEVI_TSAN_TESTS" -E "$STEVI_TSAN_EXCLUDED")
   jobs=1
 fi
 start=$(date +%s)

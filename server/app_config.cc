@@ -16,6 +16,7 @@
 #include <charconv>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <sstream>
 
@@ -211,6 +212,70 @@ Status ParseConfigText(const std::string& text, const std::string& name,
 
 namespace {
 
+// The GStreamer sources' flags (gst, uvc, rtsp, video) onto `gst`.
+void ApplyGstFlags(const std::function<const std::string*(const std::string&)>& get,
+                   v1::GstConfig& config, std::vector<std::string>& problems) {
+  v1::GstConfig* gst = &config;
+  if (const std::string* v = get("layout")) {
+    const std::optional<drivers::GstLayout> layout = drivers::ParseGstLayout(*v);
+    if (!layout) {
+      problems.push_back("--layout: side-by-side, top-bottom or two (got '" + *v + "')");
+    } else {
+      gst->set_layout(*layout == drivers::GstLayout::kTwo         ? v1::GST_LAYOUT_TWO
+                      : *layout == drivers::GstLayout::kTopBottom ? v1::GST_LAYOUT_TOP_BOTTOM
+                                                                  : v1::GST_LAYOUT_SIDE_BY_SIDE);
+    }
+  }
+  if (const std::string* v = get("pipeline")) gst->set_pipeline(*v);
+  if (const std::string* v = get("left-pipeline")) gst->set_left_pipeline(*v);
+  if (const std::string* v = get("right-pipeline")) gst->set_right_pipeline(*v);
+  if (const std::string* v = get("device")) gst->set_device(*v);
+  if (const std::string* v = get("url")) gst->set_url(*v);
+  if (const std::string* v = get("file")) gst->set_file(*v);
+  if (const std::string* v = get("size")) {
+    const size_t x = v->find('x');
+    const std::optional<double> w =
+        x == std::string::npos ? std::nullopt : ParseNumber(v->substr(0, x));
+    const std::optional<double> h =
+        x == std::string::npos ? std::nullopt : ParseNumber(v->substr(x + 1));
+    const auto side_ok = [](double s) { return s >= 16 && s <= 16384 && s == std::floor(s); };
+    if (!w || !h || !side_ok(*w) || !side_ok(*h)) {
+      problems.push_back(
+          "--size: expected WIDTHxHEIGHT of one view in pixels, 16..16384 each "
+          "(got '" +
+          *v + "')");
+    } else {
+      gst->set_width(static_cast<int32_t>(*w));
+      gst->set_height(static_cast<int32_t>(*h));
+    }
+  }
+  if (const std::string* v = get("latency-ms")) {
+    const std::optional<double> ms = ParseNumber(*v);
+    if (!ms || *ms < 0 || *ms > 5000 || *ms != std::floor(*ms)) {
+      problems.push_back("--latency-ms: must be a whole number of ms in 0..5000 (got '" + *v +
+                         "')");
+    } else {
+      gst->set_latency_ms(static_cast<uint32_t>(*ms));
+    }
+  }
+}
+
+// --record, --record-mcap and --mcap-image-hz onto `config`.
+void ApplyRecordingFlags(const std::function<const std::string*(const std::string&)>& get,
+                         v1::ServerConfig& config, std::vector<std::string>& problems) {
+  if (const std::string* v = get("record")) config.mutable_record()->set_dir(*v);
+  if (const std::string* v = get("record-mcap")) config.mutable_record_mcap()->set_file(*v);
+  if (const std::string* v = get("mcap-image-hz")) {
+    const std::optional<double> hz = ParseNumber(*v);
+    if (!hz) {
+      problems.push_back("--mcap-image-hz: must be a number of images per second (got '" + *v +
+                         "')");
+    } else {
+      config.mutable_record_mcap()->set_image_hz(*hz);
+    }
+  }
+}
+
 // ApplyFlags' work, on a copy it may leave half changed.
 Status ApplyFlagsToCopy(const Flags& flags, v1::ServerConfig& config) {
   std::vector<std::string> problems;
@@ -244,7 +309,7 @@ Status ApplyFlagsToCopy(const Flags& flags, v1::ServerConfig& config) {
       source->mutable_replay()->set_rate(*rate);
     }
   }
-  if (const std::string* v = get("record")) config.mutable_record()->set_dir(*v);
+  ApplyRecordingFlags(get, config, problems);
   if (const std::string* v = get("roi")) {
     const size_t x = v->find('x');
     const std::optional<double> w =
@@ -301,6 +366,7 @@ Status ApplyFlagsToCopy(const Flags& flags, v1::ServerConfig& config) {
       problems.push_back("--trigger: free, software or hardware:LINE (got '" + *v + "')");
     }
   }
+  ApplyGstFlags(get, *source->mutable_gst(), problems);
   if (const std::string* v = get("left")) source->set_left(*v);
   if (const std::string* v = get("right")) source->set_right(*v);
   if (const std::string* v = get("calibration")) source->set_calibration(*v);
@@ -408,7 +474,30 @@ SourceSpec SourceSpecFrom(const v1::SourceConfig& source, bool loop_images,
   spec.aravis = AravisOptionsFrom(source, problems);
   spec.replay_dir = source.replay().dir();
   spec.replay = ReplayOptionsFrom(source, problems);
+  spec.gst = GstOptionsFrom(source, loop_images, problems);
+  const v1::GstConfig& gst = source.gst();
+  if (gst.has_device()) spec.gst_device = gst.device();
+  spec.gst_url = gst.url();
+  spec.gst_file = gst.file();
+  if (gst.has_latency_ms())
+    spec.gst_latency_ms = static_cast<int>(std::min(gst.latency_ms(), 1u << 30));
   return spec;
+}
+
+drivers::GstOptions GstOptionsFrom(const v1::SourceConfig& source, bool loop_files,
+                                   std::vector<std::string>& problems) {
+  drivers::GstOptions options;
+  // The defaults that depend on the rest of the source: a video file is not live, and loops as
+  // image files do; the source's fps is the expected rate.
+  options.live = source.kind() != v1::SOURCE_KIND_VIDEO;
+  if (source.has_fps()) options.fps = source.fps();
+  AppendPrefixed(problems, "", FieldsFromProto(source.gst(), options, "source.gst."));
+  // A file loops as image files do (SourceConfig.loop, else the caller's default); a live source
+  // only if asked, which its checks then refuse.
+  if (!source.gst().has_loop()) {
+    options.loop = source.has_loop() ? source.loop() : (!options.live && loop_files);
+  }
+  return options;
 }
 
 namespace {
@@ -514,7 +603,43 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
     problems.push_back("record.max_bytes: must be at least 1 MiB (got " +
                        std::to_string(config.record().max_bytes()) + ")");
   }
+  if (config.has_record_mcap()) McapRecordingOptionsFrom(config.record_mcap(), problems);
   return problems;
+}
+
+McapRecordingOptions McapRecordingOptionsFrom(const v1::McapRecordConfig& config,
+                                              std::vector<std::string>& problems) {
+  McapRecordingOptions options;
+  options.file = config.file();
+  if (options.file.empty()) {
+    problems.push_back("record_mcap.file: required (the MCAP file to write)");
+  } else if (std::error_code ec; std::filesystem::exists(options.file, ec)) {
+    problems.push_back("record_mcap.file: " + options.file +
+                       " exists (a flight log is never overwritten)");
+  } else {
+    const std::filesystem::path parent = std::filesystem::path(options.file).parent_path().empty()
+                                             ? std::filesystem::path(".")
+                                             : std::filesystem::path(options.file).parent_path();
+    if (!std::filesystem::is_directory(parent, ec)) {
+      problems.push_back("record_mcap.file: the folder " + parent.string() + " does not exist");
+    }
+  }
+  if (config.has_image_hz()) options.log.image_hz = config.image_hz();
+  if (config.has_rig()) options.log.rig = config.rig();
+  switch (config.compression()) {
+    case v1::MCAP_COMPRESSION_NONE: options.log.mcap.compression = mcap::Compression::kNone; break;
+    case v1::MCAP_COMPRESSION_LZ4: options.log.mcap.compression = mcap::Compression::kLz4; break;
+    default: options.log.mcap.compression = mcap::Compression::kZstd; break;
+  }
+  if (config.has_chunk_s()) {
+    if (!(config.chunk_s() >= 0.05 && config.chunk_s() <= 60)) {
+      problems.push_back("record_mcap.chunk_s: must be in [0.05, 60] s" + Got(config.chunk_s()));
+    } else {
+      options.log.mcap.chunk_span_ns = static_cast<int64_t>(std::llround(config.chunk_s() * 1e9));
+    }
+  }
+  AppendPrefixed(problems, "record_mcap.", options.log.Validate());
+  return options;
 }
 
 Result<pipeline::PipelineConfig> BuildPipelineConfig(const v1::PipelineConfig& config) {

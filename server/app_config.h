@@ -17,6 +17,7 @@
 #include "drivers/recording/replay_source.h"
 #include "drivers/synthetic/chessboard_source.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "server/mcap_recording.h"
 #include "server/runtime/pose_source.h"
 #include "server/runtime/source_factory.h"
 #include "stevi/v1/config.pb.h"
@@ -63,6 +64,10 @@ Status ApplyFlags(const Flags& flags, v1::ServerConfig& config);
 // Cross-field checks before anything is opened: every problem named.
 std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config);
 
+// The MCAP flight log's options (--record-mcap FILE); problems named "record_mcap.FIELD".
+McapRecordingOptions McapRecordingOptionsFrom(const v1::McapRecordConfig& config,
+                                              std::vector<std::string>& problems);
+
 // The pipeline configuration: core defaults, then the config's fields, then validation.
 Result<pipeline::PipelineConfig> BuildPipelineConfig(const v1::PipelineConfig& config);
 
@@ -82,6 +87,10 @@ drivers::SyntheticOptions SyntheticOptionsFrom(const v1::SourceConfig& source,
                                                std::vector<std::string>& problems);
 drivers::ChessboardSourceOptions ChessboardOptionsFrom(const v1::SourceConfig& source,
                                                        std::vector<std::string>& problems);
+// The GStreamer options of the gst, uvc, rtsp and video kinds (their pipelines not built yet);
+// `loop_files` is the default of loop for a file.
+drivers::GstOptions GstOptionsFrom(const v1::SourceConfig& source, bool loop_files,
+                                   std::vector<std::string>& problems);
 drivers::ReplayOptions ReplayOptionsFrom(const v1::SourceConfig& source,
                                          std::vector<std::string>& problems);
 

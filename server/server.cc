@@ -104,6 +104,18 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   if (!built.ok()) return built.error();
   built = server->BuildGrpcServer(config, *credentials);
   if (!built.ok()) return built.error();
+  // The flight log last, once nothing else can fail: a server that did not start leaves no file.
+  // Before the engine starts, so that it has every frame.
+  if (config.has_record_mcap()) {
+    std::vector<std::string> mcap_problems;
+    McapRecordingOptions options = McapRecordingOptionsFrom(config.record_mcap(), mcap_problems);
+    if (!mcap_problems.empty()) return Error::Invalid(mcap_problems);
+    Result<std::unique_ptr<McapRecording>> mcap =
+        McapRecording::Start(std::move(options), *server->engine_, *server->broadcaster_,
+                             *server->previews_, server->recording_.get());
+    if (!mcap.ok()) return mcap.error();
+    server->mcap_recording_ = std::move(mcap).value();
+  }
   server->engine_->Start(
       config.has_pipeline_workers() ? config.pipeline_workers() : 0,
       config.has_opencv_threads() ? static_cast<int>(config.opencv_threads()) : 0);
@@ -263,6 +275,20 @@ void Server::Shutdown() {
            {"frames", std::to_string(status.frames_written())},
            {"ms", elapsed_ms()}});
     }
+  }
+  // 5. The MCAP flight log: its subscriptions ended with the streams; write what is queued and
+  //    the summary.
+  if (mcap_recording_) {
+    const McapRecordingStatus mcap = mcap_recording_->Stop();
+    Log(mcap.error.empty() ? LogLevel::kInfo : LogLevel::kError, "shutdown",
+        {{"step", "mcap_closed"},
+         {"file", mcap.file},
+         {"track_frames", std::to_string(mcap.counts.track_frames)},
+         {"images", std::to_string(mcap.counts.images)},
+         {"bytes", std::to_string(mcap.counts.bytes)},
+         {"dropped", std::to_string(mcap.frames_dropped)},
+         {"error", mcap.error},
+         {"ms", elapsed_ms()}});
   }
 }
 

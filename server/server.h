@@ -13,6 +13,7 @@
 #include "server/calibration_manager.h"
 #include "server/calibration_service.h"
 #include "server/runtime/engine.h"
+#include "server/mcap_recording.h"
 #include "server/recording_manager.h"
 #include "server/service.h"
 #include "stevi/v1/config.pb.h"
@@ -32,6 +33,8 @@ class Server {
   Engine& engine() { return *engine_; }
   CalibrationManager& calibration() { return *calibration_; }
   RecordingManager& recording() { return *recording_; }
+  // The MCAP flight log (--record-mcap), or null.
+  McapRecording* mcap_recording() { return mcap_recording_.get(); }
   PreviewHub& previews() { return *previews_; }
 
   // Graceful shutdown: stop accepting, end every stream with a final status, stop the source and
@@ -58,6 +61,7 @@ class Server {
   std::unique_ptr<Engine> engine_;
   std::unique_ptr<CalibrationManager> calibration_;
   std::unique_ptr<RecordingManager> recording_;
+  std::unique_ptr<McapRecording> mcap_recording_;
   Authorizer auth_;
   std::unique_ptr<ObstacleServiceImpl> service_;
   std::unique_ptr<CalibrationServiceImpl> calibration_service_;

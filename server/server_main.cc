@@ -21,7 +21,9 @@ With no flags: the built-in synthetic rig, the canonical algorithm, listening on
 
   --listen HOST:PORT     address to listen on (default 127.0.0.1:50051)
   --config FILE          stevi.v1.ServerConfig in protobuf text format or JSON; flags override it
-  --source KIND          synthetic (default), images, aravis (two GenICam cameras) or replay
+  --source KIND          synthetic (default), images, aravis (two GenICam cameras), replay,
+                         uvc (a UVC stereo camera or two webcams), rtsp (an RTSP camera), video
+                         (a video file) or gst (any GStreamer pipeline)
   --left PATTERN|VIDEO   images: left images as a printf pattern ("left_%04d.png") or a video file
          ID              aravis: the left camera's device id, serial number or IP address
   --right PATTERN|VIDEO  images: right images, likewise; aravis: the right camera
@@ -36,10 +38,29 @@ With no flags: the built-in synthetic rig, the canonical algorithm, listening on
   --trigger MODE         aravis: free (default), software, or hardware:LINE (e.g. hardware:Line0)
   --timestamps CLOCK     aravis: pair by the cameras' clocks (camera, default; they must share a
                          time base, e.g. PTP) or by arrival time (host, for unsynchronised cameras)
+  --layout L             uvc, rtsp, video, gst: how the views arrive: side-by-side (default),
+                         top-bottom, or two (two devices, URLs or files: --left and --right;
+                         gst: --left-pipeline and --right-pipeline), paired by capture time
+  --device DEV           uvc: the V4L2 device (default /dev/video0)
+  --size WxH             uvc: the size of one view (the camera is asked for the frame holding
+                         both: a 2560x960 side-by-side camera is --size 1280x960); others: the
+                         size expected (default: as the stream comes)
+  --url URL              rtsp: rtsp://host[:port]/path
+  --latency-ms MS        rtsp: the jitter buffer (default 100)
+  --file FILE            video: a video file GStreamer decodes (MJPEG AVI or MKV with Debian's
+                         base and good plugins; H.264 needs plugins-bad and libav)
+  --pipeline P           gst: a gst-launch-1.0 pipeline up to the frames ("v4l2src ! jpegdec");
+                         the server appends the conversion to grey and its sink
+  --left-pipeline P, --right-pipeline P
+                         gst with --layout two: one pipeline per camera
   --replay DIR           replay: the recording to play (made with --record or StartRecording)
   --rate R|max           replay: speed against the recorded timing (default 1; max = no pacing)
   --record DIR           record the raw pairs, timestamps, vehicle states and calibration id
                          from the start into DIR (lossless; stops at record.max_bytes, 4 GiB)
+  --record-mcap FILE     write the flight as an MCAP file for Foxglove, from start to shutdown:
+                         the station's channels (tracks, status, annotations, scene, vehicle)
+                         and the left and disparity images (FILE must not exist)
+  --mcap-image-hz N      images per second of each kind in the MCAP file (default 5; 0 = none)
   --scene NAME           synthetic: airfield (default) or chessboard (a moving calibration board,
                          9x6 inner corners of 100 mm squares, for `stevi calibrate --capture`)
   --data-dir DIR         where calibrations are stored (default ./stevi-data); its active
@@ -60,10 +81,12 @@ int main(int argc, char** argv) {
   stevi::KeepFrameMemory();  // first: before any thread starts
   using namespace stevi;
   const std::set<std::string> known = {
-      "listen",   "config",    "source",        "left",      "right",   "calibration",
-      "fps",      "algorithm", "data-dir",      "scene",     "replay",  "rate",
-      "record",   "roi",       "exposure-us",   "gain-db",   "trigger", "timestamps",
-      "tls-cert", "tls-key",   "tls-client-ca", "token-file"};
+      "listen",   "config",    "source",        "left",           "right",       "calibration",
+      "fps",      "algorithm", "data-dir",      "scene",          "replay",      "rate",
+      "record",   "roi",       "exposure-us",   "gain-db",        "trigger",     "timestamps",
+      "tls-cert", "tls-key",   "tls-client-ca", "token-file",     "record-mcap", "mcap-image-hz",
+      "layout",   "pipeline",  "left-pipeline", "right-pipeline", "device",      "url",
+      "file",     "size",      "latency-ms"};
   Result<server::Flags> flags = server::ParseFlags(argc, argv, known, {"help", "allow-insecure"});
   if (!flags.ok()) {
     std::cerr << "stevi-server: " << flags.error().message << "\n";

@@ -22,6 +22,7 @@ int Export(Client& client, const Args& args);       // export.cc
 int Calibration(Client& client, const Args& args);  // calibration.cc
 int Mavlink(Client& client, const Args& args);      // mavlink.cc
 int Station(Client& client, const Args& args);      // station.cc
+int Mcap(Client& client, const Args& args);         // mcap.cc
 
 // The options before the command (global_options.cc).
 struct GlobalOptions {

@@ -1,16 +1,18 @@
-// stevi export --format kml|geojson --out FILE (--count N | --in FRAMES.jsonl)
-// [--geoid-undulation M]: each track's trajectory, from live frames or a `stevi watch --json` file.
+// stevi export --format kml|geojson|mcap --out FILE (--count N | --in FRAMES.jsonl | --in DIR)
+// [--geoid-undulation M] [--image-hz N]: each track's trajectory (KML, GeoJSON), or the flight
+// for Foxglove (MCAP), from live frames, a `stevi watch --json` file or (MCAP) a recording.
 #include "client/export.h"
 
-#include <google/protobuf/util/json_util.h>
-
 #include <cstdint>
+#include <filesystem>
+#include <functional>
 #include <fstream>
 #include <iostream>
 #include <string>
 #include <vector>
 
 #include "client/commands/commands.h"
+#include "client/flight_export.h"
 #include "client/flags.h"
 #include "client/track_points.h"
 
@@ -21,14 +23,15 @@ struct ExportArgs {
   std::string format, out_path, in_path;
   uint64_t count = 0;
   KmlOptions kml;
+  double image_hz = 5;  // mcap: images per second
 };
 
 std::string ParseArgs(const Args& args, ExportArgs& a) {
   return flags::FlagSet("export")
       .Value("--format",
              [&a](const std::string& format) {
-               if (format != "kml" && format != "geojson") {
-                 return flags::Expected("export", "--format", "kml or geojson", format);
+               if (format != "kml" && format != "geojson" && format != "mcap") {
+                 return flags::Expected("export", "--format", "kml, geojson or mcap", format);
                }
                a.format = format;
                return std::string();
@@ -38,33 +41,73 @@ std::string ParseArgs(const Args& args, ExportArgs& a) {
       .Whole("--count", {.lo = 1}, [&a](std::int64_t n) { a.count = static_cast<uint64_t>(n); })
       .Real("--geoid-undulation", {.lo = -120, .hi = 100, .unit = "metres"},
             [&a](double m) { a.kml.geoid_undulation_m = m; })
+      .Real("--image-hz", {.lo = 0, .hi = 30, .unit = "images per second"},
+            [&a](double hz) { a.image_hz = hz; })
       .Parse(args);
 }
 
-// The track points of a file of TrackFrame JSON lines; false (after saying so) when it cannot be
-// read or a line is not a TrackFrame.
-bool ReadFramesFile(const std::string& path, std::vector<TrackPoint>& points) {
-  std::ifstream in(path);
-  if (!in) {
-    std::cerr << "stevi: export: cannot read " << path << "\n";
-    return false;
-  }
-  std::string line;
-  int number_of_line = 0;
-  while (std::getline(in, line)) {
-    ++number_of_line;
-    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    v1::TrackFrame frame;
-    google::protobuf::util::JsonParseOptions parse;
-    parse.ignore_unknown_fields = true;
-    if (!google::protobuf::util::JsonStringToMessage(line, &frame, parse).ok()) {
-      std::cerr << "stevi: export: " << path << " line " << number_of_line
-                << ": not a TrackFrame JSON line (as `stevi watch --json` writes)\n";
-      return false;
+// Streams `count` live frames to `each` until it returns false; 0 when done, else the exit code.
+int StreamLive(Client& client, uint64_t count,
+               const std::function<bool(const v1::TrackFrame&)>& each) {
+  // A server restart while collecting is waited out; a wrong address fails at once.
+  StreamOptions stream = LiveStreamOptions("export", 1);
+  stream.max_frames = count;
+  OnStopSignal([&client] { client.Cancel(); });  // Ctrl-C or SIGTERM: end cleanly
+  const grpc::Status status = client.StreamTracks(each, stream);
+  if (!status.ok()) return RpcFailed(client, "export", status);
+  return 0;
+}
+
+int Fail(const std::string& message) {
+  std::cerr << "stevi: export: " << message << "\n";
+  return 1;
+}
+
+// --format mcap: live frames, a frames file or a recording folder into a flight log.
+int ExportMcap(Client& client, const ExportArgs& a) {
+  drivers::FlightLogOptions options;
+  options.image_hz = a.image_hz;
+  const bool recording = !a.in_path.empty() && std::filesystem::is_directory(a.in_path);
+  const std::string from = a.in_path.empty() ? "live frames"
+                           : recording       ? "the recording " + a.in_path
+                                             : a.in_path;
+  Result<std::unique_ptr<drivers::FlightLog>> created = drivers::FlightLog::Create(
+      a.out_path, options, {{"source", from}, {"writer", "stevi export --format mcap"}});
+  if (!created.ok()) return Fail(created.error().message);
+  drivers::FlightLog& log = **created;
+  std::string note;
+  if (recording) {
+    Result<RecordingExport> done = ExportRecording(a.in_path, log);
+    if (!done.ok()) return Fail(done.error().message);
+    note = done->note;
+    std::cout << a.in_path << ": " << done->frames << " frames (" << done->images
+              << " left images), " << done->vehicle_states << " vehicle states, "
+              << done->calibrations << " calibrations; no tracks (a recording holds the raw "
+              << "frames: stevi-process --source replay --replay " << a.in_path
+              << " --mcap FILE runs the pipeline over it)\n";
+  } else if (!a.in_path.empty()) {
+    const stevi::Status read = ForEachFrameLine(
+        a.in_path, [&log](const v1::TrackFrame& frame) { return log.AddFrame(frame); });
+    if (!read.ok()) return Fail(read.error().message);
+  } else {
+    stevi::Status written = stevi::Status::Ok();
+    if (int code = StreamLive(client, a.count,
+                              [&](const v1::TrackFrame& frame) {
+                                written = log.AddFrame(frame);
+                                return written.ok();
+                              });
+        code != 0) {
+      return code;
     }
-    CollectTrackPoints(frame, points);
+    if (!written.ok()) return Fail(written.error().message);
   }
-  return true;
+  if (stevi::Status closed = log.Close(); !closed.ok()) return Fail(closed.error().message);
+  const drivers::FlightLogCounts c = log.counts();
+  std::cout << a.out_path << ": " << c.track_frames << " track frames, " << c.images << " images, "
+            << c.vehicle_fixes << " vehicle fixes, " << c.messages << " messages, " << c.bytes
+            << " bytes\n";
+  if (!note.empty()) std::cerr << "stevi: export: " << note << "\n";
+  return 0;
 }
 
 }  // namespace
@@ -76,31 +119,28 @@ int Export(Client& client, const Args& args) {
     return Usage("export: --format and --out are required");
   if (a.in_path.empty() == (a.count == 0))
     return Usage("export: give either --count N or --in FILE");
+  if (a.format == "mcap") return ExportMcap(client, a);
 
   std::vector<TrackPoint> points;
   if (!a.in_path.empty()) {
-    if (!ReadFramesFile(a.in_path, points)) return 1;
-  } else {
-    // A server restart while collecting is waited out; a wrong address fails at once.
-    StreamOptions stream = LiveStreamOptions("export", 1);
-    stream.max_frames = a.count;
-    OnStopSignal([&client] { client.Cancel(); });  // Ctrl-C or SIGTERM: end cleanly
-    const grpc::Status status = client.StreamTracks(
-        [&points](const v1::TrackFrame& frame) {
-          CollectTrackPoints(frame, points);
-          return true;
-        },
-        stream);
-    if (!status.ok()) return RpcFailed(client, "export", status);
+    const stevi::Status read = ForEachFrameLine(a.in_path, [&points](const v1::TrackFrame& frame) {
+      CollectTrackPoints(frame, points);
+      return stevi::Status::Ok();
+    });
+    if (!read.ok()) return Fail(read.error().message);
+  } else if (int code = StreamLive(client, a.count,
+                                   [&points](const v1::TrackFrame& frame) {
+                                     CollectTrackPoints(frame, points);
+                                     return true;
+                                   });
+             code != 0) {
+    return code;
   }
   for (const std::string& problem : ValidateTrackPoints(points)) {
     std::cerr << "stevi: export: left out " << problem << "\n";
   }
   const std::string text = a.format == "kml" ? ToKml(points, a.kml) : ToGeoJson(points);
-  if (!WriteFile(a.out_path, text)) {
-    std::cerr << "stevi: export: cannot write " << a.out_path << "\n";
-    return 1;
-  }
+  if (!WriteFile(a.out_path, text)) return Fail("cannot write " + a.out_path);
   std::cout << a.out_path << ": " << points.size() << " points\n";
   return 0;
 }

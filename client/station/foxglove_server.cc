@@ -15,12 +15,10 @@
 #include <exception>
 #include <mutex>
 #include <optional>
-#include <set>
 #include <thread>
 #include <unordered_map>
 
 #include <civetweb.h>
-#include <google/protobuf/descriptor.pb.h>
 #include <nlohmann/json.hpp>
 
 #include "client/thread_name.h"
@@ -1139,20 +1137,6 @@ void FoxgloveServer::Stop() {
   }
   cv.notify_all();
   waker.join();
-}
-
-std::string FileDescriptorSetFor(const google::protobuf::Descriptor* descriptor) {
-  google::protobuf::FileDescriptorSet set;
-  std::set<const google::protobuf::FileDescriptor*> seen;
-  // Depth-first, each file after its dependencies.
-  std::function<void(const google::protobuf::FileDescriptor*)> add =
-      [&](const google::protobuf::FileDescriptor* file) {
-        if (!seen.insert(file).second) return;
-        for (int i = 0; i < file->dependency_count(); ++i) add(file->dependency(i));
-        file->CopyTo(set.add_file());
-      };
-  add(descriptor->file());
-  return set.SerializeAsString();
 }
 
 }  // namespace stevi::station

@@ -84,8 +84,8 @@ struct ChannelSpec {
   std::string topic;  // "/rig1/tracks"; unique among the channels
   std::string encoding = "protobuf";
   std::string schema_name;  // fully qualified, no leading dot: "stevi.v1.TrackFrame"
-  // protobuf: a serialized FileDescriptorSet (FileDescriptorSetFor), sent base64. Other
-  // encodings: the schema text as is.
+  // protobuf: a serialized FileDescriptorSet (to_foxglove::FileDescriptorSetFor in
+  // proto/foxglove/convert.h), sent base64. Other encodings: the schema text as is.
   std::string schema;
   bool lossy = false;  // dropped first when a client's queue is full (images)
 };
@@ -186,9 +186,5 @@ class FoxgloveServer {
   explicit FoxgloveServer(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };
-
-// The file defining `descriptor` and every file it depends on, transitively, each before the
-// files that import it, as a serialized google.protobuf.FileDescriptorSet (ChannelSpec::schema).
-std::string FileDescriptorSetFor(const google::protobuf::Descriptor* descriptor);
 
 }  // namespace stevi::station

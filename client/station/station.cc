@@ -12,13 +12,18 @@
 #include <utility>
 
 #include "client/export.h"
-#include "client/station/foxglove_convert.h"
+#include "proto/foxglove/convert.h"
 #include "client/station/web_assets.h"
 #include "stevi/v1/station.pb.h"
 
 namespace stevi::station {
 
 namespace pb = google::protobuf;
+using to_foxglove::FileDescriptorSetFor;
+using to_foxglove::ToCompressedImage;
+using to_foxglove::ToImageAnnotations;
+using to_foxglove::ToLocationFix;
+using to_foxglove::ToSceneUpdate;
 
 struct Station::Rig {
   std::unique_ptr<RigLink> link;

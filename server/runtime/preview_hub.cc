@@ -206,6 +206,34 @@ void PreviewHub::Loop() {
   }
 }
 
+std::optional<Preview> EncodePreview(const pipeline::FrameResult& frame, PreviewKind kind,
+                                     const cv::Mat& fitted, int jpeg_quality) {
+  std::vector<uchar> jpeg;
+  if (fitted.empty() ||
+      !cv::imencode(".jpg", fitted, jpeg, {cv::IMWRITE_JPEG_QUALITY, jpeg_quality})) {
+    return std::nullopt;
+  }
+  const int image_width =
+      frame.rig ? frame.rig->image_size().width : std::max(1, frame.rectified_left.cols);
+  Preview p;
+  p.frame_id = frame.frame_id;
+  p.capture_time_ns = frame.capture_time_ns;
+  p.capture_unix_time_ns = frame.capture_unix_time_ns;
+  p.kind = kind;
+  p.jpeg.assign(jpeg.begin(), jpeg.end());
+  p.width = fitted.cols;
+  p.height = fitted.rows;
+  p.scale = static_cast<double>(fitted.cols) / image_width;
+  p.calibration_id = frame.rig ? frame.rig->calibration_id() : std::string();
+  return p;
+}
+
+std::optional<Preview> EncodePreview(const pipeline::FrameResult& frame, PreviewKind kind,
+                                     int max_width_px, int jpeg_quality) {
+  return EncodePreview(frame, kind, FitWidth(RenderPreview(frame, kind), max_width_px),
+                       jpeg_quality);
+}
+
 void PreviewHub::Handle(const pipeline::FrameResult& frame) {
   std::vector<std::shared_ptr<Subscriber>> due;
   {
@@ -215,9 +243,6 @@ void PreviewHub::Handle(const pipeline::FrameResult& frame) {
     }
   }
   if (due.empty()) return;
-  const int image_width =
-      frame.rig ? frame.rig->image_size().width : std::max(1, frame.rectified_left.cols);
-  const std::string calibration_id = frame.rig ? frame.rig->calibration_id() : std::string();
   // Within this frame: each kind rendered once, each (kind, width) downscaled once, each
   // (kind, width, quality) encoded once.
   std::map<PreviewKind, cv::Mat> rendered;
@@ -232,20 +257,8 @@ void PreviewHub::Handle(const pipeline::FrameResult& frame) {
     if (f == fitted.end())
       f = fitted.emplace(std::pair(kind, max_width), FitWidth(r->second, max_width)).first;
     PreviewPtr out;
-    std::vector<uchar> jpeg;
-    if (!f->second.empty() &&
-        cv::imencode(".jpg", f->second, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality})) {
-      auto p = std::make_shared<Preview>();
-      p->frame_id = frame.frame_id;
-      p->capture_time_ns = frame.capture_time_ns;
-      p->capture_unix_time_ns = frame.capture_unix_time_ns;
-      p->kind = kind;
-      p->jpeg.assign(jpeg.begin(), jpeg.end());
-      p->width = f->second.cols;
-      p->height = f->second.rows;
-      p->scale = static_cast<double>(f->second.cols) / image_width;
-      p->calibration_id = calibration_id;
-      out = std::move(p);
+    if (std::optional<Preview> p = EncodePreview(frame, kind, f->second, quality)) {
+      out = std::make_shared<const Preview>(std::move(*p));
       std::lock_guard lock(mu_);
       ++stats_.encodes;
     }

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -70,6 +71,13 @@ cv::Mat RenderPreview(const pipeline::FrameResult& frame, PreviewKind kind);
 // `image` downscaled (cv::INTER_AREA) to at most `max_width_px` wide, keeping its aspect ratio
 // (height rounded); unchanged (shared, not copied) when it is not wider.
 cv::Mat FitWidth(const cv::Mat& image, int max_width_px);
+// `fitted` (RenderPreview's image, FitWidth'ed) as a JPEG preview of `frame`; nullopt when there
+// is no image or it does not encode.
+std::optional<Preview> EncodePreview(const pipeline::FrameResult& frame, PreviewKind kind,
+                                     const cv::Mat& fitted, int jpeg_quality);
+// Renders, fits and encodes in one go (one preview alone, as stevi-process writes them).
+std::optional<Preview> EncodePreview(const pipeline::FrameResult& frame, PreviewKind kind,
+                                     int max_width_px, int jpeg_quality);
 
 // Thread-safe. Its thread starts in the constructor; Close() (or the destructor) joins it.
 class PreviewHub {

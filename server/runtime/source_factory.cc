@@ -1,8 +1,11 @@
 #include "server/runtime/source_factory.h"
 
+#include <cmath>
+#include <functional>
 #include <utility>
 
 #include "core/common/fields.h"
+#include "drivers/gstreamer/pipelines.h"
 #include "drivers/synthetic/scenarios.h"
 
 namespace stevi::server {
@@ -80,14 +83,126 @@ std::vector<std::string> CheckAravis(const SourceSpec& spec) {
   return problems;
 }
 
+// The calibration of a camera source: null when none is given (the data directory's active one
+// applies later, if it fits).
+Result<std::shared_ptr<const geometry::StereoRig>> OptionalRig(const SourceSpec& spec) {
+  if (spec.calibration.empty()) return std::shared_ptr<const geometry::StereoRig>();
+  Result<geometry::StereoRig> loaded = geometry::StereoRig::FromFile(spec.calibration);
+  if (!loaded.ok()) return loaded.error().Prefixed("source.calibration: ");
+  return std::make_shared<const geometry::StereoRig>(std::move(loaded).value());
+}
+
 Result<std::unique_ptr<drivers::StereoSource>> OpenAravis(const SourceSpec& spec) {
-  std::shared_ptr<const geometry::StereoRig> rig;
-  if (!spec.calibration.empty()) {
-    Result<geometry::StereoRig> loaded = geometry::StereoRig::FromFile(spec.calibration);
-    if (!loaded.ok()) return loaded.error().Prefixed("source.calibration: ");
-    rig = std::make_shared<const geometry::StereoRig>(std::move(loaded).value());
+  Result<std::shared_ptr<const geometry::StereoRig>> rig = OptionalRig(spec);
+  if (!rig.ok()) return rig.error();
+  return Opened(drivers::AravisStereoSource::Open(spec.aravis, std::move(rig).value()),
+                "source.aravis: ");
+}
+
+// ---- GStreamer: gst takes the pipelines whole; uvc, rtsp and video build them -------------------
+
+bool TwoViews(const SourceSpec& spec) { return spec.gst.layout == drivers::GstLayout::kTwo; }
+
+// The noun and field of each shorthand kind: what names one view's input.
+struct Shorthand {
+  std::string_view noun;   // "device"
+  std::string_view field;  // "source.gst.device"
+};
+Shorthand ShorthandOf(const std::string& kind) {
+  if (kind == "uvc") return {"device", "source.gst.device"};
+  if (kind == "rtsp") return {"URL", "source.gst.url"};
+  return {"file", "source.gst.file"};
+}
+
+// One pipeline per view of the layout, from the kind's shorthand (`one` builds a pipeline from a
+// device, URL or file), or the problems.
+Result<drivers::GstOptions> WithPipelines(
+    const SourceSpec& spec, const std::string& single,
+    const std::function<Result<std::string>(const std::string&)>& one) {
+  const Shorthand what = ShorthandOf(spec.kind);
+  drivers::GstOptions options = spec.gst;
+  std::vector<std::string> problems;
+  const auto build = [&](const std::string& from, const std::string& field, std::string& out) {
+    if (from.empty()) {
+      problems.push_back(field + ": required (the " + std::string(what.noun) + ")");
+      return;
+    }
+    Result<std::string> pipeline = one(from);
+    if (pipeline.ok()) {
+      out = std::move(pipeline).value();
+    } else {
+      problems.push_back(field + ": " + pipeline.error().message);
+    }
+  };
+  if (TwoViews(spec)) {
+    build(spec.left, "source.left", options.left_pipeline);
+    build(spec.right, "source.right", options.right_pipeline);
+  } else {
+    build(single, std::string(what.field), options.pipeline);
   }
-  return Opened(drivers::AravisStereoSource::Open(spec.aravis, std::move(rig)), "source.aravis: ");
+  if (!problems.empty()) return Error::Invalid(problems);
+  return options;
+}
+
+// The options the kind opens with: gst's as given, the others' with their pipelines built.
+Result<drivers::GstOptions> GstOptionsOf(const SourceSpec& spec) {
+  if (spec.kind == "gst") return spec.gst;
+  if (spec.kind == "uvc") {
+    if (spec.gst.width == 0 || spec.gst.height == 0) {
+      return Error::Invalid(
+          {"source.gst.width, height: required for uvc (the size of one view, "
+           "--size WxH; the camera is asked for the frame that holds both)"});
+    }
+    // The camera's frame: both views side by side, one above the other, or one (two cameras).
+    const int w =
+        spec.gst.layout == drivers::GstLayout::kSideBySide ? 2 * spec.gst.width : spec.gst.width;
+    const int h =
+        spec.gst.layout == drivers::GstLayout::kTopBottom ? 2 * spec.gst.height : spec.gst.height;
+    const int fps = static_cast<int>(std::lround(spec.gst.fps));
+    return WithPipelines(spec, spec.gst_device, [&](const std::string& device) {
+      return drivers::UvcPipeline(device, w, h, fps);
+    });
+  }
+  if (spec.kind == "rtsp") {
+    return WithPipelines(spec, spec.gst_url, [&](const std::string& url) {
+      return drivers::RtspPipeline(url, spec.gst_latency_ms);
+    });
+  }
+  return WithPipelines(spec, spec.gst_file,
+                       [](const std::string& file) { return drivers::VideoFilePipeline(file); });
+}
+
+std::vector<std::string> CheckGst(const SourceSpec& spec) {
+  std::vector<std::string> problems;
+  const bool two = TwoViews(spec);
+  if (spec.kind == "gst" && (!spec.left.empty() || !spec.right.empty())) {
+    problems.push_back(
+        "source.left, source.right: not for gst (its pipelines are "
+        "source.gst.pipeline, or left_pipeline and right_pipeline with the layout "
+        "two)");
+  } else if (spec.kind != "gst" && !two && (!spec.left.empty() || !spec.right.empty())) {
+    problems.push_back("source.left, source.right: only with the layout two (one " +
+                       std::string(ShorthandOf(spec.kind).noun) + " per view)");
+  }
+  if (spec.gst_latency_ms < 0 || spec.gst_latency_ms > 5000) {
+    problems.push_back("source.gst.latency_ms: must be 0..5000" + Got(spec.gst_latency_ms));
+  }
+  Result<drivers::GstOptions> options = GstOptionsOf(spec);
+  if (!options.ok()) {
+    problems.push_back(options.error().message);
+    return problems;
+  }
+  AppendPrefixed(problems, "source.gst.", options->Validate());
+  return problems;
+}
+
+Result<std::unique_ptr<drivers::StereoSource>> OpenGst(const SourceSpec& spec) {
+  Result<drivers::GstOptions> options = GstOptionsOf(spec);
+  if (!options.ok()) return options.error();
+  Result<std::shared_ptr<const geometry::StereoRig>> rig = OptionalRig(spec);
+  if (!rig.ok()) return rig.error();
+  return Opened(drivers::GstStereoSource::Open(std::move(options).value(), std::move(rig).value()),
+                "source." + spec.kind + ": ");
 }
 
 std::vector<std::string> CheckReplay(const SourceSpec& spec) {
@@ -114,6 +229,10 @@ constexpr SourceKind kKinds[] = {
     {"aravis", "two GenICam cameras (GigE Vision or USB3 Vision) through Aravis", &CheckAravis,
      &OpenAravis},
     {"replay", "a recording", &CheckReplay, &OpenReplay},
+    {"gst", "any GStreamer pipeline (--pipeline)", &CheckGst, &OpenGst},
+    {"uvc", "a UVC stereo camera, or two webcams (--device, --layout)", &CheckGst, &OpenGst},
+    {"rtsp", "an RTSP camera (--url)", &CheckGst, &OpenGst},
+    {"video", "a video file, e.g. side by side (--file, --layout)", &CheckGst, &OpenGst},
 };
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include "core/common/error.h"
 #include "drivers/aravis/aravis_source.h"
 #include "drivers/files/image_source.h"
+#include "drivers/gstreamer/gst_source.h"
 #include "drivers/recording/replay_source.h"
 #include "drivers/stereo_source.h"
 #include "drivers/synthetic/chessboard_source.h"
@@ -34,10 +35,18 @@ struct SourceSpec {
   drivers::AravisOptions aravis;
   std::string replay_dir;
   drivers::ReplayOptions replay;
+  // gst, uvc, rtsp, video: the source's options (their pipelines are built from the shorthand's
+  // fields below, or given whole for gst); left and right above name the two devices, URLs or
+  // files of the layout "two".
+  drivers::GstOptions gst;
+  std::string gst_device = "/dev/video0";  // uvc
+  std::string gst_url;                     // rtsp
+  std::string gst_file;                    // video
+  int gst_latency_ms = 100;                // rtsp
 };
 
 struct SourceKind {
-  std::string_view name;         // "synthetic", "images", "aravis", "replay"
+  std::string_view name;         // "synthetic", "images", "aravis", "replay", "gst", ...
   std::string_view description;  // for --help and errors
   // Problems of the spec for this kind, before anything is opened.
   std::vector<std::string> (*check)(const SourceSpec& spec);

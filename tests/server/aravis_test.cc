@@ -15,6 +15,7 @@
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "stevi/v1/obstacle_service.pb.h"
 #include "tests/server/server_process.h"
+#include "tests/testing/sanitized.h"
 #include "tests/testing/fake_gv_camera.h"
 
 namespace stevi {
@@ -153,7 +154,9 @@ TEST_F(AravisServerTest, ALostCameraLeavesTheServerUpAndStreamsResume) {
   const double recovery_s = std::chrono::duration<double>(Clock::now() - restarted).count();
   std::cout << "recovery after the camera restarted: " << recovery_s << " s\n";
   ASSERT_EQ(status.source_state(), v1::SOURCE_STATE_RUNNING);
-  EXPECT_LT(recovery_s, 5.0);
+  // Uninstrumented, the reopening takes about 1-2 s (backoff 250 ms doubling to 1 s, plus Aravis's
+  // own timeouts); a sanitizer slows the control traffic several times over.
+  EXPECT_LT(recovery_s, testing::kSanitized ? 20.0 : 5.0);
   EXPECT_GE(status.pairing().reconnects(), 1u);
   EXPECT_TRUE(HealthBecomes(server_.address(), grpc::health::v1::HealthCheckResponse::SERVING));
   EXPECT_EQ(watch.Wait(std::chrono::seconds(30)), 0) << watch.DrainStderr();

@@ -214,13 +214,17 @@ TEST_F(MavlinkBridgeTest, TheAutopilotsPosesGeoreferenceTheFramesAndObstaclesRea
   std::cout << "HEARTBEAT: " << heartbeats.size() << " at " << heartbeat_hz << " Hz\n";
   EXPECT_NEAR(heartbeat_hz, 1.0, 0.15);
   // Its status line (logfmt) counts what went out and says the pose flows: the first line whose
-  // frame is georeferenced (one printed while the first states arrive may still say that the
-  // frame predates them), within 10 lines at 1 Hz.
+  // frame is georeferenced and whose obstacles flow (one printed while the first states arrive may
+  // still say that the frame predates them; under TSan one came after the first frame alone,
+  // saying obstacles=stopped), within 10 lines at 1 Hz.
   std::optional<std::string> status;
   for (int line = 0; line < 10; ++line) {
     status = bridge_->WaitForStderrLine("event=status", 10s);
     ASSERT_TRUE(status) << bridge_->DrainStderr();
-    if (status->find("geo=GEO_STATUS_OK") != std::string::npos) break;
+    if (status->find("geo=GEO_STATUS_OK") != std::string::npos &&
+        status->find("obstacles=flowing") != std::string::npos) {
+      break;
+    }
   }
   std::cout << *status << "\n";
   EXPECT_THAT(*status, HasSubstr("autopilot=ok"));

@@ -57,7 +57,8 @@ class ServerProcess {
         server_->WaitForStderrLine("serving", std::chrono::seconds(60));
     ASSERT_TRUE(line.has_value()) << "the server did not start: " << server_->DrainStderr();
     std::smatch m;
-    ASSERT_TRUE(std::regex_search(*line, m, std::regex("127\\.0\\.0\\.1:(\\d+)"))) << *line;
+    // The listen= field: the source's description may hold an address too (an RTSP camera's).
+    ASSERT_TRUE(std::regex_search(*line, m, std::regex("listen=127\\.0\\.0\\.1:(\\d+)"))) << *line;
     address_ = "127.0.0.1:" + m[1].str();
   }
 

@@ -27,6 +27,7 @@
 #include "foxglove/ImageAnnotations.pb.h"
 #include "foxglove/LocationFix.pb.h"
 #include "foxglove/SceneUpdate.pb.h"
+#include "proto/foxglove/convert.h"
 #include "stevi/v1/obstacle_service.pb.h"
 #include "tests/testing/ws_client.h"
 
@@ -40,6 +41,7 @@ using stevi::testing::WsClient;
 using stevi::testing::WsMessage;
 using stevi::testing::WsOptions;
 using ::testing::HasSubstr;
+using to_foxglove::FileDescriptorSetFor;
 
 constexpr std::chrono::seconds kTimeout(5);
 const char kV1[] = "foxglove.websocket.v1";

@@ -1,7 +1,7 @@
 # The station's Foxglove WebSocket server against the protocol's specification, over loopback
 # (tests/testing/ws_client.h), and the test client's own RFC 6455 checks.
 stevi_test(client/station/foxglove_server_test SOURCES client/station/foxglove_server_test.cc
-  LIBS stevi_foxglove_server stevi_testing_ws stevi_proto nlohmann_json::nlohmann_json
+  LIBS stevi_foxglove_server stevi_foxglove_convert stevi_testing_ws stevi_proto nlohmann_json::nlohmann_json
   Threads::Threads TIMEOUT 120)
 
 # The ground station's page in headless Chromium against a real stevi-server and `stevi station`.

@@ -27,7 +27,7 @@ TEST(SourceKinds, NamesAreUniqueAndTheDefaultIsSynthetic) {
     EXPECT_EQ(FindSourceKind(kind.name), &kind);
   }
   EXPECT_EQ(SourceKinds().front().name, "synthetic");
-  EXPECT_EQ(SourceKindNames(), "synthetic, images, aravis, replay");
+  EXPECT_EQ(SourceKindNames(), "synthetic, images, aravis, replay, gst, uvc, rtsp, video");
   EXPECT_EQ(FindSourceKind("camera"), nullptr);
 }
 
@@ -52,6 +52,35 @@ TEST(CheckSource, NamesWhatEachKindNeeds) {
   EXPECT_THAT(aravis, Contains(HasSubstr("source.right: must be another camera")));
   EXPECT_THAT(aravis, Contains("source.aravis.buffers: must be in [2, 64] (got 1)"));
   EXPECT_THAT(aravis, Contains(HasSubstr("source.aravis.trigger_line: required")));
+
+  // The GStreamer kinds: each names what it needs, and its pipelines are built safely.
+  spec = SourceSpec{};
+  spec.kind = "video";
+  EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.gst.file: required")));
+  spec.gst_file = "flight.avi";
+  EXPECT_THAT(CheckSource(spec), IsEmpty());
+  spec.left = "a.avi";
+  EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("only with the layout two (one file per view)")));
+  spec.gst.layout = drivers::GstLayout::kTwo;
+  EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.right: required (the file)")));
+  spec = SourceSpec{};
+  spec.kind = "uvc";
+  EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.gst.width, height: required for uvc")));
+  spec.gst.width = 640;
+  spec.gst.height = 480;
+  EXPECT_THAT(CheckSource(spec), IsEmpty());
+  spec = SourceSpec{};
+  spec.kind = "rtsp";
+  spec.gst_url = "rtsp://camera/stream\" quoted";
+  EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.gst.url")));
+  spec.gst_url = "rtsp://camera/stream";
+  spec.gst_latency_ms = 9000;
+  EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.gst.latency_ms: must be 0..5000")));
+  spec = SourceSpec{};
+  spec.kind = "gst";
+  EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.gst.pipeline")));
+  spec.gst.pipeline = "videotestsrc ! appsink name=stevi_sink";
+  EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("stevi_sink")));
 
   spec = SourceSpec{};
   spec.kind = "replay";
