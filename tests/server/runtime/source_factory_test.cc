@@ -60,7 +60,8 @@ TEST(CheckSource, NamesWhatEachKindNeeds) {
   spec.gst_file = "flight.avi";
   EXPECT_THAT(CheckSource(spec), IsEmpty());
   spec.left = "a.avi";
-  EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("only with the layout two (one file per view)")));
+  EXPECT_THAT(CheckSource(spec),
+              Contains(HasSubstr("only with the layout two (one file per view)")));
   spec.gst.layout = drivers::GstLayout::kTwo;
   EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.right: required (the file)")));
   spec = SourceSpec{};
