@@ -80,10 +80,15 @@ Result<std::unique_ptr<McapRecording>> McapRecording::Start(McapRecordingOptions
 
 McapRecording::~McapRecording() { Stop(); }
 
+// The writer's errors are sticky (a full disk fails every later write alike): the first is logged
+// and kept for status; the rest are the same.
 void McapRecording::Fail(const Error& error) {
+  {
+    std::lock_guard lock(mu_);
+    if (!status_.error.empty()) return;
+    status_.error = error.message;
+  }
   Log(LogLevel::kError, "mcap_recording", {{"file", options_.file}, {"error", error.message}});
-  std::lock_guard lock(mu_);
-  if (status_.error.empty()) status_.error = error.message;
 }
 
 void McapRecording::WriteStatus(int64_t unix_time_ns) {

@@ -54,8 +54,8 @@ int Info(const std::string& path) {
     const mcap::Schema* schema = r.schema(channel.schema_id);
     const uint64_t n = counts.count(id) ? counts.at(id) : 0;
     std::cout << "  " << std::left << std::setw(26) << channel.topic << std::right << std::setw(8)
-              << n << "  " << (span_s > 0 ? static_cast<double>(n) / span_s : 0.0) << " Hz  "
-              << (schema ? schema->name : std::string("(no schema)")) << "\n";
+              << n << "  " << (span_s > 0 && n > 1 ? static_cast<double>(n - 1) / span_s : 0.0)
+              << " Hz  " << (schema ? schema->name : std::string("(no schema)")) << "\n";
   }
   for (const mcap::Metadata& m : r.metadata()) {
     for (const auto& [key, value] : m.values) {

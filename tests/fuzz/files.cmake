@@ -5,4 +5,5 @@ stevi_fuzz(calibration_yaml SOURCES ${CMAKE_CURRENT_LIST_DIR}/calibration_yaml_f
            LIBS stevi_calibration stevi_geometry)
 stevi_fuzz(calibration_image SOURCES ${CMAKE_CURRENT_LIST_DIR}/calibration_image_fuzz.cc
            LIBS stevi_calibration)
-stevi_fuzz(recording SOURCES ${CMAKE_CURRENT_LIST_DIR}/recording_fuzz.cc LIBS stevi_recording)
+stevi_fuzz(recording SOURCES ${CMAKE_CURRENT_LIST_DIR}/recording_fuzz.cc
+           LIBS stevi_recording stevi_flight_export stevi_mcap)

@@ -12,6 +12,9 @@
 //   - the iteration ends (within one record per byte), and after Rewind() a second pass returns
 //     the same records and the same end note;
 //   - nothing throws out.
+// The same folder then goes through `stevi export --format mcap`'s own reader of the format
+// (client/flight_export.h, protobuf alone), which must end with a result or a clear error; when
+// it succeeds, the MCAP file it wrote reads back whole.
 #include <unistd.h>
 
 #include <algorithm>
@@ -26,6 +29,8 @@
 #include <utility>
 #include <vector>
 
+#include "client/flight_export.h"
+#include "drivers/mcap/mcap_reader.h"
 #include "drivers/recording/recording_reader.h"
 
 namespace drivers = stevi::drivers;
@@ -104,6 +109,23 @@ Pass ReadAll(drivers::RecordingReader& reader, bool decode) {
 
 }  // namespace
 
+// The client's export of the folder into a flight log, read back.
+void Export(const std::string& dir) {
+  const std::string out = dir + "/export.mcap";
+  std::error_code ignored;
+  std::filesystem::remove(out, ignored);
+  stevi::Result<std::unique_ptr<drivers::FlightLog>> log =
+      drivers::FlightLog::Create(out, drivers::FlightLogOptions{}, {});
+  Require(log.ok());
+  const stevi::Result<stevi::client::RecordingExport> done =
+      stevi::client::ExportRecording(dir, **log);
+  Require(done.ok() || !done.error().message.empty());
+  Require((*log)->Close().ok());
+  stevi::Result<std::unique_ptr<stevi::mcap::Reader>> read = stevi::mcap::Reader::Open(out);
+  Require(read.ok() && (*read)->indexed());
+  Require((*read)->ReadAll().ok());
+}
+
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size < 3) return 0;
   const bool decode = (data[0] & 1) != 0;
@@ -116,6 +138,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   WriteFile(dir + "/" + drivers::kManifestFileName, manifest, manifest_size);
   WriteFile(dir + "/" + drivers::kRecordsFileName, records, records_size);
 
+  Export(dir);
   stevi::Result<std::unique_ptr<drivers::RecordingReader>> opened =
       drivers::RecordingReader::Open(dir);
   if (!opened.ok()) return 0;
