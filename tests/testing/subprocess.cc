@@ -33,20 +33,26 @@ int RemainingMs(Clock::time_point deadline) {
 
 Subprocess::Subprocess(const std::vector<std::string>& argv)
     : program_(argv.empty() ? "" : argv[0]) {
+  // Everything that allocates happens before fork. The test process has threads (gRPC,
+  // GStreamer, Aravis): a lock one of them held at the fork stays held in the child forever, and
+  // the child, allocating, would hang before exec.
+  std::vector<char*> args;
+  args.reserve(argv.size() + 1);
+  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  // Close-on-exec, so that a child started by another thread at the same moment cannot inherit
+  // these pipes and hold them open past this child's exit. dup2 below gives the child its own
+  // ends without the flag.
   int out_pipe[2], err_pipe[2];
-  if (pipe(out_pipe) != 0 || pipe(err_pipe) != 0) throw std::runtime_error("pipe failed");
+  if (pipe2(out_pipe, O_CLOEXEC) != 0 || pipe2(err_pipe, O_CLOEXEC) != 0) {
+    throw std::runtime_error("pipe failed");
+  }
   pid_ = fork();
   if (pid_ < 0) throw std::runtime_error("fork failed");
   if (pid_ == 0) {
+    // Async-signal-safe calls only.
     dup2(out_pipe[1], STDOUT_FILENO);
     dup2(err_pipe[1], STDERR_FILENO);
-    close(out_pipe[0]);
-    close(err_pipe[0]);
-    close(out_pipe[1]);
-    close(err_pipe[1]);
-    std::vector<char*> args;
-    for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
     execv(args[0], args.data());
     _exit(127);
   }
