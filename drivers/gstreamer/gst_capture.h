@@ -85,10 +85,10 @@ struct CaptureOptions {
 
 // Thread-safe: status() from any thread; the callbacks run on the capture's thread.
 //
-// The thread pulls GRAY8 samples (100 ms at a time), watches the bus (ERROR, EOS, WARNING) and,
-// when live, a no-frame watchdog. On a loss it sets the pipeline to NULL, unrefs it and parses it
-// again (a parsed pipeline with sometimes-pads is not reliably reusable), after 250 ms, then
-// 500 ms, then every second, until frames come again.
+// The thread pulls samples (100 ms at a time) and copies their luma, watches the bus (ERROR, EOS,
+// WARNING) and, when live, a no-frame watchdog. On a loss it sets the pipeline to NULL, unrefs it
+// and parses it again (a parsed pipeline with sometimes-pads is not reliably reusable), after 250
+// ms, then 500 ms, then every second, until frames come again.
 class GstCapture {
  public:
   // Gets each frame; may block (a file's back-pressure) until it returns, and must return soon
@@ -101,9 +101,9 @@ class GstCapture {
   // Parses the pipeline (with GST_PARSE_FLAG_FATAL_ERRORS), sets it PLAYING and waits for the
   // first frame (pulled and checked; it goes on to `on_frame`). Errors, each naming the capture:
   // kInvalidArgument for a bad description or a missing element (named, with the Debian package
-  // for the usual ones), a size check's problem or a stream that does not negotiate GRAY8;
-  // kNotFound for a missing device or file; kUnavailable for a device that cannot be opened or no
-  // frame within start_timeout.
+  // for the usual ones), a size check's problem or a stream that does not negotiate one of
+  // kGstLumaFormats; kNotFound for a missing device or file; kUnavailable for a device that cannot
+  // be opened or no frame within start_timeout.
   static Result<std::unique_ptr<GstCapture>> Start(CaptureOptions options, FrameSink on_frame,
                                                    Notify on_change);
   // Stops the thread (within about 100 ms, once `on_frame` has returned) and tears the pipeline

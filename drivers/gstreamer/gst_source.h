@@ -32,8 +32,8 @@ struct GstOptions {
   GstLayout layout = GstLayout::kSideBySide;
   // side-by-side, top-bottom: the one pipeline; two: left_pipeline and right_pipeline. Each is a
   // gst-launch description whose last element gives the frames ("v4l2src ! jpegdec"); the driver
-  // appends " ! videoconvert ! video/x-raw,format=GRAY8 ! appsink name=stevi_sink ...", so none
-  // may name an element stevi_sink. pipelines.h builds the usual ones.
+  // appends " ! videoconvert ! video/x-raw,format={luma formats} ! appsink name=stevi_sink ...",
+  // so none may name an element stevi_sink. pipelines.h builds the usual ones.
   std::string pipeline;
   std::string left_pipeline;
   std::string right_pipeline;

@@ -123,8 +123,8 @@ Result<std::string> VideoFilePipeline(std::string_view path) {
 }
 
 std::string GstSinkTail(bool live) {
-  return " ! videoconvert ! video/x-raw,format=GRAY8 ! appsink name=" + std::string(kGstSinkName) +
-         (live ? " drop=true" : " drop=false") +
+  return " ! videoconvert ! video/x-raw,format=" + std::string(kGstLumaFormats) +
+         " ! appsink name=" + std::string(kGstSinkName) + (live ? " drop=true" : " drop=false") +
          " max-buffers=2 sync=false emit-signals=false enable-last-sample=false";
 }
 

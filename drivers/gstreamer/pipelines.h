@@ -36,9 +36,17 @@ Result<std::string> RtspPipeline(std::string_view url, int latency_ms);
 // MKV needs only plugins-base and -good.
 Result<std::string> VideoFilePipeline(std::string_view path);
 
-// What the driver appends to a user pipeline: " ! videoconvert ! video/x-raw,format=GRAY8 !
-// appsink name=stevi_sink ..." with, for a live source, drop=true max-buffers=2 (the newest frame
-// wins), and for a file drop=false max-buffers=2 (every frame, the decoder waits for the reader).
+// The formats the appsink takes: each holds the luma the pipeline reads as it is, as a plane of
+// its own (GRAY8 and the planar and semi-planar YUV formats) or every other byte (the packed 4:2:2
+// ones). videoconvert passes any of them through untouched, so a decoder's I420 (jpegdec) or a
+// UVC camera's YUY2 costs one copy of the luma; anything else (RGB, say) is converted.
+inline constexpr std::string_view kGstLumaFormats =
+    "{GRAY8,I420,YV12,NV12,NV21,Y42B,Y444,YUY2,YVYU,UYVY}";
+
+// What the driver appends to a user pipeline: " ! videoconvert ! video/x-raw,format={luma
+// formats} ! appsink name=stevi_sink ..." with, for a live source, drop=true max-buffers=2 (the
+// newest frame wins), and for a file drop=false max-buffers=2 (every frame, the decoder waits for
+// the reader).
 std::string GstSinkTail(bool live);
 
 // Whether `pipeline` mentions the driver's sink name (it would clash with the appended appsink).

@@ -39,8 +39,8 @@ void TakeOver([[maybe_unused]] void* p) {
 
 }  // namespace
 
-void WriteMjpegAvi(const std::string& path, const std::vector<cv::Mat>& frames, int fps,
-                   int quality) {
+void WriteVideo(const std::string& path, const std::vector<cv::Mat>& frames, int fps,
+                const std::string& encoding) {
   ASSERT_FALSE(frames.empty());
   drivers::InitGStreamer();
   const cv::Size size = frames[0].size();
@@ -49,9 +49,8 @@ void WriteMjpegAvi(const std::string& path, const std::vector<cv::Mat>& frames, 
   const std::string description =
       "appsrc name=src format=time caps=video/x-raw,format=GRAY8,width=" +
       std::to_string(size.width) + ",height=" + std::to_string(size.height) +
-      ",framerate=" + std::to_string(fps) +
-      "/1 ! videoconvert ! jpegenc quality=" + std::to_string(quality) +
-      " ! avimux ! filesink location=" + location.value();
+      ",framerate=" + std::to_string(fps) + "/1 ! " + encoding +
+      " ! filesink location=" + location.value();
   GError* raw_error = nullptr;
   drivers::gst::ElementPtr pipeline = drivers::gst::AdoptFloating(
       gst_parse_launch_full(description.c_str(), nullptr, GST_PARSE_FLAG_FATAL_ERRORS, &raw_error));
@@ -82,6 +81,16 @@ void WriteMjpegAvi(const std::string& path, const std::vector<cv::Mat>& frames, 
   gst_element_set_state(pipeline.get(), GST_STATE_NULL);
   ASSERT_TRUE(message) << "no EOS from the writer within 30 s";
   ASSERT_EQ(GST_MESSAGE_TYPE(message.get()), GST_MESSAGE_EOS) << "the writer failed";
+}
+
+void WriteMjpegAvi(const std::string& path, const std::vector<cv::Mat>& frames, int fps,
+                   int quality) {
+  WriteVideo(path, frames, fps,
+             "videoconvert ! jpegenc quality=" + std::to_string(quality) + " ! avimux");
+}
+
+void WriteRawMkv(const std::string& path, const std::vector<cv::Mat>& frames, int fps) {
+  WriteVideo(path, frames, fps, "matroskamux");
 }
 
 LoopbackRtspServer::LoopbackRtspServer(const std::string& launch) {

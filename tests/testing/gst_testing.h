@@ -12,11 +12,18 @@
 
 namespace stevi::testing {
 
-// Writes `frames` (CV_8UC1, one size) as a Motion-JPEG AVI at `fps` through appsrc ! jpegenc !
-// avimux, rows padded to GStreamer's GRAY8 stride (a multiple of 4), then waits for the muxer's
-// end of stream. Fails the test (ASSERT) on error: call with ASSERT_NO_FATAL_FAILURE.
+// Writes `frames` (CV_8UC1, one size) as a video at `fps` through appsrc ! ENCODING ! filesink,
+// rows padded to GStreamer's GRAY8 stride (a multiple of 4), then waits for the muxer's end of
+// stream. Fails the test (ASSERT) on error: call with ASSERT_NO_FATAL_FAILURE.
+//   WriteVideo: any `encoding` (the elements between the GRAY8 appsrc and the filesink).
+//   WriteMjpegAvi: Motion-JPEG in AVI (jpegenc ! avimux), lossy, as a UVC camera's MJPEG mode.
+//   WriteRawMkv: uncompressed GRAY8 in Matroska (matroskamux), lossless: the frames come back
+//   bit for bit.
+void WriteVideo(const std::string& path, const std::vector<cv::Mat>& frames, int fps,
+                const std::string& encoding);
 void WriteMjpegAvi(const std::string& path, const std::vector<cv::Mat>& frames, int fps,
                    int quality = 95);
+void WriteRawMkv(const std::string& path, const std::vector<cv::Mat>& frames, int fps);
 
 // A gst-rtsp-server on 127.0.0.1 serving one stream at rtsp://127.0.0.1:PORT/stereo, run by its
 // own thread and GMainContext. `launch` is the media's pipeline, in parentheses, its payloader

@@ -62,7 +62,9 @@ TEST(VideoFilePipeline, QuotesThePath) {
 TEST(GstSinkTail, LiveDropsFilesWait) {
   EXPECT_THAT(GstSinkTail(true), HasSubstr("appsink name=stevi_sink drop=true max-buffers=2"));
   EXPECT_THAT(GstSinkTail(false), HasSubstr("appsink name=stevi_sink drop=false max-buffers=2"));
-  EXPECT_THAT(GstSinkTail(true), HasSubstr(" ! videoconvert ! video/x-raw,format=GRAY8 ! "));
+  EXPECT_THAT(GstSinkTail(true),
+              HasSubstr(" ! videoconvert ! video/x-raw,format={GRAY8,I420,YV12,NV12,NV21,Y42B,Y444,"
+                        "YUY2,YVYU,UYVY} ! "));
   EXPECT_TRUE(MentionsGstSinkName("videotestsrc ! appsink name=stevi_sink"));
   EXPECT_FALSE(MentionsGstSinkName("videotestsrc ! appsink name=mine"));
 }

@@ -193,6 +193,33 @@ TEST(GstVideoFile, LoopsWithTimesThatKeepIncreasing) {
   }
 }
 
+// The appsink takes the luma of a decoder's or a camera's YUV format as it is, without a
+// conversion: a lossless video of the views, turned by the pipeline into each format the sink
+// takes (videoconvert keeps the luma of a grey image), comes back with the views' pixels exactly.
+TEST(GstVideoFile, EachYuvFormatGivesItsLumaExactly) {
+  const std::vector<Pair> pairs = RenderPairs(cv::Size(160, 120), 3);
+  std::vector<cv::Mat> whole;
+  for (const Pair& p : pairs) whole.push_back(Compose(p, GstLayout::kSideBySide));
+  const std::string path = TempPath("raw.mkv");
+  testing::WriteRawMkv(path, whole, kFps);
+  if (::testing::Test::HasFatalFailure()) return;
+  for (const char* format :
+       {"GRAY8", "I420", "YV12", "NV12", "NV21", "Y42B", "Y444", "YUY2", "YVYU", "UYVY"}) {
+    SCOPED_TRACE(format);
+    GstOptions options = FileOptions(path, GstLayout::kSideBySide);
+    options.pipeline += std::string(" ! videoconvert ! video/x-raw,format=") + format;
+    Result<std::unique_ptr<GstStereoSource>> source = GstStereoSource::Open(options, nullptr);
+    ASSERT_TRUE(source.ok()) << source.error().message;
+    const Reading reading = ReadAll(*source.value(), 10);
+    ASSERT_EQ(reading.frames.size(), pairs.size()) << reading.end.message;
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      EXPECT_EQ(cv::norm(reading.frames[k].left, pairs[k].left, cv::NORM_INF), 0) << "frame " << k;
+      EXPECT_EQ(cv::norm(reading.frames[k].right, pairs[k].right, cv::NORM_INF), 0)
+          << "frame " << k;
+    }
+  }
+}
+
 // Concatenated JPEGs in multipart/x-mixed-replace framing (multipartdemux's default boundary):
 // a stream whose frame size can change in the middle.
 void WriteMultipartJpeg(const std::string& path, const std::vector<cv::Mat>& frames) {
