@@ -18,18 +18,16 @@ namespace {
 
 namespace fs = std::filesystem;
 
-Error Invalid(const std::string& message) { return Error{ErrorCode::kInvalidArgument, message}; }
-
 Result<v1::RecordingManifest> ReadManifest(const std::string& dir) {
   const fs::path path = fs::path(dir) / "manifest.json";
   std::error_code ec;
   const uintmax_t size = fs::file_size(path, ec);
   if (ec) {
-    return Error{ErrorCode::kNotFound,
-                 dir + " is not a stevi recording (no manifest.json: " + ec.message() + ")"};
+    return NotFound(dir + " is not a stevi recording (no manifest.json: " + ec.message() + ")");
   }
   if (size > kMaxExportManifestBytes) {
-    return Invalid(path.string() + ": " + std::to_string(size) + " bytes, more than a manifest");
+    return InvalidArgument(path.string() + ": " + std::to_string(size) +
+                           " bytes, more than a manifest");
   }
   std::ifstream in(path, std::ios::binary);
   std::stringstream text;
@@ -39,15 +37,16 @@ Result<v1::RecordingManifest> ReadManifest(const std::string& dir) {
   parse.ignore_unknown_fields = true;
   if (const auto status = google::protobuf::util::JsonStringToMessage(text.str(), &manifest, parse);
       !status.ok()) {
-    return Invalid(path.string() + ": not a recording manifest (" + status.ToString() + ")");
+    return InvalidArgument(path.string() + ": not a recording manifest (" + status.ToString() +
+                           ")");
   }
   if (manifest.format_version() != 1) {
-    return Invalid(path.string() + ": format version " + std::to_string(manifest.format_version()) +
-                   " is not known (1 is)");
+    return InvalidArgument(path.string() + ": format version " +
+                           std::to_string(manifest.format_version()) + " is not known (1 is)");
   }
   if (manifest.encoding() != v1::IMAGE_ENCODING_PNG) {
-    return Invalid(path.string() + ": image encoding " +
-                   v1::ImageEncoding_Name(manifest.encoding()) + " is not known (PNG is)");
+    return InvalidArgument(path.string() + ": image encoding " +
+                           v1::ImageEncoding_Name(manifest.encoding()) + " is not known (PNG is)");
   }
   return manifest;
 }
@@ -86,7 +85,7 @@ Result<RecordingExport> ExportRecording(const std::string& dir, drivers::FlightL
 
   const std::string records_path = (fs::path(dir) / "records.bin").string();
   Fd file{::open(records_path.c_str(), O_RDONLY | O_CLOEXEC)};
-  if (file.fd < 0) return Error{ErrorCode::kNotFound, records_path + ": cannot be opened"};
+  if (file.fd < 0) return NotFound(records_path + ": cannot be opened");
   google::protobuf::io::FileInputStream raw(file.fd);
   uint64_t number = 0;
   for (;; ++number) {
@@ -97,7 +96,7 @@ Result<RecordingExport> ExportRecording(const std::string& dir, drivers::FlightL
     if (!in.ReadVarint32(&size)) break;  // the end (or a torn length: nothing follows)
     const std::string where = records_path + " record " + std::to_string(number);
     if (size > kMaxExportRecordBytes) {
-      return Invalid(where + ": " + std::to_string(size) + " bytes, more than any record");
+      return InvalidArgument(where + ": " + std::to_string(size) + " bytes, more than any record");
     }
     std::string bytes;
     if (!in.ReadString(&bytes, static_cast<int>(size))) {
@@ -105,7 +104,7 @@ Result<RecordingExport> ExportRecording(const std::string& dir, drivers::FlightL
       break;
     }
     v1::RecordEntry entry;
-    if (!entry.ParseFromString(bytes)) return Invalid(where + ": not a RecordEntry");
+    if (!entry.ParseFromString(bytes)) return InvalidArgument(where + ": not a RecordEntry");
     if (entry.has_frame()) {
       const v1::RecordedFrame& f = entry.frame();
       ++out.frames;
@@ -139,7 +138,7 @@ Result<RecordingExport> ExportRecording(const std::string& dir, drivers::FlightL
 Status ForEachFrameLine(const std::string& path,
                         const std::function<Status(const v1::TrackFrame&)>& each) {
   std::ifstream in(path);
-  if (!in) return Error{ErrorCode::kNotFound, "cannot read " + path};
+  if (!in) return NotFound("cannot read " + path);
   std::string line;
   uint64_t line_number = 0;
   google::protobuf::util::JsonParseOptions parse;
@@ -149,8 +148,8 @@ Status ForEachFrameLine(const std::string& path,
     if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
     v1::TrackFrame frame;
     if (!google::protobuf::util::JsonStringToMessage(line, &frame, parse).ok()) {
-      return Invalid(path + " line " + std::to_string(line_number) +
-                     ": not a TrackFrame JSON line (as `stevi watch --json` writes)");
+      return InvalidArgument(path + " line " + std::to_string(line_number) +
+                             ": not a TrackFrame JSON line (as `stevi watch --json` writes)");
     }
     if (Status s = each(frame); !s.ok()) return s;
   }

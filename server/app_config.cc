@@ -12,16 +12,19 @@
 #include <google/protobuf/text_format.h>
 #include <google/protobuf/util/json_util.h>
 
+#include <algorithm>
 #include <cctype>
 #include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <fstream>
 #include <sstream>
 
 #include "drivers/aravis/aravis_source.h"
 #include "drivers/files/image_source.h"
+#include "drivers/recording/recorder.h"
 #include "drivers/recording/replay_source.h"
 #include "drivers/synthetic/scenarios.h"
 #include "drivers/synthetic/synthetic_source.h"
@@ -114,7 +117,7 @@ Result<std::unique_ptr<PoseSource>> MakePoseSource(
   geo::PoseBufferOptions options;
   if (std::vector<std::string> problems = FieldsFromProto(config, options, "geo.");
       !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   std::optional<geo::VehicleState> fixed = synthetic_default;
   if (config.has_fixed_pose()) fixed = FromProto(config.fixed_pose());
@@ -137,20 +140,19 @@ Result<Flags> ParseFlags(int argc, const char* const* argv, const std::set<std::
       name = name.substr(0, eq);
     }
     if (switches.count(name) != 0) {
-      if (value.has_value())
-        return Error{ErrorCode::kInvalidArgument, "--" + name + " takes no value"};
+      if (value.has_value()) return InvalidArgument("--" + name + " takes no value");
       flags.values[name] = "true";
       continue;
     }
     if (known.count(name) == 0) {
-      return Error{ErrorCode::kInvalidArgument, "unknown flag --" + name + " (see --help)"};
+      return InvalidArgument("unknown flag --" + name + " (see --help)");
     }
     if (!value.has_value()) {
-      if (i + 1 >= argc) return Error{ErrorCode::kInvalidArgument, "--" + name + " needs a value"};
+      if (i + 1 >= argc) return InvalidArgument("--" + name + " needs a value");
       value = argv[++i];
     }
     if (!flags.values.emplace(name, *value).second) {
-      return Error{ErrorCode::kInvalidArgument, "--" + name + " given twice"};
+      return InvalidArgument("--" + name + " given twice");
     }
   }
   return flags;
@@ -159,16 +161,15 @@ Result<Flags> ParseFlags(int argc, const char* const* argv, const std::set<std::
 Result<v1::ServerConfig> LoadServerConfig(const std::string& path) {
   std::error_code ec;
   const uintmax_t size = std::filesystem::file_size(path, ec);
-  if (ec) return Error{ErrorCode::kNotFound, "config " + path + ": " + ec.message()};
+  if (ec) return NotFound("config " + path + ": " + ec.message());
   if (size > kMaxConfigBytes) {
-    return Error{ErrorCode::kResourceExhausted,
-                 "config " + path + ": " + std::to_string(size) + " bytes, the limit is 1 MiB"};
+    return ResourceExhausted("config " + path + ": " + std::to_string(size) +
+                             " bytes, the limit is 1 MiB");
   }
   std::ifstream in(path, std::ios::binary);
   std::stringstream buffer;
   buffer << in.rdbuf();
-  if (!in.good() && !in.eof())
-    return Error{ErrorCode::kInvalidArgument, "config " + path + ": cannot read"};
+  if (!in.good() && !in.eof()) return InvalidArgument("config " + path + ": cannot read");
   v1::ServerConfig config;
   if (Status parsed = ParseConfigText(buffer.str(), "config " + path, config); !parsed.ok()) {
     return parsed.error();
@@ -179,8 +180,8 @@ Result<v1::ServerConfig> LoadServerConfig(const std::string& path) {
 Status ParseConfigText(const std::string& text, const std::string& name,
                        google::protobuf::Message& config) {
   if (text.size() > kMaxConfigBytes) {
-    return Error{ErrorCode::kResourceExhausted,
-                 name + ": " + std::to_string(text.size()) + " bytes, the limit is 1 MiB"};
+    return ResourceExhausted(name + ": " + std::to_string(text.size()) +
+                             " bytes, the limit is 1 MiB");
   }
   const size_t first = text.find_first_not_of(" \t\r\n");
   if (first != std::string::npos && text[first] == '{') {
@@ -188,7 +189,7 @@ Status ParseConfigText(const std::string& text, const std::string& name,
     options.ignore_unknown_fields = false;
     const auto status = google::protobuf::util::JsonStringToMessage(text, &config, options);
     if (!status.ok()) {
-      return Error{ErrorCode::kInvalidArgument, name + " (JSON): " + std::string(status.message())};
+      return InvalidArgument(name + " (JSON): " + std::string(status.message()));
     }
   } else {
     google::protobuf::TextFormat::Parser parser;
@@ -198,14 +199,14 @@ Status ParseConfigText(const std::string& text, const std::string& name,
       std::vector<std::string> problems;
       for (const std::string& p : errors.problems) problems.push_back(name + ": " + p);
       if (problems.empty()) problems.push_back(name + ": cannot parse");
-      return Error::Invalid(problems);
+      return InvalidArgument(problems);
     }
   }
   std::vector<std::string> problems;
   CheckUtf8(config, "", problems);
   if (!problems.empty()) {
     for (std::string& p : problems) p = name + ": " + p;
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   return Status::Ok();
 }
@@ -388,7 +389,7 @@ Status ApplyFlagsToCopy(const Flags& flags, v1::ServerConfig& config) {
       config.mutable_pipeline()->set_algorithm(ToProto(*algorithm));
     }
   }
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   return Status::Ok();
 }
 
@@ -594,15 +595,13 @@ std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config) {
   if (config.record().has_dir() && config.record().dir().empty()) {
     problems.push_back("record.dir: must not be empty");
   }
-  if (config.record().has_queue_frames() &&
-      (config.record().queue_frames() < 1 || config.record().queue_frames() > 1024)) {
-    problems.push_back("record.queue_frames: must be 1..1024 (got " +
-                       std::to_string(config.record().queue_frames()) + ")");
+  drivers::RecorderOptions record;  // checked by the recorder's own field list
+  if (config.record().has_max_bytes()) record.max_bytes = config.record().max_bytes();
+  if (config.record().has_queue_frames()) {
+    record.queue_frames = static_cast<int>(
+        std::min<uint32_t>(config.record().queue_frames(), std::numeric_limits<int>::max()));
   }
-  if (config.record().has_max_bytes() && config.record().max_bytes() < (uint64_t{1} << 20)) {
-    problems.push_back("record.max_bytes: must be at least 1 MiB (got " +
-                       std::to_string(config.record().max_bytes()) + ")");
-  }
+  AppendPrefixed(problems, "record.", record.Validate());
   if (config.has_record_mcap()) McapRecordingOptionsFrom(config.record_mcap(), problems);
   return problems;
 }
@@ -648,7 +647,7 @@ Result<pipeline::PipelineConfig> BuildPipelineConfig(const v1::PipelineConfig& c
   if (problems.empty()) problems = core.Validate();
   if (!problems.empty()) {
     for (std::string& p : problems) p = "pipeline." + p;
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   return core;
 }
@@ -657,7 +656,7 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const v1::SourceConfig
                                                           bool loop_images) {
   std::vector<std::string> problems;
   const SourceSpec spec = SourceSpecFrom(config, loop_images, problems);
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   return server::OpenSource(spec);
 }
 

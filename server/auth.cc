@@ -44,13 +44,12 @@ bool IsLoopbackListen(const std::string& listen) {
 
 Result<std::string> ReadSecretFile(const std::string& path, size_t max_bytes) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return Error{ErrorCode::kNotFound, path + ": cannot be read"};
+  if (!in) return NotFound(path + ": cannot be read");
   std::string text(max_bytes + 1, '\0');
   in.read(text.data(), static_cast<std::streamsize>(text.size()));
   text.resize(static_cast<size_t>(in.gcount()));
   if (text.size() > max_bytes) {
-    return Error{ErrorCode::kInvalidArgument,
-                 path + ": larger than " + std::to_string(max_bytes) + " bytes"};
+    return InvalidArgument(path + ": larger than " + std::to_string(max_bytes) + " bytes");
   }
   return text;
 }
@@ -70,13 +69,13 @@ bool ConstantTimeEquals(std::string_view a, std::string_view b) {
 Result<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(const v1::TlsConfig& tls) {
   if (!tls.has_cert_file() && !tls.has_key_file()) {
     if (tls.has_client_ca_file()) {
-      return Error{ErrorCode::kInvalidArgument,
-                   "tls.client_ca_file: needs tls.cert_file and tls.key_file (mutual TLS is TLS)"};
+      return InvalidArgument(
+          "tls.client_ca_file: needs tls.cert_file and tls.key_file (mutual TLS is TLS)");
     }
     return grpc::InsecureServerCredentials();
   }
   if (!tls.has_cert_file() || !tls.has_key_file()) {
-    return Error{ErrorCode::kInvalidArgument, "tls: cert_file and key_file go together"};
+    return InvalidArgument("tls: cert_file and key_file go together");
   }
   Result<std::string> cert = ReadSecretFile(tls.cert_file());
   if (!cert.ok()) return Error{cert.error().code, "tls.cert_file: " + cert.error().message};
@@ -103,17 +102,16 @@ Result<Authorizer> Authorizer::Create(const v1::AuthConfig& auth) {
     std::getline(lines, token);
     while (!token.empty() && (token.back() == '\r' || token.back() == ' ')) token.pop_back();
     if (token.size() < kMinTokenLength) {
-      return Error{ErrorCode::kInvalidArgument, "auth.token_file: " + auth.token_file() +
-                                                    ": the token (first line) must have at least " +
-                                                    std::to_string(kMinTokenLength) +
-                                                    " characters (got " +
-                                                    std::to_string(token.size()) + ")"};
+      return InvalidArgument("auth.token_file: " + auth.token_file() +
+                             ": the token (first line) must have at least " +
+                             std::to_string(kMinTokenLength) + " characters (got " +
+                             std::to_string(token.size()) + ")");
     }
     a.token_ = token;
   }
   for (const std::string& name : auth.allowed_client_names()) {
     if (name.empty()) {
-      return Error{ErrorCode::kInvalidArgument, "auth.allowed_client_names: an empty name"};
+      return InvalidArgument("auth.allowed_client_names: an empty name");
     }
     a.allowed_names_.insert(name);
   }
@@ -141,24 +139,24 @@ grpc::Status Authorizer::CheckControl(const grpc::ServerContextBase& context,
   const auto it = metadata.find("authorization");
   if (it == metadata.end() && !certificate_name.empty()) {
     LogRefusal(context, method, "client certificate '" + certificate_name + "' not allowed");
-    return ToGrpcStatus(ErrorCode::kPermissionDenied,
-                        std::string(method) + ": the client certificate '" + certificate_name +
-                            "' is not allowed to make control calls");
+    return ToGrpcStatus(PermissionDenied(std::string(method) + ": the client certificate '" +
+                                         certificate_name +
+                                         "' is not allowed to make control calls"));
   }
   if (it == metadata.end()) {
     LogRefusal(context, method, "no credentials");
-    return ToGrpcStatus(ErrorCode::kUnauthenticated,
-                        std::string(method) +
-                            " is a control call: it needs a bearer token "
-                            "(authorization: Bearer TOKEN) or an allowed client certificate");
+    return ToGrpcStatus(
+        Unauthenticated(std::string(method) +
+                        " is a control call: it needs a bearer token "
+                        "(authorization: Bearer TOKEN) or an allowed client certificate"));
   }
   const std::string_view value(it->second.data(), it->second.size());
   const std::string_view prefix(kBearer);
   if (token_.empty() || value.substr(0, prefix.size()) != prefix ||
       !ConstantTimeEquals(value.substr(prefix.size()), token_)) {
     LogRefusal(context, method, "wrong credentials");
-    return ToGrpcStatus(ErrorCode::kPermissionDenied,
-                        std::string(method) + ": the credentials given do not allow control calls");
+    return ToGrpcStatus(PermissionDenied(std::string(method) +
+                                         ": the credentials given do not allow control calls"));
   }
   return grpc::Status::OK;
 }

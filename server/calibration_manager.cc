@@ -17,7 +17,7 @@ namespace stevi::server {
 namespace {
 
 // A capture that stops before its last pair: the client cancelled it, or the server is stopping.
-Error CaptureCancelled() { return Error{ErrorCode::kCancelled, "capture cancelled"}; }
+Error CaptureCancelled() { return Cancelled("capture cancelled"); }
 
 constexpr int kDefaultCapturePairs = 20;
 constexpr double kDefaultCaptureInterval = 0.5;
@@ -114,7 +114,7 @@ Result<calibration::CalibrationOptions> ToCalibrationOptions(const v1::Calibrati
   if (!problems.empty()) {
     std::vector<std::string> prefixed;
     AppendPrefixed(prefixed, "settings.", problems);
-    return Error::Invalid(prefixed);
+    return InvalidArgument(prefixed);
   }
   return o;
 }
@@ -229,7 +229,7 @@ Result<v1::CalibrationReport> CalibrationManager::Calibrate(
     const std::function<bool()>& abandoned) {
   Result<calibration::CalibrationOptions> options = ToCalibrationOptions(settings);
   if (!options.ok()) return options.error();
-  if (pairs.empty()) return Error::Invalid({"no image pair was uploaded"});
+  if (pairs.empty()) return InvalidArgument("no image pair was uploaded");
   const auto gone = [&] { return abandoned && abandoned(); };
   const Error abandoned_error{ErrorCode::kFailedPrecondition,
                               "the call was cancelled or its deadline passed; nothing was stored"};
@@ -264,7 +264,7 @@ Status CalibrationManager::ValidateCapture(const v1::CaptureCalibrationRequest& 
   }
   Result<calibration::CalibrationOptions> options = ToCalibrationOptions(request.settings());
   if (!options.ok()) problems.push_back(options.error().message);
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   return Status::Ok();
 }
 
@@ -337,8 +337,7 @@ v1::ListCalibrationsResponse CalibrationManager::List() const {
 Result<v1::CalibrationRecord> CalibrationManager::Get(const std::string& id) const {
   const std::optional<calibration::CalibrationId> parsed = calibration::CalibrationId::Parse(id);
   if (!parsed) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "calibration_id: expected a name like cal-000001, got '" + id + "'"};
+    return InvalidArgument("calibration_id: expected a name like cal-000001, got '" + id + "'");
   }
   Result<calibration::StoredCalibration> stored = store_->Get(*parsed);
   if (!stored.ok()) return stored.error();
@@ -355,8 +354,7 @@ Result<v1::CalibrationRecord> CalibrationManager::Get(const std::string& id) con
 Result<v1::CalibrationRecord> CalibrationManager::Activate(const std::string& id) {
   const std::optional<calibration::CalibrationId> parsed = calibration::CalibrationId::Parse(id);
   if (!parsed) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "calibration_id: expected a name like cal-000001, got '" + id + "'"};
+    return InvalidArgument("calibration_id: expected a name like cal-000001, got '" + id + "'");
   }
   return ActivateLocked(*parsed, /*persist=*/true);
 }
@@ -371,14 +369,13 @@ Result<v1::CalibrationRecord> CalibrationManager::ActivateLocked(calibration::Ca
     for (const calibration::GateFailure& f : stored->report.failures) {
       why += (why.empty() ? "" : "; ") + f.message;
     }
-    return Error{ErrorCode::kFailedPrecondition,
-                 id.Name() + " failed its quality gates and cannot be activated: " + why};
+    return FailedPrecondition(id.Name() +
+                              " failed its quality gates and cannot be activated: " + why);
   }
   const cv::Size source = engine_.source_image_size();
   if (stored->calibration.image_size != source) {
-    return Error{ErrorCode::kFailedPrecondition,
-                 id.Name() + " is for " + SizeText(stored->calibration.image_size) +
-                     " images, but the source delivers " + SizeText(source)};
+    return FailedPrecondition(id.Name() + " is for " + SizeText(stored->calibration.image_size) +
+                              " images, but the source delivers " + SizeText(source));
   }
   // The rectification maps are built here, on the caller's thread, never on the pipeline's.
   Result<geometry::StereoRig> rig =

@@ -43,13 +43,11 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
       v1::ImagePair& pair = *upload_.mutable_pair();
       bytes_ += static_cast<int64_t>(pair.left().size() + pair.right().size());
       if (static_cast<int>(pairs_.size()) >= kMaxCalibrationPairs) {
-        return End(ToGrpcStatus(
-            ErrorCode::kResourceExhausted,
-            "more than " + std::to_string(kMaxCalibrationPairs) + " pairs in one upload"));
+        return End(ToGrpcStatus(ResourceExhausted(
+            "more than " + std::to_string(kMaxCalibrationPairs) + " pairs in one upload")));
       }
       if (bytes_ > kMaxCalibrationUploadBytes) {
-        return End(ToGrpcStatus(ErrorCode::kResourceExhausted,
-                                "the upload exceeds 1 GiB of images in all"));
+        return End(ToGrpcStatus(ResourceExhausted("the upload exceeds 1 GiB of images in all")));
       }
       pairs_.push_back(calibration::ImagePair{std::move(*pair.mutable_left()),
                                               std::move(*pair.mutable_right()), pair.name()});
@@ -78,7 +76,7 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
     HandOver(this);
     Finish(status);
   }
-  void Refuse(const std::string& why) { End(ToGrpcStatus(ErrorCode::kInvalidArgument, why)); }
+  void Refuse(const std::string& why) { End(ToGrpcStatus(InvalidArgument(why))); }
 
   void Run() {
     if (!have_settings_) return Refuse("no settings were sent");
@@ -89,7 +87,7 @@ class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpl
       if (report.ok()) *response_ = std::move(report).value();
       End(report.ok() ? grpc::Status::OK : ToGrpcStatus(report.error()));
     });
-    if (!posted) End(ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
+    if (!posted) End(ToGrpcStatus(Unavailable("server shutting down")));
   }
 
   CalibrationManager& manager_;
@@ -139,7 +137,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
     });
     if (!posted) {
       std::lock_guard lock(shared_->mu);
-      shared_->final_status = ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down");
+      shared_->final_status = ToGrpcStatus(Unavailable("server shutting down"));
       MaybeFinishLocked(*shared_);
     }
   }
@@ -154,7 +152,7 @@ class CaptureReactor final : public grpc::ServerWriteReactor<v1::CaptureProgress
       if (!shared_->finished) {
         shared_->finished = true;
         HandOver(this);
-        Finish(ToGrpcStatus(ErrorCode::kUnavailable, "stream write failed"));
+        Finish(ToGrpcStatus(Unavailable("stream write failed")));
       }
       return;
     }

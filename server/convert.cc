@@ -227,7 +227,7 @@ Result<PreviewRequest> ToPreviewRequest(const v1::StreamPreviewRequest& request)
     std::erase_if(invalid, [](const std::string& p) { return p.rfind("kinds", 0) == 0; });
   }
   problems.insert(problems.end(), invalid.begin(), invalid.end());
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   return out;
 }
 
@@ -276,7 +276,7 @@ Result<v1::DisparitySnapshot> ToSnapshot(const pipeline::FrameResult& result, bo
       !encode(stereo::ToColour(result.disparity), s.mutable_disparity_colour_png()) ||
       !encode(result.rectified_left, s.mutable_left_png()) ||
       (annotated && !encode(pipeline::AnnotateTracks(result), s.mutable_annotated_png()))) {
-    return Error{ErrorCode::kInternal, "snapshot: PNG encoding failed"};
+    return Internal("snapshot: PNG encoding failed");
   }
   if (result.rig) {
     const geometry::StereoRig& rig = *result.rig;

@@ -31,10 +31,6 @@ grpc::Status ToGrpcStatus(const Error& error) {
   return grpc::Status(code, message);
 }
 
-grpc::Status ToGrpcStatus(ErrorCode code, std::string message) {
-  return ToGrpcStatus(Error{code, std::move(message)});
-}
-
 grpc::Status ToGrpcStatus(const Status& status) {
   return status.ok() ? grpc::Status::OK : ToGrpcStatus(status.error());
 }

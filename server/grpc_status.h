@@ -7,13 +7,11 @@
 
 namespace stevi::server {
 
-// Maps the code (DESIGN.md: bad input -> INVALID_ARGUMENT, no calibration -> FAILED_PRECONDITION,
+// Maps the code (bad input -> INVALID_ARGUMENT, no calibration -> FAILED_PRECONDITION,
 // camera down -> UNAVAILABLE, too large -> RESOURCE_EXHAUSTED; each ErrorCode to the gRPC code of
 // the same name) and truncates long messages. Every status the server sends that is not OK is made
 // here.
 grpc::Status ToGrpcStatus(const Error& error);
-// The same for a code and a message.
-grpc::Status ToGrpcStatus(ErrorCode code, std::string message);
 grpc::Status ToGrpcStatus(const Status& status);
 
 }  // namespace stevi::server

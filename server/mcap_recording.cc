@@ -41,8 +41,7 @@ Result<std::unique_ptr<McapRecording>> McapRecording::Start(McapRecordingOptions
   r->status_.active = true;
   r->frames_ = broadcaster.Subscribe("mcap " + r->options_.file);
   if (r->frames_ == nullptr) {
-    return Error{ErrorCode::kResourceExhausted,
-                 "record_mcap: no room for another track subscriber (max_streams)"};
+    return ResourceExhausted("record_mcap: no room for another track subscriber (max_streams)");
   }
   if (r->options_.log.image_hz > 0) {
     PreviewRequest request;
@@ -52,13 +51,12 @@ Result<std::unique_ptr<McapRecording>> McapRecording::Start(McapRecordingOptions
     request.jpeg_quality = r->options_.image_jpeg_quality;
     if (std::vector<std::string> problems = request.Validate(); !problems.empty()) {
       broadcaster.Unsubscribe(r->frames_->id());
-      return Error::Invalid(problems).Prefixed("record_mcap: images: ");
+      return InvalidArgument(problems).Prefixed("record_mcap: images: ");
     }
     r->images_ = previews.Subscribe("mcap " + r->options_.file, request);
     if (r->images_ == nullptr) {
       broadcaster.Unsubscribe(r->frames_->id());
-      return Error{ErrorCode::kResourceExhausted,
-                   "record_mcap: no room for another preview subscriber"};
+      return ResourceExhausted("record_mcap: no room for another preview subscriber");
     }
   }
   McapRecording* raw = r.get();

@@ -176,7 +176,7 @@ int main(int argc, char** argv) {
   }
   Result<pipeline::PipelineConfig> pipeline_config = server::BuildPipelineConfig(config.pipeline());
   if (!pipeline_config.ok()) problems.push_back(pipeline_config.error().message);
-  if (!problems.empty()) return Fail(Error::Invalid(problems).message);
+  if (!problems.empty()) return Fail(InvalidArgument(problems).message);
 
   Result<std::unique_ptr<drivers::StereoSource>> source =
       server::OpenSource(config.source(), /*loop_images=*/false);

@@ -66,28 +66,24 @@ RecordingManager::~RecordingManager() {
 
 Result<v1::RecordingStatus> RecordingManager::StartIn(const std::string& dir, uint64_t max_bytes,
                                                       int queue_frames) {
-  if (max_bytes < kMinRecordingMaxBytes) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "max_bytes: must be at least 1 MiB (got " + std::to_string(max_bytes) + ")"};
-  }
-  std::lock_guard lock(mu_);
-  if (active_ != nullptr) {
-    return Error{ErrorCode::kFailedPrecondition,
-                 "a recording is running in " + active_dir_ + ": stop it first"};
-  }
-  std::error_code ec;
-  if (std::filesystem::exists(std::filesystem::path(dir) / "manifest.json", ec)) {
-    return Error{ErrorCode::kAlreadyExists,
-                 dir + " already holds a recording: choose another name or directory"};
-  }
-  const std::shared_ptr<const geometry::StereoRig> rig = engine_.rig();
-  if (rig == nullptr) {
-    return Error{ErrorCode::kFailedPrecondition,
-                 "no calibration yet: a recording needs the rig its frames follow"};
-  }
   drivers::RecorderOptions options;
   options.max_bytes = max_bytes;
   options.queue_frames = queue_frames;
+  if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
+    return InvalidArgument(problems);
+  }
+  std::lock_guard lock(mu_);
+  if (active_ != nullptr) {
+    return FailedPrecondition("a recording is running in " + active_dir_ + ": stop it first");
+  }
+  std::error_code ec;
+  if (std::filesystem::exists(std::filesystem::path(dir) / "manifest.json", ec)) {
+    return AlreadyExists(dir + " already holds a recording: choose another name or directory");
+  }
+  const std::shared_ptr<const geometry::StereoRig> rig = engine_.rig();
+  if (rig == nullptr) {
+    return FailedPrecondition("no calibration yet: a recording needs the rig its frames follow");
+  }
   drivers::RecordingInfo info;
   info.source = engine_.Status().source;
   info.rig = rig;
@@ -105,10 +101,10 @@ Result<v1::RecordingStatus> RecordingManager::StartIn(const std::string& dir, ui
 Result<v1::RecordingStatus> RecordingManager::Start(const v1::StartRecordingRequest& request) {
   const std::string name = request.name().empty() ? NameFromTime() : request.name();
   if (const std::string problem = CheckRecordingName(name); !problem.empty()) {
-    return Error{ErrorCode::kInvalidArgument, "name: " + problem};
+    return InvalidArgument("name: " + problem);
   }
   const uint64_t max_bytes =
-      request.max_bytes() == 0 ? kDefaultRecordingMaxBytes : request.max_bytes();
+      request.max_bytes() == 0 ? drivers::RecorderOptions().max_bytes : request.max_bytes();
   return StartIn((std::filesystem::path(recordings_root_) / name).string(), max_bytes);
 }
 

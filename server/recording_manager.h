@@ -17,10 +17,6 @@
 
 namespace stevi::server {
 
-inline constexpr uint64_t kDefaultRecordingMaxBytes = uint64_t{4} << 30;  // 4 GiB
-inline constexpr uint64_t kMinRecordingMaxBytes = uint64_t{1} << 20;      // 1 MiB
-inline constexpr int kDefaultRecordingQueueFrames = 32;
-
 // A recording name a client may give: 1..64 of [A-Za-z0-9._-], not starting with '.'. Empty
 // when it is fine, else the problem.
 std::string CheckRecordingName(const std::string& name);
@@ -36,10 +32,10 @@ class RecordingManager {
   RecordingManager& operator=(const RecordingManager&) = delete;
 
   // Starts recording into `dir` (the operator's --record DIR: any path). kFailedPrecondition
-  // while a recording runs; kAlreadyExists when `dir` holds a recording; kInvalidArgument for a
-  // max_bytes below 1 MiB.
+  // while a recording runs; kAlreadyExists when `dir` holds a recording; kInvalidArgument for
+  // options the recorder's field list refuses (drivers::RecorderOptions: max_bytes below 1 MiB).
   Result<v1::RecordingStatus> StartIn(const std::string& dir, uint64_t max_bytes,
-                                      int queue_frames = kDefaultRecordingQueueFrames);
+                                      int queue_frames = drivers::RecorderOptions().queue_frames);
   // The StartRecording RPC: a checked name under DATA_DIR/recordings (default from the time).
   Result<v1::RecordingStatus> Start(const v1::StartRecordingRequest& request);
   // Stops the running recording, waiting for the queued frames to be written; without one,

@@ -38,10 +38,10 @@ void FollowSyntheticFlight(const v1::SourceConfig& source, const geo::VehicleSta
 // starts). Errors are prefixed "record: ".
 Status StartConfiguredRecording(const v1::RecordConfig& record, RecordingManager& recording) {
   if (!record.has_dir()) return Status::Ok();
-  const uint64_t max_bytes =
-      record.has_max_bytes() ? record.max_bytes() : kDefaultRecordingMaxBytes;
-  const int queue = record.has_queue_frames() ? static_cast<int>(record.queue_frames())
-                                              : kDefaultRecordingQueueFrames;
+  const drivers::RecorderOptions defaults;
+  const uint64_t max_bytes = record.has_max_bytes() ? record.max_bytes() : defaults.max_bytes;
+  const int queue =
+      record.has_queue_frames() ? static_cast<int>(record.queue_frames()) : defaults.queue_frames;
   Result<v1::RecordingStatus> started = recording.StartIn(record.dir(), max_bytes, queue);
   if (started.ok()) return Status::Ok();
   Error error = started.error();
@@ -75,7 +75,7 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   std::vector<std::string> problems = ValidateServerConfig(config);
   Result<pipeline::PipelineConfig> pipeline_config = BuildPipelineConfig(config.pipeline());
   if (!pipeline_config.ok()) problems.push_back(pipeline_config.error().message);
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
 
   const std::optional<geo::VehicleState> synthetic_pose = SyntheticPose(config.source());
   Result<std::unique_ptr<PoseSource>> poses = MakePoseSource(config.geo(), synthetic_pose);
@@ -109,7 +109,7 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   if (config.has_record_mcap()) {
     std::vector<std::string> mcap_problems;
     McapRecordingOptions options = McapRecordingOptionsFrom(config.record_mcap(), mcap_problems);
-    if (!mcap_problems.empty()) return Error::Invalid(mcap_problems);
+    if (!mcap_problems.empty()) return InvalidArgument(mcap_problems);
     Result<std::unique_ptr<McapRecording>> mcap =
         McapRecording::Start(std::move(options), *server->engine_, *server->broadcaster_,
                              *server->previews_, server->recording_.get());
@@ -180,8 +180,7 @@ Status Server::BuildGrpcServer(const v1::ServerConfig& config,
   ConfigureTransport(config, builder);
   grpc_server_ = builder.BuildAndStart();
   if (grpc_server_ == nullptr || port_ == 0) {
-    return Error{ErrorCode::kUnavailable,
-                 "cannot listen on " + listen_ + " (address in use or not local?)"};
+    return Unavailable("cannot listen on " + listen_ + " (address in use or not local?)");
   }
   if (grpc::HealthCheckServiceInterface* health = grpc_server_->GetHealthCheckService()) {
     // NOT_SERVING until the first frame comes through (the default is SERVING); naming the

@@ -52,7 +52,7 @@ class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
       std::lock_guard lock(mu_);
       writing_ = false;
       if (!ok) {
-        FinishLocked(ToGrpcStatus(ErrorCode::kUnavailable, "stream write failed"));
+        FinishLocked(ToGrpcStatus(Unavailable("stream write failed")));
         return;
       }
     }
@@ -63,7 +63,7 @@ class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
     const CallbackScope scope(this);
     std::lock_guard lock(mu_);
     cancelled_ = true;
-    if (!writing_) FinishLocked(grpc::Status::CANCELLED);
+    if (!writing_) FinishLocked(ToGrpcStatus(Cancelled("the client cancelled the stream")));
   }
 
   void OnDone() override {
@@ -81,14 +81,14 @@ class QueueStreamReactor final : public grpc::ServerWriteReactor<Message> {
     std::lock_guard lock(mu_);
     if (finished_ || writing_) return;
     if (cancelled_) {
-      FinishLocked(grpc::Status::CANCELLED);
+      FinishLocked(ToGrpcStatus(Cancelled("the client cancelled the stream")));
       return;
     }
     typename Subscription<Item>::Popped popped = sub_->Pop();
     switch (popped.state) {
       case Subscription<Item>::PopState::kEmpty: return;  // notified at the next item
       case Subscription<Item>::PopState::kEnded:
-        FinishLocked(ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
+        FinishLocked(ToGrpcStatus(Unavailable("server shutting down")));
         return;
       case Subscription<Item>::PopState::kItem:
         current_.Clear();
@@ -123,8 +123,8 @@ using PreviewStreamReactor = QueueStreamReactor<PreviewPtr, v1::Preview>;
 // A subscription refused: UNAVAILABLE while shutting down, else RESOURCE_EXHAUSTED naming the
 // limit.
 grpc::Status Refusal(bool closed, const std::string& limit) {
-  return closed ? ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down")
-                : ToGrpcStatus(ErrorCode::kResourceExhausted, limit);
+  return closed ? ToGrpcStatus(Unavailable("server shutting down"))
+                : ToGrpcStatus(ResourceExhausted(limit));
 }
 
 }  // namespace
@@ -202,7 +202,7 @@ grpc::ServerUnaryReactor* Reply(grpc::CallbackServerContext* context, const grpc
 grpc::Status ValidateStreamTracksRequest(const v1::StreamTracksRequest& request) {
   const double s = request.min_score();
   if (!(s >= 0.0 && s <= 1.0)) {
-    return ToGrpcStatus(Error::Invalid({"min_score: must be in [0, 1]" + Got(s)}));
+    return ToGrpcStatus(InvalidArgument("min_score: must be in [0, 1]" + Got(s)));
   }
   return grpc::Status::OK;
 }
@@ -280,7 +280,7 @@ grpc::Status SetPipelineConfigImpl(Engine& engine, std::mutex& mu,
   pipeline::PipelineConfig updated = *engine.config().Get();
   if (std::vector<std::string> problems = MergeFromProto(request.config(), updated);
       !problems.empty()) {
-    return ToGrpcStatus(Error::Invalid(problems));
+    return ToGrpcStatus(InvalidArgument(problems));
   }
   Result<std::shared_ptr<const pipeline::PipelineConfig>> active =
       engine.config().Set(std::move(updated));
@@ -294,11 +294,11 @@ grpc::Status GetDisparitySnapshotImpl(const Engine& engine,
                                       v1::DisparitySnapshot* response) {
   const EngineStatus status = engine.Status();
   if (status.source_state == SourceState::kDown) {
-    return ToGrpcStatus(Error{ErrorCode::kUnavailable, "source is down: " + status.source_error});
+    return ToGrpcStatus(Unavailable("source is down: " + status.source_error));
   }
   std::shared_ptr<const pipeline::FrameResult> latest = engine.Latest();
   if (latest == nullptr) {
-    return ToGrpcStatus(Error{ErrorCode::kFailedPrecondition, "no frame has been processed yet"});
+    return ToGrpcStatus(FailedPrecondition("no frame has been processed yet"));
   }
   Result<v1::DisparitySnapshot> snapshot = ToSnapshot(*latest, request.annotated());
   if (!snapshot.ok()) return ToGrpcStatus(snapshot.error());
@@ -407,7 +407,7 @@ grpc::ServerReadReactor<v1::VehicleState>* ObstacleServiceImpl::PublishVehicleSt
   std::lock_guard lock(vehicle_mu_);
   if (vehicle_closed_) {
     return new RefusedReadReactor<v1::VehicleState>(
-        ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
+        ToGrpcStatus(Unavailable("server shutting down")));
   }
   auto* reactor = new VehicleStateReactor(poses_, response, [this, context] {
     std::lock_guard done_lock(vehicle_mu_);
@@ -423,7 +423,7 @@ size_t ObstacleServiceImpl::EndVehicleStreams() {
   std::lock_guard lock(vehicle_mu_);
   vehicle_closed_ = true;
   for (const auto& [context, reactor] : vehicle_streams_) {
-    reactor->End(ToGrpcStatus(ErrorCode::kUnavailable, "server shutting down"));
+    reactor->End(ToGrpcStatus(Unavailable("server shutting down")));
   }
   return vehicle_streams_.size();
 }

@@ -119,4 +119,15 @@ int Avoid(Client& client, const Args& args) {
   return 0;
 }
 
+const CommandSpec kAvoidCommand = {"avoid",
+                                   "the autopilot example: one collision advisory per frame",
+                                   R"(usage: stevi avoid [--count N] [--protected-radius M]
+
+One advisory per frame as a JSON line: CLEAR, CAUTION, WARNING or AVOID with the worst
+obstacle's bearing, distance, time and distance of closest approach against the vehicle's own
+velocity; NO_DATA when no frame came for 500 ms or the frame has no vehicle pose. Reconnects on
+its own.
+)",
+                                   &Avoid};
+
 }  // namespace stevi::client::commands

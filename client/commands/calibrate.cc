@@ -171,4 +171,17 @@ int Calibrate(Client& client, const Args& args) {
   return a.capture > 0 ? FromCapture(client, a) : FromFiles(client, a);
 }
 
+const CommandSpec kCalibrateCommand = {
+    "calibrate", "stereo calibration from chessboard pairs, uploaded or captured",
+    R"(usage: stevi calibrate --board COLSxROWS --square-mm MM [--apply] [--json]
+                       [--min-pairs N] [--max-rms PX] [--max-epipolar PX] [--alpha A]
+                       (--left PATTERN --right PATTERN | --capture N [--interval S])
+
+Stereo calibration from chessboard pairs: uploaded image files (printf patterns with one
+integer, e.g. dir/left%02d.jpg; indices 0..9999, gaps skipped) or N pairs the server grabs from
+its own source every S seconds (default 0.5) while the board moves. Prints the quality report;
+--apply activates the result if every gate passes. The board counts inner corners (e.g. 9x6).
+)",
+    &Calibrate};
+
 }  // namespace stevi::client::commands

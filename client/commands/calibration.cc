@@ -61,4 +61,15 @@ int Calibration(Client& client, const Args& args) {
   return Usage("calibration: expected list, get ID or activate ID");
 }
 
+const CommandSpec kCalibrationCommand = {"calibration", "stored calibrations: list, show, activate",
+                                         R"(usage: stevi calibration list [--json]
+       stevi calibration get ID [--yaml]
+       stevi calibration activate ID
+
+list: stored calibrations and the active one.
+get: one calibration: its report, or its YAML file.
+activate: switch the running server to it (between two frames).
+)",
+                                         &Calibration};
+
 }  // namespace stevi::client::commands

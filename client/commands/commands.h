@@ -5,11 +5,21 @@
 
 #include <cstddef>
 #include <string>
+#include <string_view>
 
 #include "client/client.h"
 #include "client/commands/common.h"
 
 namespace stevi::client::commands {
+
+// A command: its name, a one-line summary for `stevi --help`, its whole usage for `stevi help
+// NAME` and `stevi NAME --help`, and what runs it with the arguments after its name.
+struct CommandSpec {
+  std::string_view name;
+  std::string_view summary;
+  std::string_view usage;
+  int (*run)(Client& client, const Args& args);
+};
 
 int Watch(Client& client, const Args& args);        // watch.cc
 int Status(Client& client, const Args& args);       // status.cc
@@ -23,6 +33,20 @@ int Calibration(Client& client, const Args& args);  // calibration.cc
 int Mavlink(Client& client, const Args& args);      // mavlink.cc
 int Station(Client& client, const Args& args);      // station.cc
 int Mcap(Client& client, const Args& args);         // mcap.cc
+
+// Each defined beside its command.
+extern const CommandSpec kWatchCommand;
+extern const CommandSpec kStatusCommand;
+extern const CommandSpec kRecordCommand;
+extern const CommandSpec kConfigCommand;
+extern const CommandSpec kSnapshotCommand;
+extern const CommandSpec kCalibrateCommand;
+extern const CommandSpec kAvoidCommand;
+extern const CommandSpec kExportCommand;
+extern const CommandSpec kCalibrationCommand;
+extern const CommandSpec kMavlinkCommand;
+extern const CommandSpec kStationCommand;
+extern const CommandSpec kMcapCommand;
 
 // The options before the command (global_options.cc).
 struct GlobalOptions {

@@ -49,4 +49,15 @@ int Config(Client& client, const Args& args) {
   return Usage("config: unknown subcommand '" + args[0] + "' (get or set)");
 }
 
+const CommandSpec kConfigCommand = {
+    "config", "the active pipeline configuration: get it, or change it while running",
+    R"(usage: stevi config get [--json]
+       stevi config set KEY=VALUE...
+
+get: the active pipeline configuration.
+set: change it while running, e.g. algorithm=canonical, matcher.kind=semi_global,
+canonical.threshold_range_m=60.
+)",
+    &Config};
+
 }  // namespace stevi::client::commands

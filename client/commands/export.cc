@@ -145,4 +145,21 @@ int Export(Client& client, const Args& args) {
   return 0;
 }
 
+const CommandSpec kExportCommand = {
+    "export", "track trajectories as KML or GeoJSON, or the flight as MCAP",
+    R"(usage: stevi export --format kml|geojson --out FILE (--count N | --in FRAMES.jsonl)
+                    [--geoid-undulation M]
+       stevi export --format mcap --out FILE (--count N | --in FRAMES.jsonl | --in DIR)
+                    [--image-hz N]
+
+kml, geojson: each track's trajectory (confirmed and coasting tracks with a geodetic position)
+from N live frames or from a file of `stevi watch --json` lines: KML (opens in Google Earth;
+altitudes are ellipsoid heights minus M, the geoid undulation at the site) or a GeoJSON
+FeatureCollection (opens in QGIS).
+mcap: the flight for Foxglove (an indexed MCAP file with the station's channels): N live frames,
+a frames file, or a recording folder (its left images at N per second, default 5, its vehicle
+states and calibrations; stevi-process --mcap adds the tracks).
+)",
+    &Export};
+
 }  // namespace stevi::client::commands

@@ -583,4 +583,17 @@ int Mavlink(Client& client, const Args& args) {
   return code;
 }
 
+const CommandSpec kMavlinkCommand = {
+    "mavlink", "the autopilot bridge (MAVLink 2): obstacles out, the vehicle's pose in",
+    R"(usage: stevi mavlink --link URL [--adsb] [--geoid-undulation M] [--no-pose] [--rate HZ]
+                     [--component-id N] [--system-id N] [--icao-base N] [--status-every S]
+
+OBSTACLE_DISTANCE at --rate (10 Hz) from the range scan and the tracks, with --adsb an
+ADSB_VEHICLE per georeferenced confirmed or coasting track; the autopilot's pose back to the server as
+VehicleStates (not with --no-pose). URL: udp://HOST:PORT (send there), udpin://ADDR:PORT
+(listen; answer whoever spoke last), serial://DEVICE:BAUD. Nothing older than 400 ms is sent;
+status lines (logfmt) on stderr.
+)",
+    &Mavlink};
+
 }  // namespace stevi::client::commands

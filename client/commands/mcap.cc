@@ -140,4 +140,14 @@ int Mcap(Client& /*client*/, const Args& args) {
   return Recover(file, out_path);
 }
 
+const CommandSpec kMcapCommand = {"mcap", "what an MCAP flight log holds, or recover one cut short",
+                                  R"(usage: stevi mcap info FILE
+       stevi mcap recover FILE --out FIXED
+
+info: what an MCAP flight log holds: channels, counts, rates, and what was lost when it was cut
+short (a crash, a full disk).
+recover: an indexed copy of a file cut short, up to its last whole chunk.
+)",
+                                  &Mcap};
+
 }  // namespace stevi::client::commands

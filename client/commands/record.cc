@@ -65,4 +65,16 @@ int Record(Client& client, const Args& args) {
   return 0;
 }
 
+const CommandSpec kRecordCommand = {
+    "record", "record the raw stereo pairs on the server, or stop",
+    R"(usage: stevi record start [--name NAME] [--max-mb MB] [--json]
+       stevi record stop [--json]
+
+start: record the raw stereo pairs, timestamps, vehicle states and calibration id on the server,
+in DATA_DIR/recordings/NAME (default name from the time; default limit 4096 MiB), for
+stevi-server --source replay and stevi-process --replay.
+stop: stop it and print what was written.
+)",
+    &Record};
+
 }  // namespace stevi::client::commands

@@ -40,4 +40,13 @@ int Snapshot(Client& client, const Args& args) {
   return 0;
 }
 
+const CommandSpec kSnapshotCommand = {"snapshot",
+                                      "the current disparity, images and annotated frame, as files",
+                                      R"(usage: stevi snapshot --out PREFIX
+
+Writes PREFIX_disparity16.png, PREFIX_disparity_colour.png, PREFIX_left.png, PREFIX_annotated.png
+(boxes, ids, ranges) and PREFIX_meta.json.
+)",
+                                      &Snapshot};
+
 }  // namespace stevi::client::commands

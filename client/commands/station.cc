@@ -129,4 +129,19 @@ int Station(Client& client, const Args& args) {
   return 0;
 }
 
+const CommandSpec kStationCommand = {
+    "station", "the ground station: a web page and a Foxglove WebSocket for the rigs",
+    R"(usage: stevi station [--server A,B] [--listen HOST:PORT] [--token-file FILE | --allow-insecure]
+                     [--site GEOJSON] [--max-clients N] [--preview-rate HZ]
+                     [--preview-width PX] [--preview-quality Q] [--export-points N]
+
+The ground station for one or more servers (--server after `station` takes a comma-separated
+list): a web page with each rig's live video, disparity, plan view, map, tracks, status and
+controls, and a Foxglove WebSocket (Foxglove, Lichtblick), both on --listen (127.0.0.1:8080).
+Another address needs --token-file (the page asks for that token) or --allow-insecure. The
+page's control calls carry the operator token typed into the page. --export-points N: each rig's
+export history keeps the newest N georeferenced track points (200000).
+)",
+    &Station};
+
 }  // namespace stevi::client::commands

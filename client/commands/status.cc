@@ -67,4 +67,13 @@ int Status(Client& client, const Args& args) {
   return ShowResponse(client, "status", args, 0, &Client::GetStatus, PrintStatusText);
 }
 
+const CommandSpec kStatusCommand = {
+    "status", "the server's source, rates, drops, timings, pairing and recording",
+    R"(usage: stevi status [--json]
+
+Source state, frame rates, drops, stage timings, camera pairing (skew, unpaired and incomplete
+frames, reconnects), recording, subscribers.
+)",
+    &Status};
+
 }  // namespace stevi::client::commands

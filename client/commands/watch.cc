@@ -95,4 +95,14 @@ int Watch(Client& client, const Args& args) {
   return 0;
 }
 
+const CommandSpec kWatchCommand = {
+    "watch", "live tracks, as a table or JSON lines",
+    R"(usage: stevi watch [--count N] [--json] [--confirmed] [--min-score S]
+
+Live tracks: a table, or one TrackFrame JSON per line (--json). --confirmed hides tentative
+tracks; --min-score S (0..1) hides those whose detection scored below S. --count N stops after N
+frames.
+)",
+    &Watch};
+
 }  // namespace stevi::client::commands

@@ -103,8 +103,9 @@ struct PoseJoinerOptions {
 
 // Joins the autopilot's GLOBAL_POSITION_INT (position, velocity), ATTITUDE or ATTITUDE_QUATERNION,
 // GPS_RAW_INT (ellipsoid height, accuracies) and SYSTEM_TIME (Unix time) into VehicleStates: one
-// for each GLOBAL_POSITION_INT once the others needed are there. Messages from one system only:
-// the first autopilot heard (see Autopilot()).
+// for each GLOBAL_POSITION_INT once the others needed are there. It takes whatever it is given:
+// the caller passes the messages of one system only (the first autopilot heard; `stevi mavlink`
+// filters them in client/commands/mavlink.cc).
 class PoseJoiner {
  public:
   explicit PoseJoiner(PoseJoinerOptions options) : options_(options) {}

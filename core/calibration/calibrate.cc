@@ -5,15 +5,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <map>
 #include <numeric>
 #include <optional>
 #include <sstream>
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
-
-#include "core/calibration/image_header.h"
 
 namespace stevi::calibration {
 namespace {
@@ -36,67 +33,6 @@ std::string PairLabel(int index, const std::string& name) {
   std::string label = "#" + std::to_string(index);
   if (!name.empty()) label += " (" + name + ")";
   return label;
-}
-
-// ---- Images -----------------------------------------------------------------------------------
-
-struct Probe {
-  std::optional<cv::Size> size;
-  std::optional<RejectReason> reason;  // set when the image cannot be used
-  std::string problem;
-};
-
-std::span<const std::uint8_t> BytesOf(const ImageData& data) {
-  if (const auto* s = std::get_if<std::string>(&data)) {
-    return {reinterpret_cast<const std::uint8_t*>(s->data()), s->size()};
-  }
-  if (const auto* v = std::get_if<std::vector<std::uint8_t>>(&data)) return {v->data(), v->size()};
-  return {};
-}
-
-// The image's size without decoding it (header for bytes), or why it cannot be used.
-Probe ProbeImage(const ImageData& data, cv::Size max_size) {
-  Probe p;
-  if (const auto* mat = std::get_if<cv::Mat>(&data)) {
-    if (mat->empty()) {
-      p.reason = RejectReason::kUndecodable;
-      p.problem = "empty image";
-    } else if (mat->depth() != CV_8U ||
-               (mat->channels() != 1 && mat->channels() != 3 && mat->channels() != 4) ||
-               mat->dims != 2) {
-      p.reason = RejectReason::kUndecodable;
-      p.problem = "unsupported image type " + cv::typeToString(mat->type()) +
-                  " (expected 8-bit grey, BGR or BGRA)";
-    } else {
-      p.size = mat->size();
-    }
-  } else {
-    Result<cv::Size> header = ImageHeaderSize(BytesOf(data));
-    if (!header.ok()) {
-      p.reason = RejectReason::kUndecodable;
-      p.problem = header.error().message;
-      return p;
-    }
-    p.size = *header;
-  }
-  if (p.size && (p.size->width > max_size.width || p.size->height > max_size.height)) {
-    p.reason = RejectReason::kTooLarge;
-    p.problem = "image of " + SizeText(*p.size) + " pixels exceeds the maximum of " +
-                SizeText(max_size) + "; not decoded";
-    p.size.reset();
-  }
-  return p;
-}
-
-// An 8-bit grey image of the input (decoding bytes, converting colour cv::Mat).
-Result<cv::Mat> GreyImage(const ImageData& data, cv::Size max_size) {
-  if (const auto* mat = std::get_if<cv::Mat>(&data)) {
-    if (mat->channels() == 1) return *mat;
-    cv::Mat grey;
-    cv::cvtColor(*mat, grey, mat->channels() == 3 ? cv::COLOR_BGR2GRAY : cv::COLOR_BGRA2GRAY);
-    return grey;
-  }
-  return DecodeGreyImage(BytesOf(data), max_size);
 }
 
 // ---- Geometry helpers -------------------------------------------------------------------------
@@ -182,8 +118,6 @@ int StereoFlags(const CalibrationModel& m) {
   return flags;
 }
 
-Error Invalid(const std::string& message) { return Error{ErrorCode::kInvalidArgument, message}; }
-
 struct Solution {
   cv::Mat K1, D1, K2, D2, R, T, E, F;
   cv::Mat1d errors;  // n x 2: RMS reprojection error of each pair in camera 1 and camera 2 (pixels)
@@ -227,7 +161,7 @@ Result<Solution> Solve(const std::vector<PairCorners>& pairs,
   if (!std::isfinite(s.rms) || !Finite(s.K1) || !Finite(s.K2) || !Finite(s.D1) || !Finite(s.D2) ||
       !Finite(s.R) || !Finite(s.T) || s.errors.rows != static_cast<int>(pairs.size()) ||
       s.errors.cols != 2) {
-    return Error{ErrorCode::kInternal, "the stereo calibration diverged (non-finite result)"};
+    return Internal("the stereo calibration diverged (non-finite result)");
   }
   return s;
 }
@@ -258,16 +192,17 @@ Error NoPairError(const DetectedPairs& detected, const BoardSpec& board) {
                    r.reason == RejectReason::kNoBoardRight || r.reason == RejectReason::kNoBoard;
   }
   if (!any_decoded) {
-    return Invalid("no usable pair: every one of the " + std::to_string(detected.pairs_given) +
-                   " pairs was rejected before detection: " + RejectionSummary(detected.rejected));
+    return InvalidArgument(
+        "no usable pair: every one of the " + std::to_string(detected.pairs_given) +
+        " pairs was rejected before detection: " + RejectionSummary(detected.rejected));
   }
   if (!any_board) {
-    return Invalid("no board of " + board.Name() +
-                   " inner corners found in any pair; check the board size (inner corners, "
-                   "columns x rows) and that the whole board is in view");
+    return InvalidArgument("no board of " + board.Name() +
+                           " inner corners found in any pair; check the board size (inner corners, "
+                           "columns x rows) and that the whole board is in view");
   }
-  return Invalid("no pair has the board of " + board.Name() +
-                 " inner corners in both images: " + RejectionSummary(detected.rejected));
+  return InvalidArgument("no pair has the board of " + board.Name() +
+                         " inner corners in both images: " + RejectionSummary(detected.rejected));
 }
 
 // An error when the pairs are too few to solve, or the image size is not set.
@@ -276,18 +211,18 @@ std::optional<Error> CheckPairCount(const DetectedPairs& detected,
   const int n_pairs = static_cast<int>(detected.pairs.size());
   if (n_pairs == 0) return NoPairError(detected, options.board);
   if (n_pairs < kMinSolvablePairs) {
-    return Invalid("too few pairs: " + std::to_string(n_pairs) + " of " +
-                   std::to_string(detected.pairs_given) +
-                   " have the board in both images, at least 3 are needed to calibrate (the "
-                   "min_pairs gate asks for " +
-                   std::to_string(options.gates.min_pairs) + ")" +
-                   (detected.rejected.empty()
-                        ? std::string()
-                        : "; rejected: " + RejectionSummary(detected.rejected)));
+    return InvalidArgument(
+        "too few pairs: " + std::to_string(n_pairs) + " of " +
+        std::to_string(detected.pairs_given) +
+        " have the board in both images, at least 3 are needed to calibrate (the "
+        "min_pairs gate asks for " +
+        std::to_string(options.gates.min_pairs) + ")" +
+        (detected.rejected.empty() ? std::string()
+                                   : "; rejected: " + RejectionSummary(detected.rejected)));
   }
   const cv::Size image_size = detected.image_size;
   if (image_size.width <= 0 || image_size.height <= 0) {
-    return Invalid("image_size: must be > 0 (got " + SizeText(image_size) + ")");
+    return InvalidArgument("image_size: must be > 0 (got " + SizeText(image_size) + ")");
   }
   return std::nullopt;
 }
@@ -297,9 +232,10 @@ std::optional<Error> CheckCorners(const std::vector<PairCorners>& pairs, const B
                                   const std::vector<cv::Point3f>& object) {
   for (const PairCorners& p : pairs) {
     if (p.left.size() != object.size() || p.right.size() != object.size()) {
-      return Invalid("pair " + PairLabel(p.index, p.name) + ": " + std::to_string(p.left.size()) +
-                     " and " + std::to_string(p.right.size()) + " corners, the board of " +
-                     board.Name() + " has " + std::to_string(object.size()));
+      return InvalidArgument("pair " + PairLabel(p.index, p.name) + ": " +
+                             std::to_string(p.left.size()) + " and " +
+                             std::to_string(p.right.size()) + " corners, the board of " +
+                             board.Name() + " has " + std::to_string(object.size()));
     }
   }
   return std::nullopt;
@@ -424,7 +360,7 @@ void Rectify(geometry::StereoCalibration& c, double alpha) {
 // kInternal for a calibration that fails Validate(), with the RMS and the worst pairs.
 Error InvalidResult(const std::vector<std::string>& problems, double rms,
                     const std::vector<PairCorners>& used, const cv::Mat1d& errors) {
-  Error err = Error::Invalid(problems);
+  Error err = InvalidArgument(problems);
   err.code = ErrorCode::kInternal;
   err.message = "the stereo calibration gave an invalid result (" + err.message + "); RMS " +
                 Fixed(rms, 2) + " px, worst pairs: " + WorstPairs(used, errors);
@@ -677,191 +613,17 @@ std::vector<std::string> CalibrationOptions::Validate() const {
   return problems;
 }
 
-namespace {
-
-// Per-pair rejections so far, by pair index.
-using Rejections = std::vector<std::optional<RejectedPair>>;
-
-void Reject(const std::vector<ImagePair>& pairs, Rejections& rejection, int i, RejectReason reason,
-            std::string detail) {
-  rejection[i] = RejectedPair{i, pairs[i].name, reason, std::move(detail)};
-}
-
-// Steps 1 and 2: sizes from the headers, then the calibration's image size, the one most pairs
-// share (the earliest on a tie). Pairs that cannot be probed or differ in size are rejected.
-cv::Size CommonImageSize(const std::vector<ImagePair>& pairs, const CalibrationOptions& options,
-                         Rejections& rejection) {
-  const int n = static_cast<int>(pairs.size());
-  std::vector<cv::Size> sizes(n);
-  std::map<std::pair<int, int>, int> size_counts;
-  std::vector<std::pair<int, int>> size_order;  // first appearance, for ties
-  for (int i = 0; i < n; ++i) {
-    const Probe left = ProbeImage(pairs[i].left, options.max_image_size);
-    const Probe right = ProbeImage(pairs[i].right, options.max_image_size);
-    if (left.reason || right.reason) {
-      std::string detail;
-      if (left.reason) detail = "left image: " + left.problem;
-      if (right.reason)
-        detail += (detail.empty() ? "" : "; ") + std::string("right image: ") + right.problem;
-      Reject(pairs, rejection, i, left.reason ? *left.reason : *right.reason, detail);
-      continue;
-    }
-    if (*left.size != *right.size) {
-      Reject(pairs, rejection, i, RejectReason::kSizeMismatch,
-             "left image is " + SizeText(*left.size) + ", right image is " + SizeText(*right.size));
-      continue;
-    }
-    sizes[i] = *left.size;
-    const std::pair<int, int> key(sizes[i].width, sizes[i].height);
-    if (size_counts[key]++ == 0) size_order.push_back(key);
-  }
-  std::pair<int, int> common(0, 0);
-  int best = 0;
-  for (const auto& key : size_order) {
-    if (size_counts[key] > best) {
-      best = size_counts[key];
-      common = key;
-    }
-  }
-  const cv::Size image_size(common.first, common.second);
-  for (int i = 0; i < n; ++i) {
-    if (!rejection[i] && sizes[i] != image_size) {
-      Reject(pairs, rejection, i, RejectReason::kSizeDiffers,
-             "images of " + SizeText(sizes[i]) + ", while " + std::to_string(best) + " pairs are " +
-                 SizeText(image_size));
-    }
-  }
-  return image_size;
-}
-
-struct ImageOutcome {
-  std::optional<Error> decode_error;
-  Result<std::vector<cv::Point2f>> corners = Error{ErrorCode::kInternal, "not run"};
-};
-
-// Step 3: decode and detect, one task per image of every pair not yet rejected. Slot 2i is pair
-// i's left image, 2i+1 its right.
-std::vector<ImageOutcome> DetectCorners(const std::vector<ImagePair>& pairs,
-                                        const CalibrationOptions& options,
-                                        const Rejections& rejection) {
-  const int n = static_cast<int>(pairs.size());
-  std::vector<ImageOutcome> outcomes(2 * static_cast<std::size_t>(n));
-  std::vector<int> tasks;
-  for (int i = 0; i < n; ++i) {
-    if (!rejection[i]) {
-      tasks.push_back(2 * i);
-      tasks.push_back(2 * i + 1);
-    }
-  }
-  cv::parallel_for_(cv::Range(0, static_cast<int>(tasks.size())), [&](const cv::Range& range) {
-    for (int t = range.start; t < range.end; ++t) {
-      const int slot = tasks[t];
-      const ImagePair& pair = pairs[slot / 2];
-      ImageOutcome& outcome = outcomes[slot];
-      try {
-        Result<cv::Mat> grey =
-            GreyImage(slot % 2 == 0 ? pair.left : pair.right, options.max_image_size);
-        if (!grey.ok()) {
-          outcome.decode_error = grey.error();
-          continue;
-        }
-        outcome.corners = DetectChessboard(*grey, options.board, options.detection);
-      } catch (const std::exception& e) {
-        outcome.decode_error = Error{ErrorCode::kInternal, e.what()};
-      }
-    }
-  });
-  return outcomes;
-}
-
-// Step 4: a pair is used when both images decoded and showed the board; otherwise it is rejected
-// with the reason.
-void JudgeDetections(const std::vector<ImagePair>& pairs, const CalibrationOptions& options,
-                     const std::vector<ImageOutcome>& outcomes, Rejections& rejection,
-                     DetectedPairs& out) {
-  const int n = static_cast<int>(pairs.size());
-  for (int i = 0; i < n; ++i) {
-    if (rejection[i]) continue;
-    const ImageOutcome& left = outcomes[2 * i];
-    const ImageOutcome& right = outcomes[2 * i + 1];
-    if (left.decode_error || right.decode_error) {
-      std::string detail;
-      RejectReason reason = RejectReason::kUndecodable;
-      for (const auto* side : {&left, &right}) {
-        if (!side->decode_error) continue;
-        if (side->decode_error->code == ErrorCode::kResourceExhausted)
-          reason = RejectReason::kTooLarge;
-        if (!detail.empty()) detail += "; ";
-        detail += (side == &left ? "left image: " : "right image: ") + side->decode_error->message;
-      }
-      Reject(pairs, rejection, i, reason, detail);
-      continue;
-    }
-    const bool found_left = left.corners.ok(), found_right = right.corners.ok();
-    if (found_left && found_right) {
-      out.pairs.push_back(PairCorners{i, pairs[i].name, *left.corners, *right.corners});
-      continue;
-    }
-    const std::string missing = "no board of " + options.board.Name() + " inner corners found in ";
-    auto why = [](const ImageOutcome& o) {
-      return o.corners.error().code == ErrorCode::kNotFound
-                 ? std::string()
-                 : " (" + o.corners.error().message + ")";
-    };
-    if (!found_left && !found_right) {
-      Reject(pairs, rejection, i, RejectReason::kNoBoard, missing + "either image" + why(left));
-    } else if (!found_left) {
-      Reject(pairs, rejection, i, RejectReason::kNoBoardLeft,
-             missing + "the left image" + why(left));
-    } else {
-      Reject(pairs, rejection, i, RejectReason::kNoBoardRight,
-             missing + "the right image" + why(right));
-    }
-  }
-}
-
-Result<DetectedPairs> DetectPairsChecked(const std::vector<ImagePair>& pairs,
-                                         const CalibrationOptions& options) {
-  DetectedPairs out;
-  out.pairs_given = static_cast<int>(pairs.size());
-  Rejections rejection(pairs.size());
-  out.image_size = CommonImageSize(pairs, options, rejection);
-  const std::vector<ImageOutcome> outcomes = DetectCorners(pairs, options, rejection);
-  JudgeDetections(pairs, options, outcomes, rejection, out);
-  for (const std::optional<RejectedPair>& r : rejection) {
-    if (r) out.rejected.push_back(*r);
-  }
-  return out;
-}
-
-}  // namespace
-
-Result<DetectedPairs> DetectPairs(const std::vector<ImagePair>& pairs,
-                                  const CalibrationOptions& options) {
-  if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
-  }
-  if (pairs.empty()) return Invalid("no image pairs given");
-  try {
-    return DetectPairsChecked(pairs, options);
-  } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal,
-                 std::string("chessboard detection failed (") + e.what() + ")"};
-  }
-}
-
 Result<CalibrationResult> CalibrateFromCorners(const DetectedPairs& detected,
                                                const CalibrationOptions& options) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   try {
     return CalibrateChecked(detected, options);
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInternal, "the stereo calibration failed in OpenCV (" + e.err + ")"};
+    return Internal("the stereo calibration failed in OpenCV (" + e.err + ")");
   } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal,
-                 std::string("the stereo calibration failed (") + e.what() + ")"};
+    return Internal(std::string("the stereo calibration failed (") + e.what() + ")");
   }
 }
 

@@ -199,11 +199,11 @@ Result<std::vector<cv::Point2f>> DetectChessboard(const cv::Mat& grey, const Boa
   std::vector<std::string> problems;
   AppendPrefixed(problems, "board.", board.Validate());
   AppendPrefixed(problems, "detection.", options.Validate());
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   if (grey.empty() || grey.type() != CV_8UC1) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "DetectChessboard: expected a non-empty 8-bit grey image (CV_8UC1), got " +
-                     (grey.empty() ? std::string("an empty one") : cv::typeToString(grey.type()))};
+    return InvalidArgument(
+        "DetectChessboard: expected a non-empty 8-bit grey image (CV_8UC1), got " +
+        (grey.empty() ? std::string("an empty one") : cv::typeToString(grey.type())));
   }
   const cv::Size pattern = board.PatternSize();
   std::vector<cv::Point2f> corners;
@@ -235,11 +235,11 @@ Result<std::vector<cv::Point2f>> DetectChessboard(const cv::Mat& grey, const Boa
       }
     }
     if (!found || static_cast<int>(corners.size()) != pattern.area()) {
-      return Error{ErrorCode::kNotFound, "no board of " + board.Name() + " inner corners found"};
+      return NotFound("no board of " + board.Name() + " inner corners found");
     }
     Canonicalise(grey, pattern, corners);
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInternal, "chessboard detection failed in OpenCV (" + e.err + ")"};
+    return Internal("chessboard detection failed in OpenCV (" + e.err + ")");
   }
   return corners;
 }

@@ -110,7 +110,7 @@ Result<ChessboardRenderer> ChessboardRenderer::Create(const geometry::StereoCali
                                                       const RenderOptions& options) {
   std::vector<std::string> problems = InputProblems(truth_rig, board, image_size);
   AppendPrefixed(problems, "options.", options.Validate());
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
 
   ChessboardRenderer renderer;
   renderer.rig_ = truth_rig;
@@ -130,7 +130,7 @@ Result<ChessboardRenderer> ChessboardRenderer::Create(const geometry::StereoCali
       cv::undistortPoints(corners, normalised, K, D, cv::noArray(), cv::noArray(),
                           kUndistortCriteria);
     } catch (const cv::Exception& e) {
-      return Error{ErrorCode::kInvalidArgument, "truth_rig: cannot undistort (" + e.err + ")"};
+      return InvalidArgument("truth_rig: cannot undistort (" + e.err + ")");
     }
     rays->rays = cv::Mat2d(image_size.height + 1, image_size.width + 1);
     std::copy(normalised.begin(), normalised.end(), rays->rays.begin());
@@ -269,7 +269,7 @@ Result<std::vector<cv::Affine3d>> GenerateBoardPoses(const geometry::StereoCalib
   std::vector<std::string> problems = InputProblems(truth_rig, board, image_size);
   AppendPrefixed(problems, "options.", options.Validate());
   if (count < 0 || count > 100000) problems.push_back("count: must be in [0, 100000]" + Got(count));
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
 
   const double s = board.square_size_m;
   const double m = options.margin_squares * s;
@@ -350,13 +350,13 @@ Result<std::vector<cv::Affine3d>> GenerateBoardPoses(const geometry::StereoCalib
         placed = true;
       }
       if (!placed) {
-        return Error{ErrorCode::kOutOfRange,
-                     "GenerateBoardPoses: no pose keeps the board (with its margin) in view "
-                     "of both cameras; use a smaller board or width fraction"};
+        return OutOfRange(
+            "GenerateBoardPoses: no pose keeps the board (with its margin) in view "
+            "of both cameras; use a smaller board or width fraction");
       }
     }
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInvalidArgument, "GenerateBoardPoses: OpenCV failed (" + e.err + ")"};
+    return InvalidArgument("GenerateBoardPoses: OpenCV failed (" + e.err + ")");
   }
   return poses;
 }

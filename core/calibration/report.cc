@@ -284,7 +284,7 @@ Result<std::string> ReportToYaml(const CalibrationReport& r) {
     fs << "]";
     return fs.releaseAndGetString();
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInternal, "cannot format the calibration report (" + e.err + ")"};
+    return Internal("cannot format the calibration report (" + e.err + ")");
   }
 }
 
@@ -293,21 +293,19 @@ namespace {
 // Opens the YAML text for reading ("%YAML:1.0" is put in front of a text without it).
 std::optional<Error> OpenYaml(const std::string& yaml_text, cv::FileStorage& fs) {
   if (std::string problem = geometry::YamlTextProblem(yaml_text); !problem.empty()) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "calibration report: not valid YAML (" + problem + ")"};
+    return InvalidArgument("calibration report: not valid YAML (" + problem + ")");
   }
   try {
     std::string text = yaml_text;
     if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
     if (!fs.open(text,
                  cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML)) {
-      return Error{ErrorCode::kInvalidArgument, "calibration report: cannot parse the text"};
+      return InvalidArgument("calibration report: cannot parse the text");
     }
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInvalidArgument, "calibration report: not valid YAML (" + e.err + ")"};
+    return InvalidArgument("calibration report: not valid YAML (" + e.err + ")");
   } catch (const std::exception& e) {
-    return Error{ErrorCode::kInvalidArgument,
-                 std::string("calibration report: not valid YAML (") + e.what() + ")"};
+    return InvalidArgument(std::string("calibration report: not valid YAML (") + e.what() + ")");
   }
   return std::nullopt;
 }
@@ -430,8 +428,7 @@ Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
   try {
     const cv::FileNode root = fs.root();
     if (!root.isMap()) {
-      return Error{ErrorCode::kInvalidArgument,
-                   "calibration report: expected a map at the top level"};
+      return InvalidArgument("calibration report: expected a map at the top level");
     }
     Reader read(problems);
     ReadFigures(read, root, r);
@@ -449,7 +446,7 @@ Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
     problems.push_back(std::string("unreadable (") + e.what() + ")");
   }
   if (!problems.empty()) {
-    Error e = Error::Invalid(problems);
+    Error e = InvalidArgument(problems);
     e.message = "calibration report: " + e.message;
     return e;
   }

@@ -32,18 +32,17 @@ constexpr std::uintmax_t kMaxFileBytes = 16u << 20;
 // The whole file, or an error naming it (kNotFound when it does not exist).
 Result<std::string> ReadFile(const std::string& path, const std::string& label) {
   std::error_code ec;
-  if (!fs::exists(path, ec)) return Error{ErrorCode::kNotFound, label + ": missing"};
+  if (!fs::exists(path, ec)) return NotFound(label + ": missing");
   const std::uintmax_t size = fs::file_size(path, ec);
-  if (ec) return Error{ErrorCode::kInvalidArgument, label + ": cannot read (" + ec.message() + ")"};
+  if (ec) return InvalidArgument(label + ": cannot read (" + ec.message() + ")");
   if (size > kMaxFileBytes) {
-    return Error{ErrorCode::kInvalidArgument,
-                 label + ": " + std::to_string(size) + " bytes, too large to be ours"};
+    return InvalidArgument(label + ": " + std::to_string(size) + " bytes, too large to be ours");
   }
   std::ifstream in(path, std::ios::binary);
-  if (!in) return Error{ErrorCode::kInvalidArgument, label + ": cannot open"};
+  if (!in) return InvalidArgument(label + ": cannot open");
   std::ostringstream text;
   text << in.rdbuf();
-  if (in.bad()) return Error{ErrorCode::kInvalidArgument, label + ": read failed"};
+  if (in.bad()) return InvalidArgument(label + ": read failed");
   return text.str();
 }
 
@@ -124,16 +123,14 @@ std::string CalibrationStore::ReportPath(CalibrationId id) const {
 
 Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
   std::error_code ec;
-  if (directory.empty())
-    return Error{ErrorCode::kInvalidArgument, "calibration store: empty directory name"};
+  if (directory.empty()) return InvalidArgument("calibration store: empty directory name");
   if (fs::exists(directory, ec) && !fs::is_directory(directory, ec)) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "calibration store: " + directory + " is not a directory"};
+    return InvalidArgument("calibration store: " + directory + " is not a directory");
   }
   fs::create_directories(directory, ec);
   if (!fs::is_directory(directory, ec)) {
-    return Error{ErrorCode::kInvalidArgument, "calibration store: cannot create the directory " +
-                                                  directory + " (" + ec.message() + ")"};
+    return InvalidArgument("calibration store: cannot create the directory " + directory + " (" +
+                           ec.message() + ")");
   }
 
   OpenedStore opened;
@@ -145,8 +142,8 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
   std::set<std::int64_t> calibration_ids, report_ids;
   fs::directory_iterator it(directory, ec);
   if (ec) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "calibration store: cannot list " + directory + " (" + ec.message() + ")"};
+    return InvalidArgument("calibration store: cannot list " + directory + " (" + ec.message() +
+                           ")");
   }
   for (const fs::directory_entry& entry : it) {
     const std::string name = entry.path().filename().string();
@@ -247,8 +244,7 @@ std::vector<CalibrationSummary> CalibrationStore::List() const {
 Result<StoredCalibration> CalibrationStore::ReadLocked(CalibrationId id) const {
   const bool known = std::any_of(entries_.begin(), entries_.end(),
                                  [&](const CalibrationSummary& s) { return s.id == id; });
-  if (!known)
-    return Error{ErrorCode::kNotFound, "no calibration " + id.Name() + " in " + directory_};
+  if (!known) return NotFound("no calibration " + id.Name() + " in " + directory_);
   const std::string yaml_name = id.Name() + kCalibrationSuffix;
   const std::string report_name = id.Name() + kReportSuffix;
   StoredCalibration out;
@@ -257,13 +253,12 @@ Result<StoredCalibration> CalibrationStore::ReadLocked(CalibrationId id) const {
   if (!yaml.ok()) return yaml.error();
   Result<geometry::StereoCalibration> calibration = geometry::ParseCalibrationYaml(*yaml);
   if (!calibration.ok()) {
-    return Error{ErrorCode::kInvalidArgument, yaml_name + ": " + calibration.error().message};
+    return InvalidArgument(yaml_name + ": " + calibration.error().message);
   }
   Result<std::string> report_text = ReadFile(ReportPath(id), report_name);
   if (!report_text.ok()) return report_text.error();
   Result<CalibrationReport> report = ParseReportYaml(*report_text);
-  if (!report.ok())
-    return Error{ErrorCode::kInvalidArgument, report_name + ": " + report.error().message};
+  if (!report.ok()) return InvalidArgument(report_name + ": " + report.error().message);
   out.yaml_text = std::move(*yaml);
   out.calibration = std::move(*calibration);
   out.report = std::move(*report);
@@ -278,7 +273,7 @@ Result<StoredCalibration> CalibrationStore::Get(CalibrationId id) const {
 Result<CalibrationId> CalibrationStore::Add(const geometry::StereoCalibration& calibration,
                                             const CalibrationReport& report) {
   if (std::vector<std::string> problems = calibration.Validate(); !problems.empty()) {
-    Error e = Error::Invalid(problems);
+    Error e = InvalidArgument(problems);
     e.message = "calibration store: refusing an invalid calibration: " + e.message;
     return e;
   }
@@ -315,10 +310,9 @@ Status CalibrationStore::Activate(CalibrationId id) {
       if (!gates.empty()) gates += "; ";
       gates += f.message;
     }
-    return Error{ErrorCode::kFailedPrecondition,
-                 id.Name() + " failed its quality gates" +
-                     (gates.empty() ? std::string() : " (" + gates + ")") +
-                     "; it can be inspected but not activated"};
+    return FailedPrecondition(id.Name() + " failed its quality gates" +
+                              (gates.empty() ? std::string() : " (" + gates + ")") +
+                              "; it can be inspected but not activated");
   }
   const std::string active_path = (fs::path(directory_) / kActiveFile).string();
   if (Status s = AtomicWriteFile(active_path, id.Name() + "\n"); !s.ok()) return s;
@@ -333,8 +327,7 @@ std::optional<CalibrationId> CalibrationStore::ActiveId() const {
 
 Result<StoredCalibration> CalibrationStore::Active() const {
   std::lock_guard<std::mutex> lock(mu_);
-  if (!active_)
-    return Error{ErrorCode::kFailedPrecondition, "no active calibration in " + directory_};
+  if (!active_) return FailedPrecondition("no active calibration in " + directory_);
   return ReadLocked(*active_);
 }
 

@@ -20,13 +20,12 @@ Status AtomicWriteFile(const std::string& path, const std::string& text) {
   std::string tmp_path = path + ".tmp-XXXXXX";
   const int fd = ::mkstemp(tmp_path.data());
   if (fd < 0) {
-    return Error{ErrorCode::kInternal,
-                 path + ": cannot create a temporary file beside it (" + ErrnoText() + ")"};
+    return Internal(path + ": cannot create a temporary file beside it (" + ErrnoText() + ")");
   }
   auto fail = [&](const std::string& what) -> Status {
     const std::string reason = ErrnoText();
     ::unlink(tmp_path.c_str());
-    return Error{ErrorCode::kInternal, path + ": " + what + " (" + reason + ")"};
+    return Internal(path + ": " + what + " (" + reason + ")");
   };
   ::fchmod(fd, 0644);
   std::size_t written = 0;

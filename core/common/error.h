@@ -28,7 +28,7 @@ enum class ErrorCode {
 std::string_view ErrorCodeName(ErrorCode code);
 
 // Helpers for Validate() messages ("field: problem (got 3.5)").
-// " (got VALUE)", the value formatted like printf's %g.
+// " (got VALUE)", the value as FormatNumber writes it (whole numbers in full, else like %g).
 std::string Got(double value);
 // Appends each of `problems` to `out`, prefixed with `prefix` (a sub-struct's name and a dot).
 void AppendPrefixed(std::vector<std::string>& out, std::string_view prefix,
@@ -38,13 +38,27 @@ struct Error {
   ErrorCode code = ErrorCode::kInternal;
   std::string message;
 
-  // Joins a list of problems ("field: problem") into one message.
-  static Error Invalid(const std::vector<std::string>& problems);
   // The same error, its message after `prefix` ("source.aravis: ").
   Error Prefixed(std::string_view prefix) const {
     return Error{code, std::string(prefix) + message};
   }
 };
+
+// Errors are built by their code's name, one way everywhere: `return NotFound(path + ": no such
+// file");`.
+Error InvalidArgument(std::string message);
+// The problems of a Validate() ("field: problem"), joined into one message by "; ".
+Error InvalidArgument(const std::vector<std::string>& problems);
+Error NotFound(std::string message);
+Error AlreadyExists(std::string message);
+Error FailedPrecondition(std::string message);
+Error Unavailable(std::string message);
+Error ResourceExhausted(std::string message);
+Error OutOfRange(std::string message);
+Error Cancelled(std::string message);
+Error Unauthenticated(std::string message);
+Error PermissionDenied(std::string message);
+Error Internal(std::string message);
 
 // Either a value or an Error. Small on purpose: C++20 has no std::expected.
 template <typename T>

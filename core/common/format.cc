@@ -17,7 +17,12 @@ std::optional<double> ParseNumber(std::string_view text) {
 
 std::string FormatNumber(double value) {
   char buf[64];
-  std::snprintf(buf, sizeof buf, "%g", value);
+  // Whole numbers in full (1048576, not 1.04858e+06), up to where doubles stop being exact.
+  if (std::isfinite(value) && value == std::trunc(value) && std::fabs(value) < 1e15) {
+    std::snprintf(buf, sizeof buf, "%.0f", value);
+  } else {
+    std::snprintf(buf, sizeof buf, "%g", value);
+  }
   return buf;
 }
 

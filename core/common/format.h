@@ -11,7 +11,8 @@
 
 namespace stevi {
 
-// printf's %g: "0.5", "1e+08", "640".
+// A number for messages and tables: whole numbers in full ("640", "100000000"), others as
+// printf's %g ("0.5", "1e-06").
 std::string FormatNumber(double value);
 // The whole of `text` as a finite number ("0.5", "86400", "-1e-3"); nullopt for anything else
 // (empty, trailing characters, "nan", "inf", out of range).

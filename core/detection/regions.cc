@@ -4,12 +4,13 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <limits>
 #include <numeric>
 #include <string>
 
 #include <opencv2/imgproc.hpp>
 
+#include "core/detection/patch_refinement.h"
+#include "core/detection/surface_filters.h"
 #include "core/extraction/blobs.h"
 
 namespace stevi::detection {
@@ -32,13 +33,6 @@ constexpr double kMinModeFraction = 0.1;
 constexpr double kMatcherBiasPx = 0.1;
 // Blobs shorter than this (rows, at 640 px wide) are never given the slope test: too few rows.
 constexpr int kMinTerrainRows640 = 12;
-// At most this many patches carry the sub-pixel fit (an even subsample), and at least this many.
-constexpr int kMaxRefinePatches = 40;
-constexpr int kMinRefinePatches = 5;
-// What the patches' scatter does not show: the bias of bilinear interpolation and of sampling that
-// every patch shares (pixels, added in quadrature; about what regions_test measures on rendered
-// boxes, whose errors it leaves at 1 sigma rms).
-constexpr double kRefineSystematicPx = 0.03;
 // Hypotheses whose disparity's 1-sigma exceeds this fraction of it (7 % of the range) are dropped:
 // their range says little. Below it the range is kept with its honest sigma; a bound of 3.5 % lost
 // obstacles on the tuning seeds (aircraft at 3-4 px) and no false positives
@@ -125,107 +119,6 @@ int Find(std::vector<int>& parent, int i) {
   return i;
 }
 
-// The fraction of trusted disparities in a ring around the label's mask that lie at its range
-// (see StereoBlobOptions::max_attached_fraction). -1 when the ring holds too few.
-double AttachedFraction(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
-                        const cv::Rect& box, double median_px, double min_disparity_px, int ring_in,
-                        int ring_out) {
-  constexpr int kMinRingPixels = 20;
-  const cv::Rect outer =
-      (box + cv::Point(-ring_out, -ring_out) + cv::Size(2 * ring_out, 2 * ring_out)) &
-      cv::Rect(0, 0, labels.cols, labels.rows);
-  const cv::Mat1b mask = (labels(outer) == label);
-  cv::Mat1b inner_disc, outer_disc;
-  cv::dilate(mask, inner_disc,
-             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * ring_in + 1, 2 * ring_in + 1)));
-  cv::dilate(
-      mask, outer_disc,
-      cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * ring_out + 1, 2 * ring_out + 1)));
-  const double band = std::max(1.0, 0.1 * median_px);
-  const double lo = std::max(median_px - band, min_disparity_px) * kScale;
-  const double hi = (median_px + band) * kScale;
-  int ring = 0, attached = 0;
-  for (int y = 0; y < outer.height; ++y) {
-    const int16_t* d = disparity.fixed[outer.y + y] + outer.x;
-    const uchar* in = inner_disc[y];
-    const uchar* out = outer_disc[y];
-    for (int x = 0; x < outer.width; ++x) {
-      if (!out[x] || in[x] || d[x] < min_disparity_px * kScale) continue;
-      ++ring;
-      if (d[x] >= lo && d[x] <= hi) ++attached;
-    }
-  }
-  return ring < kMinRingPixels ? -1.0 : static_cast<double>(attached) / ring;
-}
-
-// How far the surface under the label's pixels leans back, as dZ/dH (metres of depth per metre of
-// height; 0 for a vertical face, infinite for level ground). A plane n . P = D in the camera frame
-// has the disparity d(u, v) = (B / D) (n_x (u - cx) + n_y (v - cy) + n_z f): linear in (u, v) for
-// any plane, so the fit d = alpha u + beta v + gamma is well conditioned even for flat ground
-// (whose depth, not height, varies), and n_y / n_z = beta f / (gamma + alpha cx + beta cy). 0 when
-// the lean is not significant (beta within 3 standard errors of 0) or the label spans too few rows.
-double LeanBack(const stereo::DisparityMap& disparity, const cv::Mat1i& labels, int label,
-                const cv::Rect& box, double median_px, const geometry::StereoRig& rig,
-                int min_rows) {
-  if (box.height < min_rows) return 0;
-  const double lo = 0.7 * median_px * kScale;
-  const double hi = 1.3 * median_px * kScale;
-  double suu = 0, suv = 0, su = 0, svv = 0, sv = 0, sud = 0, svd = 0, sd = 0, dd = 0;
-  int n = 0;
-  const double u0 = box.x + 0.5 * box.width, v0 = box.y + 0.5 * box.height;
-  for (int y = box.y; y < box.y + box.height; ++y) {
-    const int* lab = labels[y];
-    const int16_t* d = disparity.fixed[y];
-    const double v = y - v0;
-    double row_u = 0, row_uu = 0, row_d = 0, row_ud = 0, row_dd = 0;
-    int row_n = 0;
-    for (int x = box.x; x < box.x + box.width; ++x) {
-      if (lab[x] != label || d[x] < lo || d[x] > hi) continue;
-      const double value = static_cast<double>(d[x]) / kScale;
-      const double u = x - u0;
-      row_u += u;
-      row_uu += u * u;
-      row_d += value;
-      row_ud += u * value;
-      row_dd += value * value;
-      ++row_n;
-    }
-    suu += row_uu;
-    su += row_u;
-    suv += v * row_u;
-    svv += v * v * row_n;
-    sv += v * row_n;
-    sud += row_ud;
-    svd += v * row_d;
-    sd += row_d;
-    dd += row_dd;
-    n += row_n;
-  }
-  const cv::Matx33d ata(suu, suv, su, suv, svv, sv, su, sv, n);
-  const cv::Vec3d atd(sud, svd, sd);
-  if (n < 30) return 0;
-  cv::Matx33d inverse;
-  if (cv::invert(ata, inverse, cv::DECOMP_CHOLESKY) == 0) return 0;
-  const cv::Vec3d p = inverse * atd;  // alpha, beta, disparity at the box centre
-  const double residual = std::max(0.0, dd - p.dot(atd));
-  const double sigma2 = std::max(residual / std::max(1, n - 3), 1e-4);
-  // A block matcher's neighbouring disparities share most of their window: about one
-  // independent value per half-window square, so the fit's standard error is that much larger.
-  const int block = std::max(1, disparity.block_size);
-  const double correlated = std::max(1.0, 0.25 * block * block);
-  const double beta_se =
-      std::sqrt(sigma2 * inverse(1, 1) * std::min(correlated, static_cast<double>(n)));
-  // The lean that the fit shows beyond doubt: beta less three standard errors.
-  const double beta = p[1] - 3.0 * beta_se;
-  if (!(beta > 0)) return 0;
-  // gamma + alpha cx + beta cy with gamma the disparity at (0, 0): the plane's disparity at the
-  // principal point.
-  const double at_principal = p[2] + p[0] * (rig.cx() - u0) + beta * (rig.cy() - v0);
-  const double numerator = beta * rig.f_px();
-  if (at_principal <= 0) return std::numeric_limits<double>::infinity();
-  return numerator / at_principal;
-}
-
 }  // namespace
 
 int ScaledKernel(int size_at_640, int width_px) {
@@ -262,178 +155,6 @@ cv::Mat1b ClassifyPixels(const stereo::DisparityMap& disparity, const geometry::
       }
     }
   }
-  return out;
-}
-
-namespace {
-
-// RefineDisparity's patches: 7 x 7, each moving at most kPatchSearchPx from the initial disparity.
-constexpr int kHalf = 3;
-constexpr double kSearchPx = 2.0;
-constexpr int kSide = 2 * kHalf + 1, kCount = kSide * kSide;
-constexpr int kOuter = kSide + 2;  // one more pixel around, for the right image's gradients
-
-struct Seed {
-  int gx;
-  cv::Point at;
-};
-
-// The patches' centres: on a grid of cells (5 px, larger for large objects, so that about twice
-// kMaxRefinePatches cells cover the box), in each cell's middle row the mask pixel of strongest
-// horizontal gradient, so that the patches barely overlap and their errors are nearly
-// independent. At most kMaxRefinePatches (an even subsample); fewer than kMinRefinePatches are
-// too few to refine with.
-std::vector<Seed> PatchSeeds(const cv::Mat1b& left, const cv::Mat1b& mask, const cv::Rect& box,
-                             double initial_px) {
-  const int cell = std::max(5, static_cast<int>(std::lround(std::sqrt(
-                                   static_cast<double>(box.area()) / (2.0 * kMaxRefinePatches)))));
-  const int margin = kHalf + 3;
-  std::vector<Seed> seeds;
-  for (int cy = 0; cy < box.height; cy += cell) {
-    const int y = std::min(cy + cell / 2, box.height - 1);
-    const int v = box.y + y;
-    if (v < margin || v >= left.rows - margin) continue;
-    const uchar* m = mask[y];
-    const uchar* row = left[v];
-    for (int cx = 0; cx < box.width; cx += cell) {
-      Seed best{0, {}};
-      for (int x = cx; x < std::min(cx + cell, box.width); ++x) {
-        const int u = box.x + x;
-        if (!m[x] || u < margin || u >= left.cols - margin || u - initial_px - kSearchPx < margin ||
-            u - initial_px + kSearchPx >= left.cols - margin) {
-          continue;
-        }
-        const int gx = std::abs(row[u + 1] - row[u - 1]);
-        if (gx > best.gx) best = {gx, cv::Point(u, v)};
-      }
-      if (best.gx >= 2) seeds.push_back(best);
-    }
-  }
-  if (static_cast<int>(seeds.size()) < kMinRefinePatches) return seeds;
-  if (static_cast<int>(seeds.size()) > kMaxRefinePatches) {
-    // An even subsample: every part of the object counts alike.
-    std::vector<Seed> kept;
-    kept.reserve(kMaxRefinePatches);
-    const double step = static_cast<double>(seeds.size()) / kMaxRefinePatches;
-    for (int i = 0; i < kMaxRefinePatches; ++i)
-      kept.push_back(seeds[static_cast<size_t>(i * step)]);
-    seeds.swap(kept);
-  }
-
-  return seeds;
-}
-
-// One patch: zero-mean SSD (a gain and an offset between the views drop out), translation
-// (dx, dy) by Gauss-Newton from the initial disparity: the vertical term takes up a residual
-// misalignment of the rectification. nullopt for a flat patch, one that leaves the image or the
-// search range, or an ill-conditioned fit.
-std::optional<double> PatchDisparity(const cv::Mat1b& left, const cv::Mat1b& right,
-                                     const Seed& seed, double initial_px) {
-  std::array<float, kCount> l{};
-  std::array<float, kOuter * kOuter> r{};
-  double l_mean = 0;
-  for (int j = 0, i = 0; j < kSide; ++j) {
-    const uchar* row = left[seed.at.y - kHalf + j];
-    for (int k = 0; k < kSide; ++k, ++i) {
-      l[i] = row[seed.at.x - kHalf + k];
-      l_mean += l[i];
-    }
-  }
-  l_mean /= kCount;
-  double l_energy = 0;
-  for (float& v : l) {
-    v = static_cast<float>(v - l_mean);
-    l_energy += v * v;
-  }
-  if (l_energy < 4.0 * kCount) return std::nullopt;  // flat: below a grey level rms
-  double d = initial_px, e = 0;
-  bool ok = true;
-  for (int iteration = 0; iteration < 5 && ok; ++iteration) {
-    // The right image around the patch's match, shifted by (d, e): every sample of the
-    // iteration shares the sub-pixel weights.
-    const double x0 = seed.at.x - kHalf - 1 - d, y0 = seed.at.y - kHalf - 1 + e;
-    const int ix = static_cast<int>(std::floor(x0)), iy = static_cast<int>(std::floor(y0));
-    if (ix < 0 || iy < 0 || ix + kOuter + 1 >= right.cols || iy + kOuter + 1 >= right.rows) {
-      ok = false;
-      break;
-    }
-    const float fx = static_cast<float>(x0 - ix), fy = static_cast<float>(y0 - iy);
-    const float w00 = (1 - fx) * (1 - fy), w10 = fx * (1 - fy), w01 = (1 - fx) * fy, w11 = fx * fy;
-    for (int j = 0; j < kOuter; ++j) {
-      const uchar* r0 = right[iy + j] + ix;
-      const uchar* r1 = right[iy + j + 1] + ix;
-      float* out = &r[j * kOuter];
-      for (int k = 0; k < kOuter; ++k) {
-        out[k] = w00 * r0[k] + w10 * r0[k + 1] + w01 * r1[k] + w11 * r1[k + 1];
-      }
-    }
-    double r_mean = 0;
-    for (int j = 1; j <= kSide; ++j) {
-      for (int k = 1; k <= kSide; ++k) r_mean += r[j * kOuter + k];
-    }
-    r_mean /= kCount;
-    // residual = L - R(x - d, y + e): d(res)/dd = Rx, d(res)/de = -Ry.
-    double a11 = 0, a12 = 0, a22 = 0, b1 = 0, b2 = 0;
-    for (int j = 1, i = 0; j <= kSide; ++j) {
-      const float* row = &r[j * kOuter];
-      for (int k = 1; k <= kSide; ++k, ++i) {
-        const double res = l[i] - (row[k] - r_mean);
-        const double jd = 0.5 * (row[k + 1] - row[k - 1]);
-        const double je = -0.5 * (row[k + kOuter] - row[k - kOuter]);
-        a11 += jd * jd;
-        a12 += jd * je;
-        a22 += je * je;
-        b1 += jd * res;
-        b2 += je * res;
-      }
-    }
-    const double det = a11 * a22 - a12 * a12;
-    if (a11 < 1.0 || det <= 1e-9 * a11 * a22) {
-      ok = false;
-      break;
-    }
-    const double step_d = -(a22 * b1 - a12 * b2) / det;
-    const double step_e = -(a11 * b2 - a12 * b1) / det;
-    d += std::clamp(step_d, -0.5, 0.5);
-    e = std::clamp(e + std::clamp(step_e, -0.5, 0.5), -1.0, 1.0);
-    if (std::abs(d - initial_px) > kSearchPx) ok = false;
-    if (std::abs(step_d) < 2e-3 && std::abs(step_e) < 2e-3) break;
-  }
-  if (!ok) return std::nullopt;
-  return d;
-}
-
-}  // namespace
-
-std::optional<RefinedDisparity> RefineDisparity(const cv::Mat1b& left, const cv::Mat1b& right,
-                                                const cv::Mat1b& mask, const cv::Rect& box,
-                                                double initial_px) {
-  if (left.empty() || right.empty() || left.size() != right.size() || !(initial_px > 0)) {
-    return std::nullopt;
-  }
-  const std::vector<Seed> seeds = PatchSeeds(left, mask, box, initial_px);
-  if (static_cast<int>(seeds.size()) < kMinRefinePatches) return std::nullopt;
-  std::vector<double> estimates;
-  estimates.reserve(seeds.size());
-  for (const Seed& seed : seeds) {
-    if (const std::optional<double> d = PatchDisparity(left, right, seed, initial_px))
-      estimates.push_back(*d);
-  }
-  const int n = static_cast<int>(estimates.size());
-  if (n < kMinRefinePatches) return std::nullopt;
-  std::sort(estimates.begin(), estimates.end());
-  const double median = n % 2 ? estimates[n / 2] : 0.5 * (estimates[n / 2 - 1] + estimates[n / 2]);
-  std::vector<double> deviations(n);
-  for (int i = 0; i < n; ++i) deviations[i] = std::abs(estimates[i] - median);
-  std::nth_element(deviations.begin(), deviations.begin() + n / 2, deviations.end());
-  // The median of n independent patch estimates: 1.2533 * sigma / sqrt(n), with the patches'
-  // scatter from their median absolute deviation.
-  const double scatter = 1.4826 * deviations[n / 2];
-  RefinedDisparity out;
-  out.disparity_px = median;
-  const double random = 1.2533 * scatter / std::sqrt(static_cast<double>(n));
-  out.sigma_px = std::hypot(random, kRefineSystematicPx);
-  out.pixels = n;
   return out;
 }
 
@@ -529,32 +250,24 @@ void LinkAppearance(const RegionsContext& ctx, cv::Mat1b& candidates, cv::Mat1s&
   cv::compare(linked_disparity, 0, linked, cv::CMP_GE);
 }
 
-// Step 1b: the linked pixels joined as neighbours across disparity steps of at most
-// max_disparity_step_px, each blob split where its candidates' disparities form separate depth
-// modes: the pieces (index 0: nothing), summarised, with their labels in `piece_labels`. A piece's
-// box and disparities are its candidates' (linking only holds them together).
-std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candidates,
-                             const cv::Mat1s& linked_disparity, const cv::Mat1b& linked,
-                             const cv::Mat1i& region_labels, cv::Mat1i& piece_labels) {
-  const StereoBlobOptions& options = ctx.options;
+// A blob's histogram of its candidates' disparities, in quarter-pixel bins, for every blob of
+// step 1b's blobs at once (whole-image passes: a blob's box overlaps others').
+struct BlobHistograms {
+  std::vector<int> blob_of;    // label -> blob (-1: dropped)
+  int bins = 0;                // bins per blob
+  std::vector<int> histogram;  // blob b's bins from b * bins
+  std::vector<int> counts;     // per blob: its candidates
+};
+
+BlobHistograms HistogramBlobs(const RegionsContext& ctx, const extraction::BlobSet& blobs,
+                              const cv::Mat1b& candidates) {
   const stereo::DisparityMap& disparity = ctx.disparity;
   const cv::Mat1s& fixed = disparity.fixed;
   const int width = ctx.width, height = ctx.height;
-  const int step_fixed =
-      std::max(1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale)));
-  const extraction::BlobSet blobs =
-      options.max_disparity_step_px > 0
-          ? extraction::ExtractDisparityBlobs(linked, linked_disparity, step_fixed,
-                                              kMinPieceDisparities,
-                                              /*shapes=*/false)
-          : extraction::ExtractBlobs(linked, kMinPieceDisparities);
-  const int gap_bins = std::max(
-      1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale / kBinFixed)));
-  // Per blob, in whole-image passes (a blob's box overlaps others'): the quarter-pixel histogram
-  // of its candidates' disparities, its depth modes, and each mode's piece.
-  std::vector<int> blob_of(std::max(1, blobs.label_count), -1);  // label -> blob (-1: dropped)
+  BlobHistograms h;
+  h.blob_of.assign(std::max(1, blobs.label_count), -1);
   for (size_t i = 0; i < blobs.blobs.size(); ++i)
-    blob_of[blobs.blobs[i].label] = static_cast<int>(i);
+    h.blob_of[blobs.blobs[i].label] = static_cast<int>(i);
   const size_t blob_count = blobs.blobs.size();
   int top_px = disparity.min_disparity + disparity.num_disparities;
   if (disparity.num_disparities <= 0) {  // a map that does not say its search range
@@ -563,27 +276,37 @@ std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candida
     top_px = static_cast<int>(top) / kScale;
   }
   const int bins = (std::max(1, top_px) + 1) * kScale / kBinFixed + 1;
-  std::vector<int> histogram(blob_count * bins, 0), counts(blob_count, 0);
+  h.bins = bins;
+  h.histogram.assign(blob_count * bins, 0);
+  h.counts.assign(blob_count, 0);
   for (int y = 0; y < height; ++y) {
     const int* lab = blobs.labels[y];
     const uchar* c = candidates[y];
     const int16_t* d = fixed[y];
     for (int x = 0; x < width; ++x) {
       if ((lab[x] == 0) | (c[x] == 0)) continue;
-      const int b = blob_of[lab[x]];
+      const int b = h.blob_of[lab[x]];
       if (b < 0) continue;
-      ++histogram[static_cast<size_t>(b) * bins + std::min(bins - 1, d[x] / kBinFixed)];
-      ++counts[b];
+      ++h.histogram[static_cast<size_t>(b) * bins + std::min(bins - 1, d[x] / kBinFixed)];
+      ++h.counts[b];
     }
   }
-  // Modes, and the piece of each (bin -> piece index, 0 = no mode).
-  std::vector<Piece> pieces(1);  // piece 0 = nothing
-  std::vector<int> piece_of_bin(histogram.size(), 0);
+  return h;
+}
+
+// Each blob's depth modes, one piece each, appended to `pieces`. Returns, per bin of every blob's
+// histogram, the piece of its mode (0: no mode).
+std::vector<int> PiecesOfModes(const StereoBlobOptions& options, const BlobHistograms& h,
+                               std::vector<Piece>& pieces) {
+  const int bins = h.bins;
+  const int gap_bins = std::max(
+      1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale / kBinFixed)));
+  std::vector<int> piece_of_bin(h.histogram.size(), 0);
   std::vector<int> blob_histogram;
-  for (size_t b = 0; b < blob_count; ++b) {
-    const int n = counts[b];
+  for (size_t b = 0; b < h.counts.size(); ++b) {
+    const int n = h.counts[b];
     if (n < kMinPieceDisparities) continue;
-    blob_histogram.assign(histogram.begin() + b * bins, histogram.begin() + (b + 1) * bins);
+    blob_histogram.assign(h.histogram.begin() + b * bins, h.histogram.begin() + (b + 1) * bins);
     // Bins holding fewer than 1 % of the values are empty: a sparse bridge is no mode.
     const int sparse = std::max(1, n / 100);
     for (int& v : blob_histogram) v = v >= sparse ? v : 0;
@@ -599,6 +322,20 @@ std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candida
         piece_of_bin[b * bins + k] = static_cast<int>(pieces.size()) - 1;
     }
   }
+  return piece_of_bin;
+}
+
+// Each linked pixel goes to the piece of the mode of the disparity it took (its area and
+// centroid); a candidate also gives the piece its box and disparity, and its label in
+// `piece_labels`.
+void LabelPieces(const RegionsContext& ctx, const extraction::BlobSet& blobs,
+                 const BlobHistograms& h, const std::vector<int>& piece_of_bin,
+                 const cv::Mat1b& candidates, const cv::Mat1s& linked_disparity,
+                 const cv::Mat1i& region_labels, std::vector<Piece>& pieces,
+                 cv::Mat1i& piece_labels) {
+  const cv::Mat1s& fixed = ctx.disparity.fixed;
+  const int width = ctx.width, height = ctx.height;
+  const int bins = h.bins;
   std::vector<cv::Point> lo(pieces.size(), cv::Point(INT32_MAX, INT32_MAX));
   std::vector<cv::Point> hi(pieces.size(), cv::Point(-1, -1));
   piece_labels.create(fixed.size());
@@ -611,7 +348,7 @@ std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candida
     for (int x = 0; x < width; ++x) {
       out_label[x] = 0;
       if (lab[x] == 0) continue;
-      const int b = blob_of[lab[x]];
+      const int b = h.blob_of[lab[x]];
       if (b < 0) continue;
       // A linked pixel goes with the mode of the disparity it took.
       const int k =
@@ -619,7 +356,7 @@ std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candida
       if (k == 0) continue;
       Piece& p = pieces[k];
       // A piece lies in one region: its pixels are 8-connected appearance pixels.
-      if (options.join_within_region && p.region == 0) p.region = region_labels(y, x);
+      if (ctx.options.join_within_region && p.region == 0) p.region = region_labels(y, x);
       ++p.area;
       p.sum_x += x;
       p.sum_y += y;
@@ -637,9 +374,34 @@ std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candida
     if (hi[k].x >= 0)
       pieces[k].box = cv::Rect(lo[k].x, lo[k].y, hi[k].x - lo[k].x + 1, hi[k].y - lo[k].y + 1);
   }
+}
+
+// Step 1b: the linked pixels joined as neighbours across disparity steps of at most
+// max_disparity_step_px, each blob split where its candidates' disparities form separate depth
+// modes: the pieces (index 0: nothing), summarised, with their labels in `piece_labels`. A piece's
+// box and disparities are its candidates' (linking only holds them together).
+std::vector<Piece> CutPieces(const RegionsContext& ctx, const cv::Mat1b& candidates,
+                             const cv::Mat1s& linked_disparity, const cv::Mat1b& linked,
+                             const cv::Mat1i& region_labels, cv::Mat1i& piece_labels) {
+  const StereoBlobOptions& options = ctx.options;
+  const int step_fixed =
+      std::max(1, static_cast<int>(std::lround(options.max_disparity_step_px * kScale)));
+  const extraction::BlobSet blobs =
+      options.max_disparity_step_px > 0
+          ? extraction::ExtractDisparityBlobs(linked, linked_disparity, step_fixed,
+                                              kMinPieceDisparities,
+                                              /*shapes=*/false)
+          : extraction::ExtractBlobs(linked, kMinPieceDisparities);
+  // Per blob: the quarter-pixel histogram of its candidates' disparities, its depth modes, and
+  // each mode's piece.
+  const BlobHistograms histograms = HistogramBlobs(ctx, blobs, candidates);
+  std::vector<Piece> pieces(1);  // piece 0 = nothing
+  const std::vector<int> piece_of_bin = PiecesOfModes(options, histograms, pieces);
+  LabelPieces(ctx, blobs, histograms, piece_of_bin, candidates, linked_disparity, region_labels,
+              pieces, piece_labels);
   const int piece_count = static_cast<int>(pieces.size());
   for (int i = 1; i < piece_count; ++i) {
-    if (!pieces[i].disparities.empty()) Summarise(pieces[i], disparity.block_size);
+    if (!pieces[i].disparities.empty()) Summarise(pieces[i], ctx.disparity.block_size);
   }
 
   return pieces;
@@ -743,37 +505,10 @@ void RangeFromPixels(const RegionsContext& ctx, const GroupLimits& limits, const
   const int interior = limits.interior;
   bool refined_ok = false;
   if (full != nullptr && !full->left.empty()) {
-    const int k = std::max(1, full->binning);
-    const cv::Rect full_box =
-        cv::Rect(group.box.x * k, group.box.y * k, group.box.width * k, group.box.height * k) &
-        cv::Rect(0, 0, full->left.cols, full->left.rows);
-    // The fit runs over the pixels at the hypothesis' own range (a box's oblique faces and a
-    // halo at other disparities would pull it off its nearest face).
-    const int band =
-        std::max(kScale * 3 / 8, static_cast<int>(std::lround(0.02 * median_px * kScale)));
-    const int median_fixed = static_cast<int>(std::lround(median_px * kScale));
-    cv::Mat1b at_range(mask.size());
-    for (int y = 0; y < mask.rows; ++y) {
-      const int16_t* dd = fixed[group.box.y + y] + group.box.x;
-      const uchar* c = classes[group.box.y + y] + group.box.x;
-      const uchar* m = mask[y];
-      uchar* o = at_range[y];
-      for (int x = 0; x < mask.cols; ++x) {
-        const bool near =
-            (m[x] != 0) & (c[x] == kCandidate) & (std::abs(dd[x] - median_fixed) <= band);
-        o[x] = near ? 255 : 0;
-      }
-    }
-    cv::Mat1b full_mask;
-    cv::resize(at_range, full_mask, cv::Size(group.box.width * k, group.box.height * k), 0, 0,
-               cv::INTER_NEAREST);
-    full_mask = full_mask(cv::Rect(0, 0, full_box.width, full_box.height));
-    const std::optional<RefinedDisparity> refined =
-        RefineDisparity(full->left, full->right, full_mask, full_box, median_px * k);
-    if (refined &&
-        std::abs(refined->disparity_px - median_px * k) <= std::max(1.5 * k, 0.2 * median_px * k)) {
-      d.disparity_px = refined->disparity_px / k;
-      d.disparity_sigma_px = refined->sigma_px / k;
+    if (const std::optional<RefinedDisparity> refined =
+            RefineOnFullPair(*full, fixed, classes, group.box, mask, median_px)) {
+      d.disparity_px = refined->disparity_px;
+      d.disparity_sigma_px = refined->sigma_px;
       refined_ok = true;
     }
   }

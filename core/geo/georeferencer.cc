@@ -15,7 +15,7 @@ constexpr double kDegToRad = std::numbers::pi / 180.0;
 
 const MountOptions& Checked(const MountOptions& mount) {
   if (std::vector<std::string> problems = mount.Validate(); !problems.empty()) {
-    throw std::invalid_argument("MountOptions: " + Error::Invalid(problems).message);
+    throw std::invalid_argument("MountOptions: " + InvalidArgument(problems).message);
   }
   return mount;
 }
@@ -100,7 +100,7 @@ Result<GeoPoint> Georeferencer::Georeference(const VehiclePose& pose,
       problems.push_back("point.covariance_m2: must be symmetric with a non-negative diagonal");
     }
   }
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
 
   const VehicleState& state = pose.state;
   const Eigen::Matrix3d ned_from_body = NedFromBody(state).toRotationMatrix();

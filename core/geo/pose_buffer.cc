@@ -47,7 +47,7 @@ double Lerp(double a, double b, double w) { return a + (b - a) * w; }
 
 const PoseBufferOptions& Checked(const PoseBufferOptions& options) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
-    throw std::invalid_argument("PoseBufferOptions: " + Error::Invalid(problems).message);
+    throw std::invalid_argument("PoseBufferOptions: " + InvalidArgument(problems).message);
   }
   return options;
 }
@@ -75,7 +75,7 @@ PoseBuffer::PoseBuffer(PoseBufferOptions options) : options_(Checked(options)) {
 
 Status PoseBuffer::Add(const VehicleState& state) {
   if (std::vector<std::string> problems = state.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   std::lock_guard lock(mutex_);
   if (!states_.empty() && state.t_ns <= states_.back().t_ns) {
@@ -83,7 +83,7 @@ Status PoseBuffer::Add(const VehicleState& state) {
     std::snprintf(buf, sizeof buf,
                   "t_ns: out of order: %lld ns is not after the newest state (%lld ns)",
                   static_cast<long long>(state.t_ns), static_cast<long long>(states_.back().t_ns));
-    return Error{ErrorCode::kInvalidArgument, buf};
+    return InvalidArgument(buf);
   }
   states_.push_back(state);
   while (states_.size() > static_cast<std::size_t>(options_.capacity)) states_.pop_front();

@@ -182,8 +182,8 @@ Result<StereoCalibration> ParseStorage(const cv::FileStorage& fs) {
   std::vector<std::string> problems;
   const cv::FileNode root = fs.root();
   if (!root.empty() && !root.isNone() && !root.isMap()) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "expected a map of calibration keys (image_width, M1, ...) at the top level"};
+    return InvalidArgument(
+        "expected a map of calibration keys (image_width, M1, ...) at the top level");
   }
   StereoCalibration c;
 
@@ -229,7 +229,7 @@ Result<StereoCalibration> ParseStorage(const cv::FileStorage& fs) {
 
   // Only check the values once every key could be read, so a missing key is not reported twice.
   if (problems.empty()) problems = c.Validate();
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   return c;
 }
 
@@ -367,30 +367,27 @@ std::string YamlTextProblem(std::string_view text) {
 Result<StereoCalibration> LoadCalibrationYaml(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) {
-    return Error{ErrorCode::kNotFound, "calibration file not found: " + path};
+    return NotFound("calibration file not found: " + path);
   }
   if (std::filesystem::is_directory(path, ec)) {
-    return Error{ErrorCode::kInvalidArgument, path + ": is a directory, not a calibration file"};
+    return InvalidArgument(path + ": is a directory, not a calibration file");
   }
   {
     std::ifstream in(path, std::ios::binary);
     const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
     if (std::string problem = YamlTextProblem(text); !problem.empty()) {
-      return Error{ErrorCode::kInvalidArgument,
-                   path + ": not a valid calibration YAML file (" + problem + ")"};
+      return InvalidArgument(path + ": not a valid calibration YAML file (" + problem + ")");
     }
   }
   cv::FileStorage fs;
   try {
     if (!fs.open(path, cv::FileStorage::READ | cv::FileStorage::FORMAT_YAML)) {
-      return Error{ErrorCode::kInvalidArgument, path + ": cannot open the calibration file"};
+      return InvalidArgument(path + ": cannot open the calibration file");
     }
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInvalidArgument,
-                 path + ": not a valid calibration YAML file (" + OpenCvReason(e) + ")"};
+    return InvalidArgument(path + ": not a valid calibration YAML file (" + OpenCvReason(e) + ")");
   } catch (const std::exception& e) {
-    return Error{ErrorCode::kInvalidArgument,
-                 path + ": not a valid calibration YAML file (" + e.what() + ")"};
+    return InvalidArgument(path + ": not a valid calibration YAML file (" + e.what() + ")");
   }
   Result<StereoCalibration> result = ParseStorage(fs);
   if (!result.ok()) return WithPrefix(result.error(), path + ": ");
@@ -399,7 +396,7 @@ Result<StereoCalibration> LoadCalibrationYaml(const std::string& path) {
 
 Result<StereoCalibration> ParseCalibrationYaml(const std::string& yaml_text) {
   if (std::string problem = YamlTextProblem(yaml_text); !problem.empty()) {
-    return Error{ErrorCode::kInvalidArgument, "calibration YAML: not valid YAML (" + problem + ")"};
+    return InvalidArgument("calibration YAML: not valid YAML (" + problem + ")");
   }
   cv::FileStorage fs;
   int header_lines = 0;
@@ -412,21 +409,20 @@ Result<StereoCalibration> ParseCalibrationYaml(const std::string& yaml_text) {
     }
     if (!fs.open(text,
                  cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML)) {
-      return Error{ErrorCode::kInvalidArgument, "calibration YAML: cannot parse the text"};
+      return InvalidArgument("calibration YAML: cannot parse the text");
     }
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "calibration YAML: not valid YAML (" + OpenCvReason(e, header_lines) + ")"};
+    return InvalidArgument("calibration YAML: not valid YAML (" + OpenCvReason(e, header_lines) +
+                           ")");
   } catch (const std::exception& e) {
-    return Error{ErrorCode::kInvalidArgument,
-                 std::string("calibration YAML: not valid YAML (") + e.what() + ")"};
+    return InvalidArgument(std::string("calibration YAML: not valid YAML (") + e.what() + ")");
   }
   return ParseStorage(fs);
 }
 
 Result<std::string> CalibrationYamlText(const StereoCalibration& calibration) {
   if (std::vector<std::string> problems = calibration.Validate(); !problems.empty()) {
-    return WithPrefix(Error::Invalid(problems), "refusing to write an invalid calibration: ");
+    return WithPrefix(InvalidArgument(problems), "refusing to write an invalid calibration: ");
   }
   try {
     cv::FileStorage fs(
@@ -448,8 +444,7 @@ Result<std::string> CalibrationYamlText(const StereoCalibration& calibration) {
     if (calibration.F) fs << "F" << cv::Mat(*calibration.F);
     return fs.releaseAndGetString();
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInternal,
-                 "could not format the calibration (" + OpenCvReason(e) + ")"};
+    return Internal("could not format the calibration (" + OpenCvReason(e) + ")");
   }
 }
 

@@ -1,4 +1,4 @@
-// Stereo calibration files: OpenCV FileStorage YAML with the keys of DESIGN.md.
+// Stereo calibration files: OpenCV FileStorage YAML, one key per field of StereoCalibration below.
 #pragma once
 
 #include <optional>

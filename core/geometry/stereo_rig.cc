@@ -51,17 +51,15 @@ bool IsAlreadyRectified(const StereoCalibration& c) {
 
 Status CheckImage(const cv::Mat& image, const char* name, cv::Size size) {
   const std::string who = std::string("Rectify: ") + name + ": ";
-  if (image.empty()) return Error{ErrorCode::kInvalidArgument, who + "empty image"};
+  if (image.empty()) return InvalidArgument(who + "empty image");
   if (image.type() != CV_8UC1 && image.type() != CV_8UC3) {
-    return Error{ErrorCode::kInvalidArgument,
-                 who + "expected 8-bit grey (CV_8UC1) or BGR (CV_8UC3), got " +
-                     cv::typeToString(image.type())};
+    return InvalidArgument(who + "expected 8-bit grey (CV_8UC1) or BGR (CV_8UC3), got " +
+                           cv::typeToString(image.type()));
   }
   if (image.size() != size) {
-    return Error{ErrorCode::kInvalidArgument,
-                 who + "expected " + std::to_string(size.width) + "x" +
-                     std::to_string(size.height) + " (the calibration's size), got " +
-                     std::to_string(image.cols) + "x" + std::to_string(image.rows)};
+    return InvalidArgument(who + "expected " + std::to_string(size.width) + "x" +
+                           std::to_string(size.height) + " (the calibration's size), got " +
+                           std::to_string(image.cols) + "x" + std::to_string(image.rows));
   }
   return Status::Ok();
 }
@@ -93,18 +91,18 @@ void Remap(const cv::Mat& raw, const cv::Mat& map1, const cv::Mat& map2, cv::Mat
 Result<StereoRig> StereoRig::FromCalibration(const StereoCalibration& calibration,
                                              std::string calibration_id) {
   if (std::vector<std::string> problems = calibration.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   if (calibration.T[0] > 0) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "T: the camera named left sits to the right of the camera named right "
-                 "(T_x > 0); swap left and right"};
+    return InvalidArgument(
+        "T: the camera named left sits to the right of the camera named right "
+        "(T_x > 0); swap left and right");
   }
   if (std::abs(calibration.T[0]) <
       std::max(std::abs(calibration.T[1]), std::abs(calibration.T[2]))) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "T: the baseline must be mostly horizontal (|T_x| largest); vertical or "
-                 "forward-looking rigs are not supported"};
+    return InvalidArgument(
+        "T: the baseline must be mostly horizontal (|T_x| largest); vertical or "
+        "forward-looking rigs are not supported");
   }
 
   StereoRig rig;
@@ -131,8 +129,8 @@ Result<StereoRig> StereoRig::FromCalibration(const StereoCalibration& calibratio
         cv::stereoRectify(cv::Mat(c.M1), c.D1, cv::Mat(c.M2), c.D2, c.image_size, cv::Mat(c.R),
                           cv::Mat(c.T), r1, r2, p1, p2, q, cv::CALIB_ZERO_DISPARITY, 0.0);
       } catch (const cv::Exception& e) {
-        return Error{ErrorCode::kInvalidArgument,
-                     std::string("calibration: stereo rectification failed (") + e.err + ")"};
+        return InvalidArgument(std::string("calibration: stereo rectification failed (") + e.err +
+                               ")");
       }
       c.R1 = cv::Matx33d(r1);
       c.R2 = cv::Matx33d(r2);
@@ -141,8 +139,8 @@ Result<StereoRig> StereoRig::FromCalibration(const StereoCalibration& calibratio
       c.Q = cv::Matx44d(q);
     }
     if ((*c.P2)(1, 3) != 0 && std::abs((*c.P2)(1, 3)) > std::abs((*c.P2)(0, 3))) {
-      return Error{ErrorCode::kInvalidArgument,
-                   "P2: the rectification is vertical; only horizontal rigs are supported"};
+      return InvalidArgument(
+          "P2: the rectification is vertical; only horizontal rigs are supported");
     }
     auto maps = std::make_shared<Maps>();
     try {
@@ -151,8 +149,8 @@ Result<StereoRig> StereoRig::FromCalibration(const StereoCalibration& calibratio
       cv::initUndistortRectifyMap(cv::Mat(c.M2), c.D2, cv::Mat(*c.R2), cv::Mat(*c.P2), c.image_size,
                                   CV_16SC2, maps->right_x, maps->right_y);
     } catch (const cv::Exception& e) {
-      return Error{ErrorCode::kInvalidArgument,
-                   std::string("calibration: building the remap tables failed (") + e.err + ")"};
+      return InvalidArgument(std::string("calibration: building the remap tables failed (") +
+                             e.err + ")");
     }
     rig.maps_ = std::move(maps);
   }
@@ -165,8 +163,7 @@ Result<StereoRig> StereoRig::FromCalibration(const StereoCalibration& calibratio
   rig.baseline_m_ = std::abs(p2(0, 3) / p2(0, 0));
   rig.Q_ = *c.Q;
   if (!(rig.f_px_ > 0) || !(rig.baseline_m_ > 0) || !std::isfinite(rig.baseline_m_)) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "P1, P2: the rectified focal length and baseline must be > 0"};
+    return InvalidArgument("P1, P2: the rectified focal length and baseline must be > 0");
   }
   return rig;
 }

@@ -75,7 +75,7 @@ std::shared_ptr<const PipelineConfig> ConfigStore::Get() const {
 
 Result<std::shared_ptr<const PipelineConfig>> ConfigStore::Set(PipelineConfig config) {
   const std::vector<std::string> problems = config.Validate();
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   auto snapshot = std::make_shared<const PipelineConfig>(std::move(config));
   std::lock_guard lock(mu_);
   active_ = snapshot;

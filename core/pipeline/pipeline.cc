@@ -12,7 +12,6 @@
 #include "core/detection/canonical.h"
 #include "core/geo/mount.h"
 #include "core/geo/vehicle_state.h"
-#include "core/geo/vehicle_state.h"
 
 namespace stevi::pipeline {
 namespace {
@@ -32,10 +31,6 @@ bool ToGrey(const cv::Mat& in, cv::Mat& out) {
     case CV_8UC4: cv::cvtColor(in, out, cv::COLOR_BGRA2GRAY); return true;
     default: return false;
   }
-}
-
-Error Invalid(std::string message) {
-  return Error{ErrorCode::kInvalidArgument, std::move(message)};
 }
 
 }  // namespace
@@ -183,16 +178,18 @@ Status FrontEnd::State::Rectify(const StereoFrame& frame, const Snapshot& snapsh
     } else if (ToGrey(frame.left, full_out)) {
       out_left = full_out;
     } else {
-      return Invalid("frame.left: unsupported image type " + cv::typeToString(frame.left.type()) +
-                     " (want CV_8UC1 or CV_8UC3)");
+      return InvalidArgument("frame.left: unsupported image type " +
+                             cv::typeToString(frame.left.type()) +
+                             " (want CV_8UC1, CV_8UC3 or CV_8UC4)");
     }
     if (frame.right.type() == CV_8UC1) {
       out_right = frame.right;  // only read: no copy needed
     } else if (ToGrey(frame.right, rect_right)) {
       out_right = rect_right;
     } else {
-      return Invalid("frame.right: unsupported image type " + cv::typeToString(frame.right.type()) +
-                     " (want CV_8UC1 or CV_8UC3)");
+      return InvalidArgument("frame.right: unsupported image type " +
+                             cv::typeToString(frame.right.type()) +
+                             " (want CV_8UC1, CV_8UC3 or CV_8UC4)");
     }
   } else {
     Status status = rig.Rectify(frame.left, frame.right, full_out, rect_right);
@@ -224,7 +221,7 @@ Status FrontEnd::State::ComputeDisparity(const stereo::MatcherOptions& options,
     if (!problems.empty()) {
       std::vector<std::string> prefixed;
       AppendPrefixed(prefixed, "matcher.", problems);
-      return Error::Invalid(prefixed);
+      return InvalidArgument(prefixed);
     }
     matcher = stereo::MakeMatcher(options);
     matcher_options = options;
@@ -275,7 +272,7 @@ Status Pipeline::State::ConfigureTracker(const tracking::TrackerOptions& options
   if (!problems.empty()) {
     std::vector<std::string> prefixed;
     AppendPrefixed(prefixed, "tracking.", problems);
-    return Error::Invalid(prefixed);
+    return InvalidArgument(prefixed);
   }
   if (tracker == nullptr) {
     tracker = std::make_unique<tracking::Tracker>(options);
@@ -291,7 +288,7 @@ Status Pipeline::State::ConfigureGeoreferencer(const geo::MountOptions& mount) {
   if (!problems.empty()) {
     std::vector<std::string> prefixed;
     AppendPrefixed(prefixed, "mount.", problems);
-    return Error::Invalid(prefixed);
+    return InvalidArgument(prefixed);
   }
   georeferencer = std::make_unique<geo::Georeferencer>(mount);
   return Status::Ok();
@@ -364,18 +361,19 @@ Result<PreparedFrame> Pipeline::Prepare(const StereoFrame& frame, const Snapshot
 
 Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot& snapshot) {
   const Clock::time_point start = Clock::now();
-  if (snapshot.config == nullptr) return Invalid("snapshot.config: is null");
-  if (snapshot.rig == nullptr) return Invalid("snapshot.rig: is null (no calibration)");
+  if (snapshot.config == nullptr) return InvalidArgument("snapshot.config: is null");
+  if (snapshot.rig == nullptr) return InvalidArgument("snapshot.rig: is null (no calibration)");
   const PipelineConfig& config = *snapshot.config;
   const geometry::StereoRig& rig = *snapshot.rig;
 
   const cv::Size want = rig.image_size();
-  if (frame.left.empty()) return Invalid("frame.left: image is empty");
-  if (frame.right.empty()) return Invalid("frame.right: image is empty");
+  if (frame.left.empty()) return InvalidArgument("frame.left: image is empty");
+  if (frame.right.empty()) return InvalidArgument("frame.right: image is empty");
   if (frame.left.size() != want || frame.right.size() != want) {
-    return Invalid("frame: left image is " + SizeText(frame.left.size()) + " and right image is " +
-                   SizeText(frame.right.size()) + ", but the rig '" + rig.calibration_id() +
-                   "' expects " + SizeText(want));
+    return InvalidArgument("frame: left image is " + SizeText(frame.left.size()) +
+                           " and right image is " + SizeText(frame.right.size()) +
+                           ", but the rig '" + rig.calibration_id() + "' expects " +
+                           SizeText(want));
   }
 
   PreparedFrame prepared;
@@ -427,8 +425,8 @@ Result<PreparedFrame> FrontEnd::Prepare(const StereoFrame& frame, const Snapshot
 
 Result<FrameResult> Pipeline::Finish(PreparedFrame prepared, const Snapshot& snapshot) {
   const Clock::time_point start = Clock::now();
-  if (snapshot.config == nullptr) return Invalid("snapshot.config: is null");
-  if (snapshot.rig == nullptr) return Invalid("snapshot.rig: is null (no calibration)");
+  if (snapshot.config == nullptr) return InvalidArgument("snapshot.config: is null");
+  if (snapshot.rig == nullptr) return InvalidArgument("snapshot.rig: is null (no calibration)");
   const PipelineConfig& config = *snapshot.config;
   FrameResult result = std::move(prepared.result);
   // The rig the frame was processed with: the binned one when the frame was binned.

@@ -597,7 +597,7 @@ std::vector<std::string> SadBlockMatcherParams::Validate() const {
 
 SadBlockMatcher::SadBlockMatcher(SadBlockMatcherParams p) : p_(p) {
   const std::vector<std::string> problems = p_.Validate();
-  if (!problems.empty()) CV_Error(cv::Error::StsOutOfRange, Error::Invalid(problems).message);
+  if (!problems.empty()) CV_Error(cv::Error::StsOutOfRange, InvalidArgument(problems).message);
 }
 
 void SadBlockMatcher::ForcePortable(bool force) { g_force_portable.store(force); }

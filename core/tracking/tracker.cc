@@ -73,7 +73,7 @@ Tracker::Tracker(TrackerOptions options) { SetOptions(std::move(options)); }
 
 void Tracker::SetOptions(TrackerOptions options) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
-    throw std::invalid_argument("TrackerOptions: " + Error::Invalid(problems).message);
+    throw std::invalid_argument("TrackerOptions: " + InvalidArgument(problems).message);
   }
   options_ = std::move(options);
 }
@@ -702,7 +702,7 @@ std::vector<Track> Tracker::Update(const std::vector<detection::Detection>& dete
                                    int64_t t_ns, const CameraModel& camera,
                                    const std::optional<EgoMotion>& ego) {
   if (std::vector<std::string> problems = camera.Validate(); !problems.empty()) {
-    throw std::invalid_argument("Tracker::Update: camera: " + Error::Invalid(problems).message);
+    throw std::invalid_argument("Tracker::Update: camera: " + InvalidArgument(problems).message);
   }
   const double dt = TimeStep(t_ns);
   // The tracks in this frame's cam frame: carried through the camera's motion when it is known.

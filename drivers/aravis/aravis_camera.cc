@@ -127,10 +127,10 @@ Result<std::optional<DeviceEntry>> Match(const std::vector<DeviceEntry>& devices
   if (by_serial.size() > 1) {
     std::vector<std::string> names;
     for (const DeviceEntry* d : by_serial) names.push_back(DescribeDevice(*d));
-    return Error{ErrorCode::kInvalidArgument, "camera '" + key +
-                                                  "' is ambiguous: several devices have this "
-                                                  "serial number (" +
-                                                  Join(names) + "); use a device id"};
+    return InvalidArgument("camera '" + key +
+                           "' is ambiguous: several devices have this "
+                           "serial number (" +
+                           Join(names) + "); use a device id");
   }
   if (by_serial.size() == 1) return std::optional<DeviceEntry>(*by_serial.front());
   for (const DeviceEntry& d : devices) {
@@ -139,7 +139,7 @@ Result<std::optional<DeviceEntry>> Match(const std::vector<DeviceEntry>& devices
   return std::optional<DeviceEntry>();
 }
 
-Error NotFound(const std::string& key, const std::vector<DeviceEntry>& devices) {
+Error DeviceNotFound(const std::string& key, const std::vector<DeviceEntry>& devices) {
   std::string message = "camera '" + key +
                         "' not found (matched against device ids, serial numbers and IP "
                         "addresses); ";
@@ -152,7 +152,7 @@ Error NotFound(const std::string& key, const std::vector<DeviceEntry>& devices) 
     for (const DeviceEntry& d : devices) names.push_back(DescribeDevice(d));
     message += "present: " + Join(names);
   }
-  return Error{ErrorCode::kNotFound, message};
+  return NotFound(message);
 }
 
 int OpenCvBayerToGrey(PixelFormat format) {
@@ -215,11 +215,10 @@ std::string SupportedPixelFormats() { return "Mono8, BayerRG8, BayerGR8, BayerGB
 Result<cv::Mat> ToGrey(const void* data, size_t size, int width, int height, PixelFormat format) {
   if (data == nullptr || width <= 0 || height <= 0 ||
       size != static_cast<size_t>(width) * static_cast<size_t>(height)) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "a " + std::string(PixelFormatName(format)) + " image of " +
-                     SizeText(width, height) + " needs " +
-                     std::to_string(static_cast<long long>(width) * height) + " bytes (got " +
-                     std::to_string(size) + ")"};
+    return InvalidArgument("a " + std::string(PixelFormatName(format)) + " image of " +
+                           SizeText(width, height) + " needs " +
+                           std::to_string(static_cast<long long>(width) * height) + " bytes (got " +
+                           std::to_string(size) + ")");
   }
   // Aravis owns `data` (a stream buffer that goes back to the pool): always copy.
   const cv::Mat view(height, width, CV_8UC1, const_cast<void*>(data));
@@ -340,14 +339,12 @@ Status ConfigurePixelFormat(ConfigureStep& step, const CameraSettings& settings,
   if (!settings.pixel_format.empty()) {
     format = ParsePixelFormat(settings.pixel_format);
     if (!format) {
-      return Error{ErrorCode::kInvalidArgument,
-                   step.name + ": pixel format " + settings.pixel_format +
-                       " is not supported (supported: " + SupportedPixelFormats() + ")"};
+      return InvalidArgument(step.name + ": pixel format " + settings.pixel_format +
+                             " is not supported (supported: " + SupportedPixelFormats() + ")");
     }
     if (!offers(settings.pixel_format)) {
-      return Error{ErrorCode::kInvalidArgument, step.name + " does not offer pixel format " +
-                                                    settings.pixel_format + " (it offers " +
-                                                    Join(offered) + ")"};
+      return InvalidArgument(step.name + " does not offer pixel format " + settings.pixel_format +
+                             " (it offers " + Join(offered) + ")");
     }
   } else if (offers("Mono8")) {
     format = PixelFormat::kMono8;
@@ -359,9 +356,8 @@ Status ConfigurePixelFormat(ConfigureStep& step, const CameraSettings& settings,
       }
     }
     if (!format) {
-      return Error{ErrorCode::kInvalidArgument,
-                   step.name + " offers none of the supported pixel formats (" +
-                       SupportedPixelFormats() + "); it offers " + Join(offered)};
+      return InvalidArgument(step.name + " offers none of the supported pixel formats (" +
+                             SupportedPixelFormats() + "); it offers " + Join(offered));
     }
   }
   info.pixel_format = *format;
@@ -400,29 +396,27 @@ Status ConfigureRoi(ConfigureStep& step, const CameraSettings& settings, CameraI
   info.sensor = cv::Size(sensor_w, sensor_h);
   const int roi_w = settings.roi_width, roi_h = settings.roi_height;
   if (roi_w > std::min(sensor_w, w_max) || roi_h > std::min(sensor_h, h_max)) {
-    return Error{ErrorCode::kInvalidArgument,
-                 step.name + ": the region of interest " + SizeText(roi_w, roi_h) +
-                     " is larger than its sensor (" + SizeText(sensor_w, sensor_h) +
-                     (w_max < sensor_w || h_max < sensor_h
-                          ? ", largest ROI " + SizeText(w_max, h_max) + " at the current binning"
-                          : std::string()) +
-                     ")"};
+    return InvalidArgument(
+        step.name + ": the region of interest " + SizeText(roi_w, roi_h) +
+        " is larger than its sensor (" + SizeText(sensor_w, sensor_h) +
+        (w_max < sensor_w || h_max < sensor_h
+             ? ", largest ROI " + SizeText(w_max, h_max) + " at the current binning"
+             : std::string()) +
+        ")");
   }
   if (roi_w < w_min || roi_h < h_min) {
-    return Error{ErrorCode::kInvalidArgument,
-                 step.name + ": the region of interest " + SizeText(roi_w, roi_h) +
-                     " is smaller than its minimum " + SizeText(w_min, h_min)};
+    return InvalidArgument(step.name + ": the region of interest " + SizeText(roi_w, roi_h) +
+                           " is smaller than its minimum " + SizeText(w_min, h_min));
   }
   const gint w_step = std::max(1, arv_camera_get_width_increment(step.camera, step.error.out()));
   if (step.error) return step.Failed("reading the width step");
   const gint h_step = std::max(1, arv_camera_get_height_increment(step.camera, step.error.out()));
   if (step.error) return step.Failed("reading the height step");
   if ((roi_w - w_min) % w_step != 0 || (roi_h - h_min) % h_step != 0) {
-    return Error{ErrorCode::kInvalidArgument,
-                 step.name + ": the region of interest " + SizeText(roi_w, roi_h) +
-                     " does not fit its size steps (width " + std::to_string(w_min) + " + k*" +
-                     std::to_string(w_step) + ", height " + std::to_string(h_min) + " + k*" +
-                     std::to_string(h_step) + ")"};
+    return InvalidArgument(step.name + ": the region of interest " + SizeText(roi_w, roi_h) +
+                           " does not fit its size steps (width " + std::to_string(w_min) +
+                           " + k*" + std::to_string(w_step) + ", height " + std::to_string(h_min) +
+                           " + k*" + std::to_string(h_step) + ")");
   }
   int x = (sensor_w - roi_w) / 2, y = (sensor_h - roi_h) / 2;
   if (has_offsets) {
@@ -453,11 +447,10 @@ Status ConfigureRoi(ConfigureStep& step, const CameraSettings& settings, CameraI
   if (step.error) return step.Failed("reading the ROI back");
   info.roi = cv::Rect(rx, ry, rw, rh);
   if (rw != roi_w || rh != roi_h || (has_offsets && (rx != x || ry != y))) {
-    return Error{ErrorCode::kInvalidArgument,
-                 step.name + ": asked for the region " + SizeText(roi_w, roi_h) + " at (" +
-                     std::to_string(x) + ", " + std::to_string(y) + "), the camera set " +
-                     SizeText(rw, rh) + " at (" + std::to_string(rx) + ", " + std::to_string(ry) +
-                     ")"};
+    return InvalidArgument(step.name + ": asked for the region " + SizeText(roi_w, roi_h) +
+                           " at (" + std::to_string(x) + ", " + std::to_string(y) +
+                           "), the camera set " + SizeText(rw, rh) + " at (" + std::to_string(rx) +
+                           ", " + std::to_string(ry) + ")");
   }
 
   return Status::Ok();
@@ -516,9 +509,8 @@ Status ConfigureAnalog(ConfigureStep& step, const AnalogControl& c, bool automat
     }
   } else {
     if (!has) {
-      return Error{ErrorCode::kInvalidArgument,
-                   step.name + ": " + c.setting + " " + FormatNumber(value) +
-                       " was asked but the camera has no " + c.control};
+      return InvalidArgument(step.name + ": " + c.setting + " " + FormatNumber(value) +
+                             " was asked but the camera has no " + c.control);
     }
     if (has_auto) {
       c.set_auto(step.camera, ARV_AUTO_OFF, step.error.out());
@@ -528,10 +520,9 @@ Status ConfigureAnalog(ConfigureStep& step, const AnalogControl& c, bool automat
     c.get_bounds(step.camera, &lo, &hi, step.error.out());
     if (step.error) return step.Failed("reading the " + noun + " bounds");
     if (value < lo || value > hi) {
-      return Error{ErrorCode::kInvalidArgument, step.name + ": " + c.setting + " " +
-                                                    FormatNumber(value) + " is outside its range " +
-                                                    FormatNumber(lo) + ".." + FormatNumber(hi) +
-                                                    " " + c.unit};
+      return InvalidArgument(step.name + ": " + c.setting + " " + FormatNumber(value) +
+                             " is outside its range " + FormatNumber(lo) + ".." + FormatNumber(hi) +
+                             " " + c.unit);
     }
     c.set(step.camera, value, step.error.out());
     if (step.error)
@@ -553,10 +544,9 @@ Status ConfigureFrameRate(ConfigureStep& step, const CameraSettings& settings, C
       arv_camera_get_frame_rate_bounds(step.camera, &lo, &hi, step.error.out());
       if (step.error) return step.Failed("reading the frame rate bounds");
       if (settings.frame_rate_hz < lo || settings.frame_rate_hz > hi) {
-        return Error{ErrorCode::kInvalidArgument, step.name + ": frame_rate_hz " +
-                                                      FormatNumber(settings.frame_rate_hz) +
-                                                      " is outside its range " + FormatNumber(lo) +
-                                                      ".." + FormatNumber(hi) + " Hz"};
+        return InvalidArgument(step.name + ": frame_rate_hz " +
+                               FormatNumber(settings.frame_rate_hz) + " is outside its range " +
+                               FormatNumber(lo) + ".." + FormatNumber(hi) + " Hz");
       }
       arv_camera_set_frame_rate(step.camera, settings.frame_rate_hz, step.error.out());
       if (step.error)
@@ -581,7 +571,7 @@ Status ConfigureTrigger(ConfigureStep& step, const CameraSettings& settings, Cam
       break;
     case TriggerMode::kSoftware:
       if (arv_camera_is_software_trigger_supported(step.camera, nullptr) == 0) {
-        return Error{ErrorCode::kInvalidArgument, step.name + " has no software trigger"};
+        return InvalidArgument(step.name + " has no software trigger");
       }
       arv_camera_set_trigger(step.camera, "Software", step.error.out());
       if (step.error) return step.Failed("setting the software trigger");
@@ -593,9 +583,9 @@ Status ConfigureTrigger(ConfigureStep& step, const CameraSettings& settings, Cam
       const std::vector<std::string> sources = TakeStrings(strings, n);
       if (step.error) return step.Failed("listing the trigger sources");
       if (std::find(sources.begin(), sources.end(), settings.trigger_line) == sources.end()) {
-        return Error{ErrorCode::kInvalidArgument,
-                     step.name + " has no trigger source '" + settings.trigger_line + "' (it has " +
-                         (sources.empty() ? std::string("none") : Join(sources)) + ")"};
+        return InvalidArgument(step.name + " has no trigger source '" + settings.trigger_line +
+                               "' (it has " +
+                               (sources.empty() ? std::string("none") : Join(sources)) + ")");
       }
       arv_camera_set_trigger(step.camera, settings.trigger_line.c_str(), step.error.out());
       if (step.error) return step.Failed("setting the trigger source " + settings.trigger_line);
@@ -637,13 +627,13 @@ Result<std::unique_ptr<AravisCamera>> AravisCamera::Open(const CameraSettings& s
       if (!match.ok()) return match.error();
       found = *match;
     }
-    if (!found) return NotFound(settings.id, devices);
+    if (!found) return DeviceNotFound(settings.id, devices);
     info.device = *found;
     h.camera = arv_camera_new(info.device.id.c_str(), error.out());
     if (h.camera == nullptr || error) {
       // Whatever the cause (no answer, another host in control), the camera is not usable now.
-      return Error{ErrorCode::kUnavailable,
-                   "cannot open camera " + DescribeDevice(info.device) + ": " + error.message()};
+      return Unavailable("cannot open camera " + DescribeDevice(info.device) + ": " +
+                         error.message());
     }
   }
   const std::string name = "camera " + info.device.id;
@@ -706,8 +696,7 @@ Status AravisCamera::StartAcquisition() {
   GErrorSlot error;
   arv_camera_start_acquisition(handles_->camera, error.out());
   if (error) {
-    return Error{ErrorCode::kUnavailable,
-                 "camera " + id() + ": starting acquisition failed: " + error.message()};
+    return Unavailable("camera " + id() + ": starting acquisition failed: " + error.message());
   }
   acquiring_ = true;
   return Status::Ok();
@@ -719,8 +708,7 @@ Result<std::optional<MonoFrame>> AravisCamera::Pop(std::chrono::microseconds tim
   Handles& h = *handles_;
   while (true) {
     if (control_lost()) {
-      return Error{ErrorCode::kUnavailable,
-                   "camera " + id() + " lost its control channel (no heartbeat answer)"};
+      return Unavailable("camera " + id() + " lost its control channel (no heartbeat answer)");
     }
     const auto left =
         std::chrono::duration_cast<std::chrono::microseconds>(deadline - Clock::now()).count();
@@ -764,8 +752,7 @@ Status AravisCamera::SoftwareTrigger() {
   GErrorSlot error;
   arv_camera_software_trigger(handles_->camera, error.out());
   if (error) {
-    return Error{ErrorCode::kUnavailable,
-                 "camera " + id() + ": software trigger failed: " + error.message()};
+    return Unavailable("camera " + id() + ": software trigger failed: " + error.message());
   }
   return Status::Ok();
 }
@@ -776,8 +763,7 @@ Status AravisCamera::Ping() {
   // a real read on the wire.
   arv_camera_get_integer(handles_->camera, "Width", error.out());
   if (error) {
-    return Error{ErrorCode::kUnavailable,
-                 "camera " + id() + " does not answer: " + error.message()};
+    return Unavailable("camera " + id() + " does not answer: " + error.message());
   }
   return Status::Ok();
 }

@@ -321,14 +321,13 @@ AravisStereoSource::~AravisStereoSource() {
 Result<std::unique_ptr<AravisStereoSource>> AravisStereoSource::Open(
     AravisOptions options, std::shared_ptr<const geometry::StereoRig> rig) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   if (rig && rig->image_size() != cv::Size(options.roi_width, options.roi_height)) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "the calibration's image size " + std::to_string(rig->image_size().width) + "x" +
-                     std::to_string(rig->image_size().height) +
-                     " differs from the region of interest " + std::to_string(options.roi_width) +
-                     "x" + std::to_string(options.roi_height)};
+    return InvalidArgument(
+        "the calibration's image size " + std::to_string(rig->image_size().width) + "x" +
+        std::to_string(rig->image_size().height) + " differs from the region of interest " +
+        std::to_string(options.roi_width) + "x" + std::to_string(options.roi_height));
   }
 
   auto impl = std::make_unique<Impl>();
@@ -415,7 +414,7 @@ Result<StereoFrame> AravisStereoSource::Next() {
   const auto deadline = Clock::now() + m.options.timeout;
   const uint64_t frames_before[2] = {m.slots[0].frames, m.slots[1].frames};
   while (true) {
-    if (m.interrupted) return Error{ErrorCode::kUnavailable, "camera pair: stopped"};
+    if (m.interrupted) return Unavailable("camera pair: stopped");
     if (m.latest) {
       StereoFrame frame = std::move(*m.latest);
       m.latest.reset();
@@ -424,7 +423,7 @@ Result<StereoFrame> AravisStereoSource::Next() {
     for (Impl::Slot& s : m.slots) {
       if (s.lost && !s.lost_reported) {
         s.lost_reported = true;
-        return Error{ErrorCode::kUnavailable, m.LostMessage(s)};
+        return Unavailable(m.LostMessage(s));
       }
     }
     if (m.cv.wait_until(lock, deadline) == std::cv_status::timeout && !m.latest) break;
@@ -434,7 +433,7 @@ Result<StereoFrame> AravisStereoSource::Next() {
   for (Impl::Slot& s : m.slots) {
     if (s.lost) {
       s.lost_reported = true;
-      return Error{ErrorCode::kUnavailable, m.LostMessage(s)};
+      return Unavailable(m.LostMessage(s));
     }
   }
   const Impl::Slot& l = m.slot(Side::kLeft);
@@ -458,7 +457,7 @@ Result<StereoFrame> AravisStereoSource::Next() {
                  " (latest right - left: " + Millis(gap) + ")";
     }
   }
-  return Error{ErrorCode::kUnavailable, message};
+  return Unavailable(message);
 }
 
 SourceCounters AravisStereoSource::Counters() const {

@@ -20,10 +20,6 @@ namespace {
 
 bool IsPattern(const std::string& path) { return path.find('%') != std::string::npos; }
 
-Error Invalid(std::string message) {
-  return Error{ErrorCode::kInvalidArgument, std::move(message)};
-}
-
 // A pattern is untrusted input: before it goes near snprintf it must hold exactly one integer
 // conversion %[flags][width]d or %[flags][width]i (flags from "0-+ ", width up to 2 digits);
 // "%%" is a literal '%'.
@@ -72,14 +68,14 @@ std::string Format(const std::string& pattern, int index) {
 Result<cv::Mat> ReadImage(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) {
-    return Error{ErrorCode::kNotFound, path + ": no such file"};
+    return NotFound(path + ": no such file");
   }
   cv::Mat image = cv::imread(path, cv::IMREAD_UNCHANGED);
-  if (image.empty()) return Invalid(path + ": cannot decode the image");
+  if (image.empty()) return InvalidArgument(path + ": cannot decode the image");
   if (image.depth() != CV_8U) {
-    return Invalid(path + ": " + (image.depth() == CV_16U ? "16-bit" : "non-8-bit") +
-                   " images are not supported (type " + cv::typeToString(image.type()) +
-                   "); convert to 8-bit grey or colour");
+    return InvalidArgument(path + ": " + (image.depth() == CV_16U ? "16-bit" : "non-8-bit") +
+                           " images are not supported (type " + cv::typeToString(image.type()) +
+                           "); convert to 8-bit grey or colour");
   }
   switch (image.channels()) {
     case 1:
@@ -90,20 +86,20 @@ Result<cv::Mat> ReadImage(const std::string& path) {
       return bgr;
     }
     default:
-      return Invalid(path + ": images with " + std::to_string(image.channels()) +
-                     " channels are not supported (want grey, BGR or BGRA)");
+      return InvalidArgument(path + ": images with " + std::to_string(image.channels()) +
+                             " channels are not supported (want grey, BGR or BGRA)");
   }
 }
 
 Status CheckPair(const cv::Mat& left, const std::string& left_name, const cv::Mat& right,
                  const std::string& right_name, const cv::Size& want) {
   if (left.size() != right.size()) {
-    return Invalid(left_name + " is " + SizeText(left.size()) + " but " + right_name + " is " +
-                   SizeText(right.size()) + ": the pair must have one size");
+    return InvalidArgument(left_name + " is " + SizeText(left.size()) + " but " + right_name +
+                           " is " + SizeText(right.size()) + ": the pair must have one size");
   }
   if (left.size() != want) {
-    return Invalid(left_name + " is " + SizeText(left.size()) +
-                   " but the calibration's image size is " + SizeText(want));
+    return InvalidArgument(left_name + " is " + SizeText(left.size()) +
+                           " but the calibration's image size is " + SizeText(want));
   }
   return Status::Ok();
 }
@@ -163,12 +159,13 @@ class ImageSource : public StereoSource {
     for (const std::string* path : {&options_.left, &options_.right}) {
       std::error_code ec;
       if (!std::filesystem::exists(*path, ec)) {
-        return Error{ErrorCode::kNotFound, *path + ": no such file"};
+        return NotFound(*path + ": no such file");
       }
     }
-    if (!left_video_.open(options_.left)) return Invalid(options_.left + ": cannot open the video");
+    if (!left_video_.open(options_.left))
+      return InvalidArgument(options_.left + ": cannot open the video");
     if (!right_video_.open(options_.right)) {
-      return Invalid(options_.right + ": cannot open the video");
+      return InvalidArgument(options_.right + ": cannot open the video");
     }
     return Status::Ok();
   }
@@ -184,19 +181,18 @@ class ImageSource : public StereoSource {
       const bool got_left = left_video_.read(frame.left);
       const bool got_right = right_video_.read(frame.right);
       if (!got_left && !got_right) {
-        return Error{ErrorCode::kOutOfRange, "end of the videos " + options_.left + " and " +
-                                                 options_.right + " after " +
-                                                 std::to_string(index) + " frames"};
+        return OutOfRange("end of the videos " + options_.left + " and " + options_.right +
+                          " after " + std::to_string(index) + " frames");
       }
       if (!got_left || !got_right) {
-        return Invalid((got_left ? options_.right : options_.left) + " ended at frame " +
-                       std::to_string(index) + " but " +
-                       (got_left ? options_.left : options_.right) + " goes on");
+        return InvalidArgument((got_left ? options_.right : options_.left) + " ended at frame " +
+                               std::to_string(index) + " but " +
+                               (got_left ? options_.left : options_.right) + " goes on");
       }
       for (cv::Mat* image : {&frame.left, &frame.right}) {
         if (image->depth() != CV_8U || (image->channels() != 1 && image->channels() != 3)) {
-          return Invalid((image == &frame.left ? left_name : right_name) +
-                         ": unsupported frame type " + cv::typeToString(image->type()));
+          return InvalidArgument((image == &frame.left ? left_name : right_name) +
+                                 ": unsupported frame type " + cv::typeToString(image->type()));
         }
       }
     } else {
@@ -206,13 +202,11 @@ class ImageSource : public StereoSource {
       const bool has_left = std::filesystem::exists(left_name, ec);
       const bool has_right = std::filesystem::exists(right_name, ec);
       if (!has_left && !has_right) {
-        Error error{ErrorCode::kOutOfRange, "end of the image sequence: neither " + left_name +
-                                                " nor " + right_name + " exists"};
         if (!opened_) {
-          error.code = ErrorCode::kNotFound;
-          error.message = left_name + ": no such file (the sequence's first left image)";
+          return NotFound(left_name + ": no such file (the sequence's first left image)");
         }
-        return error;
+        return OutOfRange("end of the image sequence: neither " + left_name + " nor " + right_name +
+                          " exists");
       }
       Result<cv::Mat> left = ReadImage(left_name);
       if (!left.ok()) return WithCode(left.error(), ErrorCode::kInvalidArgument);
@@ -294,7 +288,7 @@ std::vector<std::string> ImageSourceOptions::Validate() const {
 
 Result<std::unique_ptr<StereoSource>> OpenImageSource(const ImageSourceOptions& options) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   Result<geometry::StereoRig> rig = geometry::StereoRig::FromFile(options.calibration);
   if (!rig.ok()) return rig.error();

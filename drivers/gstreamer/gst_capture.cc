@@ -192,12 +192,12 @@ Status GstCapture::Impl::Build() {
   const gst::ErrorPtr error(raw_error);
   if (error) return gst::ParseFailure(*error, context.get());
   if (!parsed || !GST_IS_PIPELINE(parsed.get())) {
-    return Error{ErrorCode::kInvalidArgument, "the description gave no pipeline"};
+    return InvalidArgument("the description gave no pipeline");
   }
   gst::ElementPtr appsink(
       gst_bin_get_by_name(GST_BIN(parsed.get()), std::string(kGstSinkName).c_str()));
   if (!appsink || !GST_IS_APP_SINK(appsink.get())) {
-    return Error{ErrorCode::kInternal, "the pipeline has no appsink " + std::string(kGstSinkName)};
+    return Internal("the pipeline has no appsink " + std::string(kGstSinkName));
   }
   gst::BusPtr new_bus(gst_element_get_bus(parsed.get()));
   if (options.live && options.base_time_ns >= 0 && first_build) {
@@ -213,7 +213,7 @@ Status GstCapture::Impl::Build() {
     const gst::MessagePtr message(gst_bus_pop_filtered(new_bus.get(), GST_MESSAGE_ERROR));
     gst_element_set_state(parsed.get(), GST_STATE_NULL);
     if (message) return gst::BusFailure(message.get());
-    return Error{ErrorCode::kUnavailable, "the pipeline did not start"};
+    return Unavailable("the pipeline did not start");
   }
   pipeline = std::move(parsed);
   sink = std::move(appsink);
@@ -365,23 +365,22 @@ Result<CapturedFrame> GstCapture::Impl::Convert(GstSample* sample, double* strea
   GstBuffer* buffer = gst_sample_get_buffer(sample);
   GstVideoInfo info;
   if (caps == nullptr || buffer == nullptr || !gst_video_info_from_caps(&info, caps)) {
-    return Error{ErrorCode::kInternal, "a sample without video caps"};
+    return Internal("a sample without video caps");
   }
   const int luma_channel = LumaChannel(GST_VIDEO_INFO_FORMAT(&info));
   if (luma_channel < 0) {
-    return Error{ErrorCode::kInternal,
-                 std::string("a sample in a format without a luma plane: ") +
-                     gst_video_format_to_string(GST_VIDEO_INFO_FORMAT(&info))};
+    return Internal(std::string("a sample in a format without a luma plane: ") +
+                    gst_video_format_to_string(GST_VIDEO_INFO_FORMAT(&info)));
   }
   const cv::Size size(GST_VIDEO_INFO_WIDTH(&info), GST_VIDEO_INFO_HEIGHT(&info));
   if (options.check_size) {
     if (std::string problem = options.check_size(size); !problem.empty()) {
-      return Error{ErrorCode::kInvalidArgument, problem};
+      return InvalidArgument(problem);
     }
   }
   GstVideoFrame mapped;
   if (!gst_video_frame_map(&mapped, &info, buffer, GST_MAP_READ)) {
-    return Error{ErrorCode::kInternal, "cannot map a buffer"};
+    return Internal("cannot map a buffer");
   }
   CapturedFrame frame;
   // Plane 0 holds the luma; its stride is the video meta's when there is one, else the caps'
@@ -489,9 +488,8 @@ Result<std::unique_ptr<GstCapture>> GstCapture::Start(CaptureOptions options, Fr
                                                       Notify on_change) {
   InitGStreamer();
   if (MentionsGstSinkName(options.pipeline)) {
-    return Error{ErrorCode::kInvalidArgument,
-                 options.name + ": the pipeline must not name an element " +
-                     std::string(kGstSinkName) + " (the driver appends its own appsink)"};
+    return InvalidArgument(options.name + ": the pipeline must not name an element " +
+                           std::string(kGstSinkName) + " (the driver appends its own appsink)");
   }
   auto impl = std::make_unique<Impl>();
   impl->description = options.pipeline + GstSinkTail(options.live);
@@ -520,7 +518,7 @@ Result<std::unique_ptr<GstCapture>> GstCapture::Start(CaptureOptions options, Fr
       " of starting";
   if (!m.status.last_warning.empty()) message += " (last warning: " + m.status.last_warning + ")";
   lock.unlock();
-  return Error{ErrorCode::kUnavailable, message};
+  return Unavailable(message);
 }
 
 CaptureStatus GstCapture::status() const {

@@ -166,14 +166,14 @@ Error ParseFailure(const GError& error, GstParseContext* context) {
         packages += (packages.empty() ? "" : ", ") + std::string(package);
       }
     }
-    if (list.empty()) return Error{ErrorCode::kInvalidArgument, message + error.message};
+    if (list.empty()) return InvalidArgument(message + error.message);
     message += "no GStreamer element " + list;
     message += packages.empty() ? " (misspelt, or its plugin is not installed: gst-inspect-1.0 "
                                   "NAME tells)"
                                 : " (install " + packages + ")";
-    return Error{ErrorCode::kInvalidArgument, message};
+    return InvalidArgument(message);
   }
-  return Error{ErrorCode::kInvalidArgument, message + "bad pipeline: " + error.message};
+  return InvalidArgument(message + "bad pipeline: " + error.message);
 }
 
 Error BusFailure(GstMessage* message) {

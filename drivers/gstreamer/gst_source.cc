@@ -316,7 +316,7 @@ std::optional<Error> GstStereoSource::Impl::Trouble(bool fresh_only) {
     if (s.state == CaptureState::kFailed) return s.failure;
     if (s.state == CaptureState::kLost && (!fresh_only || s.losses > reported_losses[i])) {
       reported_losses[i] = s.losses;
-      return Error{ErrorCode::kUnavailable, LostMessage(i)};
+      return Unavailable(LostMessage(i));
     }
   }
   return std::nullopt;
@@ -401,13 +401,12 @@ Status GstStereoSource::Impl::StartCaptures() {
 Result<std::unique_ptr<GstStereoSource>> GstStereoSource::Open(
     GstOptions options, std::shared_ptr<const geometry::StereoRig> rig) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   const cv::Size wanted(options.width, options.height);
   if (rig && options.width > 0 && rig->image_size() != wanted) {
-    return Error{ErrorCode::kInvalidArgument, "the calibration's image size " +
-                                                  SizeText(rig->image_size()) +
-                                                  " differs from width/height " + SizeText(wanted)};
+    return InvalidArgument("the calibration's image size " + SizeText(rig->image_size()) +
+                           " differs from width/height " + SizeText(wanted));
   }
   auto impl = std::make_unique<Impl>();
   Impl& m = *impl;
@@ -463,7 +462,7 @@ Result<StereoFrame> GstStereoSource::Next() {
   const auto deadline = Clock::now() + m.options.timeout;
   const std::array<uint64_t, 2> frames_before = m.frames;
   while (true) {
-    if (m.interrupted) return Error{ErrorCode::kUnavailable, "gst: stopped"};
+    if (m.interrupted) return Unavailable("gst: stopped");
     if (m.options.live && m.latest) {
       StereoFrame frame = std::move(*m.latest);
       m.latest.reset();
@@ -478,14 +477,13 @@ Result<StereoFrame> GstStereoSource::Next() {
     if (std::optional<Error> trouble = m.Trouble(true)) return *trouble;
     if (!m.options.live && m.Ended()) {
       const uint64_t pairs = m.count == 1 ? m.pairs : m.pairer.Counters().pairs;
-      return Error{ErrorCode::kOutOfRange, (m.count == 1 ? m.names[0] : "left/right") +
-                                               ": end of the stream after " +
-                                               std::to_string(pairs) + " pairs"};
+      return OutOfRange((m.count == 1 ? m.names[0] : "left/right") + ": end of the stream after " +
+                        std::to_string(pairs) + " pairs");
     }
     if (m.cv.wait_until(lock, deadline) == std::cv_status::timeout) break;
   }
   if (std::optional<Error> trouble = m.Trouble(false)) return *trouble;
-  return Error{ErrorCode::kUnavailable, m.NoPairMessage(frames_before)};
+  return Unavailable(m.NoPairMessage(frames_before));
 }
 
 double GstStereoSource::NominalFps() const {

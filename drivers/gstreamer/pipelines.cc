@@ -5,10 +5,6 @@
 namespace stevi::drivers {
 namespace {
 
-Error Invalid(std::string message) {
-  return Error{ErrorCode::kInvalidArgument, std::move(message)};
-}
-
 // The length of the UTF-8 sequence that starts at text[i], or 0 when it is not a valid one
 // (overlong forms, surrogates and code points above U+10FFFF are invalid too).
 size_t Utf8SequenceLength(std::string_view text, size_t i) {
@@ -60,24 +56,26 @@ std::string Printable(std::string_view value) {
 
 Result<std::string> QuoteGstValue(std::string_view value, std::string_view what) {
   const std::string name(what);
-  if (value.empty()) return Invalid(name + ": must not be empty");
+  if (value.empty()) return InvalidArgument(name + ": must not be empty");
   if (value == "NULL") {
-    return Invalid(name + ": 'NULL' cannot be passed to GStreamer (it reads it as no string)");
+    return InvalidArgument(name +
+                           ": 'NULL' cannot be passed to GStreamer (it reads it as no string)");
   }
   for (size_t i = 0; i < value.size();) {
     const auto b = static_cast<uint8_t>(value[i]);
     if (b < 0x20 || b == 0x7F) {
-      return Invalid(name + ": contains a control character at byte " + std::to_string(i) +
-                     " (got '" + Printable(value) + "')");
+      return InvalidArgument(name + ": contains a control character at byte " + std::to_string(i) +
+                             " (got '" + Printable(value) + "')");
     }
     if (value[i] == '\\' || value[i] == '"') {
-      return Invalid(name + ": contains " + (value[i] == '"' ? "a double quote" : "a backslash") +
-                     ", which a GStreamer pipeline description cannot quote safely (got '" +
-                     std::string(value) + "')");
+      return InvalidArgument(name + ": contains " +
+                             (value[i] == '"' ? "a double quote" : "a backslash") +
+                             ", which a GStreamer pipeline description cannot quote safely (got '" +
+                             std::string(value) + "')");
     }
     const size_t length = Utf8SequenceLength(value, i);
     if (length == 0) {
-      return Invalid(name + ": is not valid UTF-8 at byte " + std::to_string(i));
+      return InvalidArgument(name + ": is not valid UTF-8 at byte " + std::to_string(i));
     }
     i += length;
   }
@@ -96,20 +94,20 @@ Result<std::string> UvcPipeline(std::string_view device, int width, int height, 
   if (fps < 1 || fps > 1000) {
     problems += std::string(problems.empty() ? "" : "; ") + "fps: must be in [1, 1000]" + Got(fps);
   }
-  if (!problems.empty()) return Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   return "v4l2src device=" + quoted.value() + " ! image/jpeg,width=" + std::to_string(width) +
          ",height=" + std::to_string(height) + ",framerate=" + std::to_string(fps) + "/1 ! jpegdec";
 }
 
 Result<std::string> RtspPipeline(std::string_view url, int latency_ms) {
   if (!url.starts_with("rtsp://") && !url.starts_with("rtsps://") && !url.starts_with("rtspt://")) {
-    return Invalid("url: must start with rtsp://, rtsps:// or rtspt:// (got '" + Printable(url) +
-                   "')");
+    return InvalidArgument("url: must start with rtsp://, rtsps:// or rtspt:// (got '" +
+                           Printable(url) + "')");
   }
   Result<std::string> quoted = QuoteGstValue(url, "url");
   if (!quoted.ok()) return quoted.error();
   if (latency_ms < 0 || latency_ms > 10000) {
-    return Invalid("latency_ms: must be in [0, 10000] ms" + Got(latency_ms));
+    return InvalidArgument("latency_ms: must be in [0, 10000] ms" + Got(latency_ms));
   }
   return "rtspsrc location=" + quoted.value() +
          " protocols=tcp latency=" + std::to_string(latency_ms) +

@@ -208,7 +208,7 @@ bool Compressor::Compress(Compression c, std::string_view in, std::string& out) 
 
 namespace {
 
-Status Problem(std::string text) { return Error{ErrorCode::kInvalidArgument, std::move(text)}; }
+Status Problem(std::string text) { return InvalidArgument(std::move(text)); }
 
 Status DecompressZstd(std::string_view in, uint64_t size, std::string& out) {
   const size_t n = ZSTD_decompress(out.data(), size, in.data(), in.size());
@@ -226,7 +226,7 @@ Status DecompressZstd(std::string_view in, uint64_t size, std::string& out) {
 Status DecompressLz4(std::string_view in, uint64_t size, std::string& out) {
   LZ4F_dctx* dctx = nullptr;
   if (LZ4F_isError(LZ4F_createDecompressionContext(&dctx, LZ4F_VERSION)) != 0) {
-    return Error{ErrorCode::kInternal, "lz4: cannot create a decompression context"};
+    return Internal("lz4: cannot create a decompression context");
   }
   size_t produced = 0;
   size_t consumed = 0;

@@ -81,7 +81,7 @@ Result<std::unique_ptr<FlightLog>> FlightLog::Create(
     const std::string& path, FlightLogOptions options,
     const std::map<std::string, std::string>& metadata) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   Result<std::unique_ptr<mcap::Writer>> writer = mcap::Writer::Create(path, options.mcap);
   if (!writer.ok()) return writer.error();
@@ -146,12 +146,12 @@ bool FlightLog::ImageDue(v1::PreviewKind kind, const v1::TrackFrame& frame) cons
 Status FlightLog::AddImage(const v1::Preview& preview) {
   const std::string topic = ImageTopic(options_, preview.kind());
   if (options_.image_hz <= 0) {
-    return Error{ErrorCode::kFailedPrecondition, "flight log: images are off (image_hz 0)"};
+    return FailedPrecondition("flight log: images are off (image_hz 0)");
   }
   if (topic.empty()) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "flight log: only the left and the disparity images are kept (got kind " +
-                     v1::PreviewKind_Name(preview.kind()) + ")"};
+    return InvalidArgument(
+        "flight log: only the left and the disparity images are kept (got kind " +
+        v1::PreviewKind_Name(preview.kind()) + ")");
   }
   const int64_t t = FrameTime(preview.capture_unix_time_ns(), preview.capture_time_ns());
   foxglove::CompressedImage image = to_foxglove::ToCompressedImage(preview, CameraFrame(options_));
@@ -170,9 +170,9 @@ Status FlightLog::AddEncodedImage(v1::PreviewKind kind, const std::string& forma
                                   const std::string& data, int64_t time_ns) {
   const std::string topic = ImageTopic(options_, kind);
   if (topic.empty()) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "flight log: only the left and the disparity images are kept (got kind " +
-                     v1::PreviewKind_Name(kind) + ")"};
+    return InvalidArgument(
+        "flight log: only the left and the disparity images are kept (got kind " +
+        v1::PreviewKind_Name(kind) + ")");
   }
   foxglove::CompressedImage image;
   SetStamp(time_ns, *image.mutable_timestamp());

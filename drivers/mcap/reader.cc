@@ -105,7 +105,7 @@ namespace {
 Result<std::unique_ptr<Reader>> Problems(const std::string& name, const ReaderOptions& options) {
   std::vector<std::string> problems;
   AppendPrefixed(problems, "options.", options.Validate());
-  if (!problems.empty()) return Error::Invalid(problems).Prefixed(name + ": ");
+  if (!problems.empty()) return InvalidArgument(problems).Prefixed(name + ": ");
   return std::unique_ptr<Reader>();
 }
 

@@ -19,9 +19,6 @@ namespace internal {
 
 inline std::string Str(uint64_t v) { return std::to_string(v); }
 inline bool Is(uint8_t opcode, Opcode op) { return opcode == static_cast<uint8_t>(op); }
-inline Error Invalid(std::string problem) {
-  return Error{ErrorCode::kInvalidArgument, std::move(problem)};
-}
 
 // How the linear read of a data section ended.
 struct ScanEnd {
@@ -86,7 +83,7 @@ struct Reader::Impl {
 
   // kInvalidArgument: "NAME: byte AT: PROBLEM".
   Error Bad(uint64_t at, const std::string& problem) const {
-    return internal::Invalid(name + ": byte " + internal::Str(at) + ": " + problem);
+    return InvalidArgument(name + ": byte " + internal::Str(at) + ": " + problem);
   }
   Status Load();
   Status LoadHeader(bool& cut);

@@ -11,7 +11,6 @@ namespace {
 
 using internal::Decoder;
 using internal::Hex32;
-using internal::Invalid;
 using internal::Is;
 using internal::kRecordPrefixBytes;
 using internal::RecordView;
@@ -72,21 +71,23 @@ Result<std::optional<Message>> Reader::Impl::Interpret(uint8_t opcode, std::stri
     if (schema->id == 0) return std::optional<Message>();  // invalid: ignored, as the spec says
     const auto [it, added] = schemas.emplace(schema->id, *schema);
     if (!added && !(it->second == *schema)) {
-      return Invalid("Schema " + Str(schema->id) + " differs from an earlier one with that id");
+      return InvalidArgument("Schema " + Str(schema->id) +
+                             " differs from an earlier one with that id");
     }
   } else if (Is(opcode, Opcode::kChannel)) {
     Result<Channel> channel = internal::ParseChannel(content);
     if (!channel.ok()) return channel.error();
     const auto [it, added] = channels.emplace(channel->id, *channel);
     if (!added && !(it->second == *channel)) {
-      return Invalid("Channel " + Str(channel->id) + " differs from an earlier one with that id");
+      return InvalidArgument("Channel " + Str(channel->id) +
+                             " differs from an earlier one with that id");
     }
   } else if (Is(opcode, Opcode::kMessage)) {
     Result<Message> message = internal::ParseMessage(content);
     if (!message.ok()) return message.error();
     if (channels.count(message->channel_id) == 0) {
-      return Invalid("Message: channel " + Str(message->channel_id) +
-                     " has no Channel record before it");
+      return InvalidArgument("Message: channel " + Str(message->channel_id) +
+                             " has no Channel record before it");
     }
     return std::optional<Message>(std::move(*message));
   }
@@ -156,9 +157,10 @@ Status Reader::Impl::SummaryRecord(uint64_t at, const RecordView& record, uint64
     if (!offset.ok()) return offset.error();
     if (offset->group_start < summary_start || offset->group_start > group_limit ||
         offset->group_length > group_limit - offset->group_start) {
-      return Invalid("Summary Offset: the group of " + internal::OpcodeName(offset->group_opcode) +
-                     " (bytes " + Str(offset->group_start) + " +" + Str(offset->group_length) +
-                     ") is not inside the summary");
+      return InvalidArgument("Summary Offset: the group of " +
+                             internal::OpcodeName(offset->group_opcode) + " (bytes " +
+                             Str(offset->group_start) + " +" + Str(offset->group_length) +
+                             ") is not inside the summary");
     }
   }
   return {};  // other records are skipped, as the spec asks
@@ -229,16 +231,18 @@ Status Reader::Impl::ScanChunk(uint64_t at, std::string_view content, bool decod
   if (decode) {
     Result<std::string_view> inner =
         internal::DecodeChunk(*chunk, options.max_chunk_bytes, decoded);
-    if (!inner.ok()) return Invalid("Chunk: " + inner.error().message);
+    if (!inner.ok()) return InvalidArgument("Chunk: " + inner.error().message);
     uint64_t messages = 0;
     for (uint64_t p = 0; p < inner->size();) {
       Result<RecordView> record = internal::RecordIn(*inner, p);
       if (!record.ok()) {
-        return Invalid("Chunk: its record at byte " + Str(p) + ": " + record.error().message);
+        return InvalidArgument("Chunk: its record at byte " + Str(p) + ": " +
+                               record.error().message);
       }
       Result<std::optional<Message>> message = Interpret(record->opcode, record->content);
       if (!message.ok()) {
-        return Invalid("Chunk: its record at byte " + Str(p) + ": " + message.error().message);
+        return InvalidArgument("Chunk: its record at byte " + Str(p) + ": " +
+                               message.error().message);
       }
       if (message->has_value()) ++messages;
       p += record->size();
@@ -248,9 +252,9 @@ Status Reader::Impl::ScanChunk(uint64_t at, std::string_view content, bool decod
   } else if (chunk->uncompressed_size > options.max_chunk_bytes ||
              !CompressionFromName(chunk->compression)) {
     // Checked now so that an indexed file fails at Open(), not halfway through its messages.
-    return Invalid("Chunk: uncompressed_size " + Str(chunk->uncompressed_size) +
-                   " over the limit, or unknown compression \"" + chunk->compression.substr(0, 32) +
-                   "\"");
+    return InvalidArgument("Chunk: uncompressed_size " + Str(chunk->uncompressed_size) +
+                           " over the limit, or unknown compression \"" +
+                           chunk->compression.substr(0, 32) + "\"");
   }
   seen_chunks[at] = ChunkIndex{chunk->message_start_time_ns,
                                chunk->message_end_time_ns,

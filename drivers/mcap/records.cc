@@ -10,7 +10,7 @@ namespace {
 // The parse result: the value, or the decoder's problem under the record's name.
 template <typename T>
 Result<T> Finish(const Decoder& d, const char* record, T value) {
-  if (!d.ok()) return Error{ErrorCode::kInvalidArgument, std::string(record) + ": " + d.problem()};
+  if (!d.ok()) return InvalidArgument(std::string(record) + ": " + d.problem());
   return value;
 }
 

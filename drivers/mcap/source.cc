@@ -46,8 +46,8 @@ class FileBytes : public Source {
       }
       if (got < 0 && errno == EINTR) continue;
       const std::string why = got < 0 ? std::strerror(errno) : "the file shrank while being read";
-      return Error{ErrorCode::kUnavailable, path_ + ": cannot read at byte " +
-                                                std::to_string(offset + done) + " (" + why + ")"};
+      return Unavailable(path_ + ": cannot read at byte " + std::to_string(offset + done) + " (" +
+                         why + ")");
     }
     return std::string_view(scratch);
   }
@@ -70,7 +70,7 @@ Result<std::unique_ptr<Source>> OpenFileSource(const std::string& path) {
   struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
     ::close(fd);
-    return Error{ErrorCode::kInvalidArgument, path + ": not a regular file"};
+    return InvalidArgument(path + ": not a regular file");
   }
   return std::unique_ptr<Source>(
       std::make_unique<FileBytes>(path, fd, static_cast<uint64_t>(st.st_size)));
@@ -83,20 +83,19 @@ std::unique_ptr<Source> MemorySource(std::string bytes) {
 Result<RecordView> RecordIn(std::string_view bytes, uint64_t pos) {
   const uint64_t left = bytes.size() - pos;
   if (left < kRecordPrefixBytes) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "a record header needs 9 bytes, " + std::to_string(left) + " are left"};
+    return InvalidArgument("a record header needs 9 bytes, " + std::to_string(left) + " are left");
   }
   Decoder d(bytes.substr(pos, kRecordPrefixBytes));
   RecordView record;
   record.opcode = d.U8("opcode");
   const uint64_t length = d.U64("length");
   if (record.opcode == 0) {
-    return Error{ErrorCode::kInvalidArgument, "invalid opcode 0x00 (not a record)"};
+    return InvalidArgument("invalid opcode 0x00 (not a record)");
   }
   if (length > left - kRecordPrefixBytes) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "the " + OpcodeName(record.opcode) + " record says " + std::to_string(length) +
-                     " bytes, only " + std::to_string(left - kRecordPrefixBytes) + " are left"};
+    return InvalidArgument("the " + OpcodeName(record.opcode) + " record says " +
+                           std::to_string(length) + " bytes, only " +
+                           std::to_string(left - kRecordPrefixBytes) + " are left");
   }
   record.content = bytes.substr(pos + kRecordPrefixBytes, length);
   return record;
@@ -110,9 +109,7 @@ std::string Hex32(uint32_t value) {
 
 Result<std::string_view> DecodeChunk(const ChunkRecord& chunk, uint64_t max_bytes,
                                      std::string& buffer) {
-  const auto problem = [](std::string text) {
-    return Error{ErrorCode::kInvalidArgument, std::move(text)};
-  };
+  const auto problem = [](std::string text) { return InvalidArgument(std::move(text)); };
   if (chunk.uncompressed_size > max_bytes) {
     return problem("uncompressed_size " + std::to_string(chunk.uncompressed_size) +
                    " is over the limit of " + std::to_string(max_bytes) + " bytes");

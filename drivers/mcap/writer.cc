@@ -129,7 +129,7 @@ struct Writer::Impl {
 
 Status Writer::Impl::Usable() const {
   if (failure) return *failure;
-  if (closed) return Error{ErrorCode::kFailedPrecondition, name + ": the writer is closed"};
+  if (closed) return FailedPrecondition(name + ": the writer is closed");
   return {};
 }
 
@@ -298,14 +298,13 @@ Result<std::unique_ptr<Writer>> Writer::Create(const std::string& path, WriterOp
   std::vector<std::string> problems;
   if (path.empty()) problems.push_back("path: must not be empty");
   AppendPrefixed(problems, "options.", options.Validate());
-  if (!problems.empty()) return Error::Invalid(problems).Prefixed(path + ": ");
+  if (!problems.empty()) return InvalidArgument(problems).Prefixed(path + ": ");
   // O_EXCL: never overwrite a flight, even one created a moment ago by someone else.
   const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
   if (fd < 0) {
     const int err = errno;
     if (err == EEXIST) {
-      return Error{ErrorCode::kAlreadyExists,
-                   path + ": exists already; a recording is never overwritten"};
+      return AlreadyExists(path + ": exists already; a recording is never overwritten");
     }
     return Error{(err == ENOENT || err == ENOTDIR) ? ErrorCode::kNotFound : ErrorCode::kInternal,
                  path + ": cannot create it (" + std::strerror(err) + ")"};
@@ -322,7 +321,7 @@ Result<std::unique_ptr<Writer>> Writer::FromFd(int fd, std::string name, WriterO
   AppendPrefixed(problems, "options.", options.Validate());
   if (!problems.empty()) {
     if (fd >= 0) ::close(fd);
-    return Error::Invalid(problems).Prefixed(name + ": ");
+    return InvalidArgument(problems).Prefixed(name + ": ");
   }
   auto impl = std::make_unique<Impl>();
   impl->name = std::move(name);
@@ -381,13 +380,11 @@ Status Writer::Write(uint16_t channel_id, uint64_t log_time_ns, uint64_t publish
   Impl& w = *impl_;
   if (Status usable = w.Usable(); !usable) return usable;
   if (channel_id == 0 || channel_id > w.channels.size()) {
-    return Error{ErrorCode::kInvalidArgument,
-                 w.name + ": Write: unknown channel id " + std::to_string(channel_id)};
+    return InvalidArgument(w.name + ": Write: unknown channel id " + std::to_string(channel_id));
   }
   if (data.size() > kMaxMessageBytes) {
-    return Error{ErrorCode::kInvalidArgument, w.name + ": Write: a message of " +
-                                                  std::to_string(data.size()) +
-                                                  " bytes is over the limit of 256 MiB"};
+    return InvalidArgument(w.name + ": Write: a message of " + std::to_string(data.size()) +
+                           " bytes is over the limit of 256 MiB");
   }
   const std::string definitions = w.PendingDefinitions(channel_id);
   const uint64_t needed = definitions.size() + internal::kRecordPrefixBytes +
@@ -423,9 +420,8 @@ Status Writer::AddMetadata(std::string_view name,
   Impl& w = *impl_;
   if (Status usable = w.Usable(); !usable) return usable;
   if (name.size() + MapBytes(values) > kMaxRecordFieldsBytes) {
-    return Error{ErrorCode::kInvalidArgument,
-                 w.name + ": AddMetadata: " + std::string(name.substr(0, 64)) +
-                     ": the name and values are over the limit of 1 MiB"};
+    return InvalidArgument(w.name + ": AddMetadata: " + std::string(name.substr(0, 64)) +
+                           ": the name and values are over the limit of 1 MiB");
   }
   w.out.clear();
   internal::AppendMetadata(w.out, Metadata{std::string(name), values});
@@ -442,9 +438,8 @@ Status Writer::AddAttachment(std::string_view name, std::string_view media_type,
   if (Status usable = w.Usable(); !usable) return usable;
   if (data.size() > kMaxAttachmentBytes ||
       name.size() + media_type.size() > kMaxRecordFieldsBytes) {
-    return Error{ErrorCode::kInvalidArgument,
-                 w.name + ": AddAttachment: " + std::string(name.substr(0, 64)) +
-                     ": over the limits (data 256 MiB, name and media type 1 MiB)"};
+    return InvalidArgument(w.name + ": AddAttachment: " + std::string(name.substr(0, 64)) +
+                           ": over the limits (data 256 MiB, name and media type 1 MiB)");
   }
   const Attachment attachment{log_time_ns, log_time_ns, std::string(name), std::string(media_type),
                               std::string(data)};

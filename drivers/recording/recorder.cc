@@ -72,57 +72,41 @@ bool IsFrame(const std::variant<StereoFrame, geo::VehicleState, CalibrationChang
 
 }  // namespace
 
-std::vector<std::string> RecorderOptions::Validate() const {
-  std::vector<std::string> problems;
-  if (max_bytes == 0) problems.push_back("max_bytes: must be > 0 (got 0)");
-  if (queue_frames < 1 || queue_frames > 1024) {
-    problems.push_back("queue_frames: must be in [1, 1024]" + Got(queue_frames));
-  }
-  if (png_compression < 0 || png_compression > 9) {
-    problems.push_back("png_compression: must be in [0, 9]" + Got(png_compression));
-  }
-  return problems;
-}
-
 Result<std::unique_ptr<Recorder>> Recorder::Start(const std::string& dir, RecorderOptions options,
                                                   RecordingInfo info) {
   std::vector<std::string> problems;
   if (dir.empty()) problems.push_back("dir: must not be empty");
   AppendPrefixed(problems, "options.", options.Validate());
   if (!info.rig) problems.push_back("info.rig: missing (the rig the frames follow)");
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   // Check that the rig can be stored exactly before touching the disk.
   Result<v1::RecordedRig> rig = RecordedRigOf(*info.rig);
   if (!rig.ok()) return rig.error();
 
   std::error_code ec;
   if (fs::exists(dir, ec) && !fs::is_directory(dir, ec)) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "recording directory " + dir + ": exists and is not a directory"};
+    return InvalidArgument("recording directory " + dir + ": exists and is not a directory");
   }
   fs::create_directories(dir, ec);
   if (ec) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "recording directory " + dir + ": cannot create it (" + ec.message() + ")"};
+    return InvalidArgument("recording directory " + dir + ": cannot create it (" + ec.message() +
+                           ")");
   }
   const std::string manifest_path = (fs::path(dir) / kManifestFileName).string();
   const std::string records_path = (fs::path(dir) / kRecordsFileName).string();
   if (fs::exists(manifest_path, ec)) {
-    return Error{ErrorCode::kAlreadyExists, "recording directory " + dir +
-                                                " already holds a recording (" + kManifestFileName +
-                                                " exists); record to a new directory"};
+    return AlreadyExists("recording directory " + dir + " already holds a recording (" +
+                         kManifestFileName + " exists); record to a new directory");
   }
   // O_EXCL: of two recorders started on one directory, only one gets it.
   const int fd = ::open(records_path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
   if (fd < 0) {
     const int err = errno;
     if (err == EEXIST) {
-      return Error{ErrorCode::kAlreadyExists,
-                   "recording directory " + dir + " already holds a recording (" +
-                       kRecordsFileName + " exists); record to a new directory"};
+      return AlreadyExists("recording directory " + dir + " already holds a recording (" +
+                           kRecordsFileName + " exists); record to a new directory");
     }
-    return Error{ErrorCode::kInvalidArgument,
-                 records_path + ": cannot create it (" + std::strerror(err) + ")"};
+    return InvalidArgument(records_path + ": cannot create it (" + std::strerror(err) + ")");
   }
 
   v1::RecordingManifest manifest;
@@ -171,8 +155,8 @@ stevi::Status Recorder::AddFrame(const StereoFrame& frame) {
     problem = "left and right differ in size";
   }
   if (!problem.empty()) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "recording " + dir_ + ": frame " + std::to_string(frame.index) + ": " + problem};
+    return InvalidArgument("recording " + dir_ + ": frame " + std::to_string(frame.index) + ": " +
+                           problem);
   }
   {
     // Refuse before copying the images when there is no room anyway (Enqueue checks again).
@@ -201,7 +185,7 @@ stevi::Status Recorder::SetCalibration(const std::string& calibration_id, const 
     problems.push_back("yaml: " + parsed.error().message);
   }
   if (!problems.empty()) {
-    Error e = Error::Invalid(problems);
+    Error e = InvalidArgument(problems);
     e.message = "recording " + dir_ + ": calibration change refused: " + e.message;
     return e;
   }
@@ -211,20 +195,18 @@ stevi::Status Recorder::SetCalibration(const std::string& calibration_id, const 
 std::optional<Error> Recorder::RefuseLocked(bool frame) {
   if (stopped_) {
     const std::string& why = stopping_reason_.empty() ? requested_reason_ : stopping_reason_;
-    return Error{ErrorCode::kFailedPrecondition,
-                 "recording " + dir_ + " has stopped (" + why + ")"};
+    return FailedPrecondition("recording " + dir_ + " has stopped (" + why + ")");
   }
   if (frame && queued_frames_ >= static_cast<size_t>(options_.queue_frames)) {
     ++status_.frames_dropped;
-    return Error{ErrorCode::kResourceExhausted, "recording " + dir_ + ": the writer is behind (" +
-                                                    std::to_string(options_.queue_frames) +
-                                                    " frames queued); frame dropped"};
+    return ResourceExhausted("recording " + dir_ + ": the writer is behind (" +
+                             std::to_string(options_.queue_frames) +
+                             " frames queued); frame dropped");
   }
   if (!frame && queued_other_ >= kMaxQueuedOther) {
     ++status_.other_dropped;
-    return Error{ErrorCode::kResourceExhausted, "recording " + dir_ + ": the writer is behind (" +
-                                                    std::to_string(kMaxQueuedOther) +
-                                                    " records queued); record dropped"};
+    return ResourceExhausted("recording " + dir_ + ": the writer is behind (" +
+                             std::to_string(kMaxQueuedOther) + " records queued); record dropped");
   }
   return std::nullopt;
 }

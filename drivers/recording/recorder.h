@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/common/error.h"
+#include "core/common/fields.h"
 #include "core/common/stereo_frame.h"
 #include "core/geo/vehicle_state.h"
 #include "core/geometry/stereo_rig.h"
@@ -23,18 +24,33 @@
 namespace stevi::drivers {
 
 struct RecorderOptions {
-  // Bound on the size of records.bin, bytes (> 0). A record that would go past it is not written
-  // and the recording stops, saying so. The manifest (a few KiB) comes on top.
+  // The smallest max_bytes: a few 640x480 pairs. Below it a recording would stop at once.
+  static constexpr uint64_t kMinMaxBytes = uint64_t{1} << 20;
+
+  // Bound on the size of records.bin, bytes. A record that would go past it is not written and
+  // the recording stops, saying so. The manifest (a few KiB) comes on top.
   uint64_t max_bytes = uint64_t{4} << 30;
-  // Frames waiting to be encoded and written (>= 1). When the writer falls behind, AddFrame()
-  // drops the frame (and counts it) rather than blocking the capture thread.
-  int queue_frames = 16;
-  // PNG (zlib) compression level, 0..9: 1 is fast and still lossless; higher saves little on
-  // noisy camera images and costs much CPU.
+  // Frames waiting to be encoded and written. When the writer falls behind, AddFrame() drops the
+  // frame (and counts it) rather than blocking the capture thread.
+  int queue_frames = 32;
+  // PNG (zlib) compression level: 1 is fast and still lossless; higher saves little on noisy
+  // camera images and costs much CPU.
   int png_compression = 1;
 
+  // The one declaration of each field and its bounds (core/common/fields.h). The server's
+  // record { ... } settings and its StartRecording call are checked by it too.
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.max_bytes, Field("max_bytes", "bytes", "bound on the recording's records.bin")
+                              .AtLeast(static_cast<double>(kMinMaxBytes)));
+    v.Number(s.queue_frames,
+             Field("queue_frames", "frames", "frames waiting to be written").In(1, 1024));
+    v.Number(s.png_compression, Field("png_compression", "", "zlib level of the PNGs").In(0, 9));
+  }
+
   // Every problem, as "field: problem (got X)".
-  std::vector<std::string> Validate() const;
+  std::vector<std::string> Validate() const { return fields::Check(*this); }
 };
 
 // What is being recorded, for the manifest.

@@ -180,14 +180,13 @@ Result<v1::RecordedRig> RecordedRigOf(const geometry::StereoRig& rig) {
   }
   Result<geometry::StereoRig> rebuilt = RigFromRecorded(recorded);
   if (!rebuilt.ok()) {
-    return Error{ErrorCode::kInternal, "rig: cannot be rebuilt from its calibration YAML (" +
-                                           rebuilt.error().message +
-                                           "), so a replay would not reproduce it"};
+    return Internal("rig: cannot be rebuilt from its calibration YAML (" + rebuilt.error().message +
+                    "), so a replay would not reproduce it");
   }
   if (!RigsIdentical(rig, *rebuilt)) {
-    return Error{ErrorCode::kInternal,
-                 "rig: the rig rebuilt from its calibration YAML differs from the original, so a "
-                 "replay would not reproduce it"};
+    return Internal(
+        "rig: the rig rebuilt from its calibration YAML differs from the original, so a "
+        "replay would not reproduce it");
   }
   return recorded;
 }
@@ -210,14 +209,14 @@ Result<geometry::StereoRig> RigFromRecorded(const v1::RecordedRig& recorded) {
     CheckFinite("ideal.baseline_m", ideal.baseline_m(), true, problems);
     CheckFinite("ideal.cx", ideal.cx(), false, problems);
     CheckFinite("ideal.cy", ideal.cy(), false, problems);
-    if (!problems.empty()) return Error::Invalid(problems);
+    if (!problems.empty()) return InvalidArgument(problems);
     return geometry::StereoRig::Ideal(cv::Size(w, h), ideal.f_px(), ideal.baseline_m(), ideal.cx(),
                                       ideal.cy(), recorded.calibration_id());
   }
   if (recorded.calibration_yaml().empty()) {
     problems.push_back("calibration_yaml: missing (and no ideal rig either)");
   }
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   Result<geometry::StereoCalibration> calibration =
       geometry::ParseCalibrationYaml(recorded.calibration_yaml());
   if (!calibration.ok()) {
@@ -226,10 +225,9 @@ Result<geometry::StereoRig> RigFromRecorded(const v1::RecordedRig& recorded) {
     return e;
   }
   if (calibration->image_size != cv::Size(w, h)) {
-    return Error{ErrorCode::kInvalidArgument,
-                 "calibration_yaml: image size " +
-                     SizeText(calibration->image_size.width, calibration->image_size.height) +
-                     " differs from image_width, image_height " + SizeText(w, h)};
+    return InvalidArgument("calibration_yaml: image size " +
+                           SizeText(calibration->image_size.width, calibration->image_size.height) +
+                           " differs from image_width, image_height " + SizeText(w, h));
   }
   Result<geometry::StereoRig> rig =
       geometry::StereoRig::FromCalibration(*calibration, recorded.calibration_id());
@@ -246,7 +244,7 @@ Result<geometry::StereoRig> RigFromRecorded(const v1::RecordedRig& recorded) {
 Result<std::unique_ptr<RecordingReader>> RecordingReader::Open(const std::string& dir) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) {
-    return Error{ErrorCode::kNotFound, "recording " + dir + ": no such directory"};
+    return NotFound("recording " + dir + ": no such directory");
   }
   auto reader = std::unique_ptr<RecordingReader>(new RecordingReader());
   reader->dir_ = dir;
@@ -256,72 +254,64 @@ Result<std::unique_ptr<RecordingReader>> RecordingReader::Open(const std::string
   // The manifest: bounded, then parsed by protobuf's JSON parser (unknown fields from a newer
   // writer are ignored; the version says whether we can read the records).
   if (!fs::exists(manifest_path, ec)) {
-    return Error{ErrorCode::kNotFound,
-                 manifest_path + ": not found (" + dir + " is not a recording directory)"};
+    return NotFound(manifest_path + ": not found (" + dir + " is not a recording directory)");
   }
   const uintmax_t manifest_size = fs::file_size(manifest_path, ec);
   if (ec) {
-    return Error{ErrorCode::kInvalidArgument,
-                 manifest_path + ": cannot read its size (" + ec.message() + ")"};
+    return InvalidArgument(manifest_path + ": cannot read its size (" + ec.message() + ")");
   }
   if (manifest_size > kMaxManifestBytes) {
-    return Error{ErrorCode::kInvalidArgument,
-                 manifest_path + ": " + FormatBytes(manifest_size) + ", more than the " +
-                     FormatBytes(kMaxManifestBytes) + " a manifest may have: not a manifest"};
+    return InvalidArgument(manifest_path + ": " + FormatBytes(manifest_size) + ", more than the " +
+                           FormatBytes(kMaxManifestBytes) + " a manifest may have: not a manifest");
   }
   std::string text;
   {
     std::ifstream in(manifest_path, std::ios::binary);
     if (!in) {
-      return Error{ErrorCode::kInvalidArgument, manifest_path + ": cannot open it for reading"};
+      return InvalidArgument(manifest_path + ": cannot open it for reading");
     }
     text.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-    if (in.bad()) return Error{ErrorCode::kInvalidArgument, manifest_path + ": read failed"};
+    if (in.bad()) return InvalidArgument(manifest_path + ": read failed");
   }
   google::protobuf::util::JsonParseOptions parse;
   parse.ignore_unknown_fields = true;
   const auto parsed = google::protobuf::util::JsonStringToMessage(text, &reader->manifest_, parse);
   if (!parsed.ok()) {
-    return Error{ErrorCode::kInvalidArgument, manifest_path + ": not a recording manifest (" +
-                                                  std::string(parsed.message()) + ")"};
+    return InvalidArgument(manifest_path + ": not a recording manifest (" +
+                           std::string(parsed.message()) + ")");
   }
   const v1::RecordingManifest& m = reader->manifest_;
   if (m.format_version() == 0) {
-    return Error{ErrorCode::kInvalidArgument,
-                 manifest_path + ": format_version: missing (not a recording manifest)"};
+    return InvalidArgument(manifest_path + ": format_version: missing (not a recording manifest)");
   }
   if (m.format_version() > kRecordingFormatVersion) {
-    return Error{ErrorCode::kInvalidArgument,
-                 manifest_path + ": format_version: " + std::to_string(m.format_version()) +
-                     " is newer than this program reads (" +
-                     std::to_string(kRecordingFormatVersion) + ")"};
+    return InvalidArgument(
+        manifest_path + ": format_version: " + std::to_string(m.format_version()) +
+        " is newer than this program reads (" + std::to_string(kRecordingFormatVersion) + ")");
   }
   if (m.encoding() != v1::IMAGE_ENCODING_PNG) {
-    return Error{ErrorCode::kInvalidArgument,
-                 manifest_path + ": encoding: " + v1::ImageEncoding_Name(m.encoding()) +
-                     " is not supported (IMAGE_ENCODING_PNG)"};
+    return InvalidArgument(manifest_path + ": encoding: " + v1::ImageEncoding_Name(m.encoding()) +
+                           " is not supported (IMAGE_ENCODING_PNG)");
   }
   if (!m.has_rig()) {
-    return Error{ErrorCode::kInvalidArgument, manifest_path + ": rig: missing"};
+    return InvalidArgument(manifest_path + ": rig: missing");
   }
   Result<geometry::StereoRig> rig = RigFromRecorded(m.rig());
   if (!rig.ok()) {
-    return Error{ErrorCode::kInvalidArgument, manifest_path + ": rig: " + rig.error().message};
+    return InvalidArgument(manifest_path + ": rig: " + rig.error().message);
   }
   reader->rig_ = std::make_shared<const geometry::StereoRig>(std::move(rig.value()));
 
   if (!fs::exists(reader->records_path_, ec)) {
-    return Error{ErrorCode::kNotFound, reader->records_path_ + ": not found"};
+    return NotFound(reader->records_path_ + ": not found");
   }
   reader->file_size_ = fs::file_size(reader->records_path_, ec);
   if (ec) {
-    return Error{ErrorCode::kInvalidArgument,
-                 reader->records_path_ + ": cannot read its size (" + ec.message() + ")"};
+    return InvalidArgument(reader->records_path_ + ": cannot read its size (" + ec.message() + ")");
   }
   reader->records_.open(reader->records_path_, std::ios::binary);
   if (!reader->records_) {
-    return Error{ErrorCode::kInvalidArgument,
-                 reader->records_path_ + ": cannot open it for reading"};
+    return InvalidArgument(reader->records_path_ + ": cannot open it for reading");
   }
   return reader;
 }
@@ -330,12 +320,11 @@ Status RecordingReader::Rewind() {
   std::error_code ec;
   const uintmax_t size = fs::file_size(records_path_, ec);
   if (ec) {
-    return Error{ErrorCode::kInvalidArgument,
-                 records_path_ + ": cannot read its size (" + ec.message() + ")"};
+    return InvalidArgument(records_path_ + ": cannot read its size (" + ec.message() + ")");
   }
   records_.clear();
   records_.seekg(0);
-  if (!records_) return Error{ErrorCode::kInvalidArgument, records_path_ + ": cannot seek"};
+  if (!records_) return InvalidArgument(records_path_ + ": cannot seek");
   file_size_ = size;
   offset_ = 0;
   frames_read_ = 0;
@@ -359,19 +348,17 @@ Result<cv::Mat> RecordingReader::DecodeImage(const v1::RecordedImage& image,
     const cv::Mat bytes(1, static_cast<int>(data.size()), CV_8UC1, const_cast<char*>(data.data()));
     decoded = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
-    return Error{ErrorCode::kInvalidArgument, std::string(side) + " image: " + e.what()};
+    return InvalidArgument(std::string(side) + " image: " + e.what());
   }
   if (decoded.empty()) {
-    return Error{ErrorCode::kInvalidArgument,
-                 std::string(side) + " image: the PNG does not decode"};
+    return InvalidArgument(std::string(side) + " image: the PNG does not decode");
   }
   if (decoded.type() != CV_8UC(image.channels()) ||
       decoded.size() != cv::Size(image.width(), image.height())) {
-    return Error{ErrorCode::kInvalidArgument,
-                 std::string(side) + " image: decoded as " + cv::typeToString(decoded.type()) +
-                     " " + SizeText(decoded.cols, decoded.rows) + ", the record says " +
-                     std::to_string(image.channels()) + " channels " +
-                     SizeText(image.width(), image.height())};
+    return InvalidArgument(
+        std::string(side) + " image: decoded as " + cv::typeToString(decoded.type()) + " " +
+        SizeText(decoded.cols, decoded.rows) + ", the record says " +
+        std::to_string(image.channels()) + " channels " + SizeText(image.width(), image.height()));
   }
   return decoded;
 }

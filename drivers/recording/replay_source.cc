@@ -29,7 +29,7 @@ constexpr size_t kRecentSkews = 100;
 Result<std::unique_ptr<ReplaySource>> ReplaySource::Open(const std::string& dir,
                                                          ReplayOptions options) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   Result<std::unique_ptr<RecordingReader>> opened = RecordingReader::Open(dir);
   if (!opened.ok()) return opened.error();
@@ -126,7 +126,7 @@ SourceCounters ReplaySource::Counters() const {
 Result<StereoFrame> ReplaySource::Next() {
   // Bounded: each pass reads one record, and a lap without a frame ends the replay.
   while (true) {
-    if (Interrupted()) return Error{ErrorCode::kUnavailable, "replay " + dir_ + ": stopped"};
+    if (Interrupted()) return Unavailable("replay " + dir_ + ": stopped");
     std::optional<RecordingRecord> record = reader_->Next(/*decode_images=*/true);
     if (!record) {
       if (options_.loop && frames_this_lap_ > 0) {
@@ -140,7 +140,7 @@ Result<StereoFrame> ReplaySource::Next() {
                                 : "end of the recording " + dir_ + " after " +
                                       std::to_string(reader_->frames_read()) + " frames";
       if (!reader_->end_note().empty()) message += " (" + reader_->end_note() + ")";
-      return Error{ErrorCode::kOutOfRange, message};
+      return OutOfRange(message);
     }
     switch (record->kind) {
       case RecordingRecord::Kind::kVehicleState: continue;  // all of them were read at Open()
@@ -161,7 +161,7 @@ Result<StereoFrame> ReplaySource::Next() {
     }
     StereoFrame& frame = record->frame;
     Pace(frame.t_ns);
-    if (Interrupted()) return Error{ErrorCode::kUnavailable, "replay " + dir_ + ": stopped"};
+    if (Interrupted()) return Unavailable("replay " + dir_ + ": stopped");
     ++frames_this_lap_;
     {
       std::lock_guard lock(mu_);

@@ -23,7 +23,7 @@ std::vector<std::string> ChessboardSourceOptions::Validate() const {
 
 Result<std::unique_ptr<ChessboardSource>> ChessboardSource::Open(ChessboardSourceOptions options) {
   if (std::vector<std::string> problems = options.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   const cv::Size size(options.width, options.height);
   const geometry::StereoCalibration rig = geometry::IdealCalibration(

@@ -38,7 +38,7 @@ Result<StereoFrame> NextFrame(drivers::StereoSource& source) {
   try {
     return source.Next();
   } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal, std::string("source: unexpected failure: ") + e.what()};
+    return Internal(std::string("source: unexpected failure: ") + e.what());
   }
 }
 
@@ -48,7 +48,7 @@ auto Guarded(Fn&& fn) -> decltype(fn()) {
   try {
     return fn();
   } catch (const std::exception& e) {
-    return Error{ErrorCode::kInternal, std::string("unexpected failure: ") + e.what()};
+    return Internal(std::string("unexpected failure: ") + e.what());
   }
 }
 
@@ -66,9 +66,9 @@ std::string_view SourceStateName(SourceState state) {
 
 Result<std::unique_ptr<Engine>> Engine::Create(std::unique_ptr<drivers::StereoSource> source,
                                                pipeline::PipelineConfig config, Sink sink) {
-  if (source == nullptr) return Error{ErrorCode::kInternal, "engine: no source"};
+  if (source == nullptr) return Internal("engine: no source");
   if (std::vector<std::string> problems = config.Validate(); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   return std::unique_ptr<Engine>(new Engine(std::move(source), std::move(config), std::move(sink)));
 }
@@ -104,12 +104,11 @@ Result<StereoFrame> Engine::WaitForCapture(Clock::duration timeout) {
   const uint64_t seen = frames_captured_;
   const bool got =
       capture_cv_.wait_for(lock, timeout, [&] { return stopping_ || frames_captured_ > seen; });
-  if (stopping_) return Error{ErrorCode::kCancelled, "the server is stopping"};
+  if (stopping_) return Cancelled("the server is stopping");
   if (!got) {
-    return Error{ErrorCode::kUnavailable, "no frame from the source within the timeout (" +
-                                              std::string(SourceStateName(source_state_)) +
-                                              (source_error_.empty() ? "" : ": " + source_error_) +
-                                              ")"};
+    return Unavailable("no frame from the source within the timeout (" +
+                       std::string(SourceStateName(source_state_)) +
+                       (source_error_.empty() ? "" : ": " + source_error_) + ")");
   }
   return last_capture_;
 }
@@ -261,7 +260,11 @@ void Engine::WorkerLoop(size_t index) {
       std::lock_guard lock(mu_);
       snapshot.rig = rig_;
       snapshot.pose_at = pose_at_;
-      if (swap_left_right_) std::swap(frame->left, frame->right);
+      if (swap_left_right_) {
+        // The views change places, and so does the sign of their skew (right minus left).
+        std::swap(frame->left, frame->right);
+        frame->pair_skew_ns = -frame->pair_skew_ns;
+      }
     }
     Result<pipeline::PreparedFrame> prepared =
         Guarded([&] { return front.Prepare(*frame, snapshot); });

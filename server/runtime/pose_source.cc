@@ -1,7 +1,5 @@
 #include "server/runtime/pose_source.h"
 
-#include <cmath>
-#include <numbers>
 #include <utility>
 
 namespace stevi::server {
@@ -11,7 +9,7 @@ Result<std::unique_ptr<PoseSource>> PoseSource::Create(
   std::vector<std::string> problems;
   AppendPrefixed(problems, "geo.", options.Validate());
   if (fixed) AppendPrefixed(problems, "geo.fixed_pose.", fixed->Validate());
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   return std::unique_ptr<PoseSource>(new PoseSource(options, fixed));
 }
 

@@ -140,7 +140,7 @@ Result<drivers::GstOptions> WithPipelines(
   } else {
     build(single, std::string(what.field), options.pipeline);
   }
-  if (!problems.empty()) return Error::Invalid(problems);
+  if (!problems.empty()) return InvalidArgument(problems);
   return options;
 }
 
@@ -149,9 +149,9 @@ Result<drivers::GstOptions> GstOptionsOf(const SourceSpec& spec) {
   if (spec.kind == "gst") return spec.gst;
   if (spec.kind == "uvc") {
     if (spec.gst.width == 0 || spec.gst.height == 0) {
-      return Error::Invalid(
-          {"source.gst.width, height: required for uvc (the size of one view, "
-           "--size WxH; the camera is asked for the frame that holds both)"});
+      return InvalidArgument(
+          "source.gst.width, height: required for uvc (the size of one view, "
+          "--size WxH; the camera is asked for the frame that holds both)");
     }
     // The camera's frame: both views side by side, one above the other, or one (two cameras).
     const int w =
@@ -263,7 +263,7 @@ std::vector<std::string> CheckSource(const SourceSpec& spec) {
 
 Result<std::unique_ptr<drivers::StereoSource>> OpenSource(const SourceSpec& spec) {
   if (std::vector<std::string> problems = CheckSource(spec); !problems.empty()) {
-    return Error::Invalid(problems);
+    return InvalidArgument(problems);
   }
   return FindSourceKind(spec.kind)->open(spec);
 }

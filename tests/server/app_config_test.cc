@@ -11,6 +11,9 @@
 #include "server/field_mapping.h"
 #include "tests/server/proto_fields.h"
 #include "tests/testing/data.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::server {
 namespace {
@@ -61,7 +64,7 @@ TEST(LoadServerConfig, NamesTheFileLineAndProblem) {
   const std::string path = WriteFile("bad.textproto", "listen: \"x:1\"\nsource { speed: 3 }\n");
   Result<v1::ServerConfig> config = LoadServerConfig(path);
   ASSERT_FALSE(config.ok());
-  EXPECT_EQ(config.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(config, IsError(ErrorCode::kInvalidArgument));
   EXPECT_THAT(config.error().message,
               AllOf(HasSubstr(path), HasSubstr("line 2"), HasSubstr("speed")));
 
@@ -71,8 +74,7 @@ TEST(LoadServerConfig, NamesTheFileLineAndProblem) {
 
   Result<v1::ServerConfig> missing = LoadServerConfig("/nonexistent/stevi.textproto");
   ASSERT_FALSE(missing.ok());
-  EXPECT_EQ(missing.error().code, ErrorCode::kNotFound);
-  EXPECT_THAT(missing.error().message, HasSubstr("/nonexistent/stevi.textproto"));
+  EXPECT_THAT(missing, IsError(ErrorCode::kNotFound, HasSubstr("/nonexistent/stevi.textproto")));
 }
 
 // Fuzz regression (tests/fuzz/corpus/config/regression-invalid-utf8): the text format parser
@@ -82,8 +84,8 @@ TEST(ParseConfigText, RefusesStringsThatAreNotUtf8) {
   v1::ServerConfig config;
   const Status raw = ParseConfigText("source { right: \"192.168.1\xb0.12\" }", "config c", config);
   ASSERT_FALSE(raw.ok());
-  EXPECT_EQ(raw.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(raw.error().message, HasSubstr("config c: source.right: not valid UTF-8"));
+  EXPECT_THAT(raw, IsError(ErrorCode::kInvalidArgument,
+                           HasSubstr("config c: source.right: not valid UTF-8")));
   const Status escaped = ParseConfigText(
       "auth { allowed_client_names: \"ok\" allowed_client_names: \"\\355\\240\\200\" }", "config c",
       config);
@@ -150,7 +152,7 @@ TEST(BuildPipelineConfig, NamesBadStevieAndStevisFields) {
   ASSERT_TRUE(config.ok()) << config.error().message;
   Result<pipeline::PipelineConfig> built = BuildPipelineConfig(config->pipeline());
   ASSERT_FALSE(built.ok());
-  EXPECT_EQ(built.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(built, IsError(ErrorCode::kInvalidArgument));
   EXPECT_THAT(built.error().message, AllOf(HasSubstr("pipeline.stevis.saliency_threshold"),
                                            HasSubstr("pipeline.stevis.saliency.surround_radii[1]"),
                                            HasSubstr("pipeline.stevie.edges.canny_aperture"),

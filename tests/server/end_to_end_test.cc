@@ -507,6 +507,43 @@ TEST(Stevi, AnUnreachableServerIsOneClearLine) {
   EXPECT_THAT(usage.err, HasSubstr("unknown command 'fly'"));
 }
 
+// `stevi --help` lists every command, each with a summary, and each command has its own usage,
+// from `stevi help NAME` and from `stevi NAME --help` alike. The list below is the reference: a
+// command added to the binary and not here, or dropped from its table, fails.
+TEST(Stevi, HelpListsEveryCommandAndEachHasItsOwnUsage) {
+  const std::set<std::string> expected = {"watch",  "status",      "config",  "snapshot",
+                                          "record", "calibrate",   "avoid",   "export",
+                                          "mcap",   "calibration", "mavlink", "station"};
+  const testing::RunResult help = testing::Run({BinaryPath("stevi"), "--help"}, kCommandTimeout);
+  ASSERT_EQ(help.exit_code, 0) << help.err;
+  const size_t commands_at = help.out.find("\nCommands:\n");
+  ASSERT_NE(commands_at, std::string::npos) << help.out;
+  std::set<std::string> listed;
+  std::istringstream lines(help.out.substr(commands_at + 11));
+  for (std::string line; std::getline(lines, line) && !line.empty();) {
+    std::istringstream words(line);
+    std::string name, first_word_of_summary;
+    words >> name >> first_word_of_summary;
+    EXPECT_FALSE(first_word_of_summary.empty()) << "no summary: " << line;
+    listed.insert(name);
+  }
+  EXPECT_EQ(listed, expected);
+  for (const std::string& name : expected) {
+    const testing::RunResult usage =
+        testing::Run({BinaryPath("stevi"), "help", name}, kCommandTimeout);
+    EXPECT_EQ(usage.exit_code, 0) << name << ": " << usage.err;
+    EXPECT_EQ(usage.out.rfind("usage: stevi " + name, 0), 0u) << usage.out;
+    const testing::RunResult flag =
+        testing::Run({BinaryPath("stevi"), name, "--help"}, kCommandTimeout);
+    EXPECT_EQ(flag.exit_code, 0) << name << ": " << flag.err;
+    EXPECT_EQ(flag.out, usage.out) << name;
+  }
+  const testing::RunResult unknown =
+      testing::Run({BinaryPath("stevi"), "help", "fly"}, kCommandTimeout);
+  EXPECT_EQ(unknown.exit_code, 2);
+  EXPECT_THAT(unknown.err, HasSubstr("unknown command 'fly'"));
+}
+
 TEST(SteviProcess, SyntheticFramesAndTruthAgree) {
   const std::string dir = testing::MakeTempDir("stevi-process");
   const testing::RunResult r =

@@ -31,12 +31,12 @@ class FlakySource : public drivers::StereoSource {
   Result<StereoFrame> Next() override {
     if (failures_ > 0) {
       --failures_;
-      return Error{ErrorCode::kUnavailable, "camera unplugged"};
+      return Unavailable("camera unplugged");
     }
     if (next_ >= frames_) {
       if (!ended_told_) ended_.set_value();  // the capture thread marks the source ENDED next
       ended_told_ = true;
-      return Error{ErrorCode::kOutOfRange, "end of the recording"};
+      return OutOfRange("end of the recording");
     }
     return renderer_->Render(next_++);
   }

@@ -50,23 +50,23 @@ TEST(ToGrpcStatus, EveryCodeMapsToTheGrpcCodeOfItsName) {
 }
 
 TEST(ToGrpcStatus, CodeAndMessageFormIsTheSame) {
-  const grpc::Status a = ToGrpcStatus(ErrorCode::kPermissionDenied, "no");
-  const grpc::Status b = ToGrpcStatus(Error{ErrorCode::kPermissionDenied, "no"});
+  const grpc::Status a = ToGrpcStatus(PermissionDenied("no"));
+  const grpc::Status b = ToGrpcStatus(PermissionDenied("no"));
   EXPECT_EQ(a.error_code(), b.error_code());
   EXPECT_EQ(a.error_message(), b.error_message());
 }
 
 TEST(ToGrpcStatus, OkStatusIsOk) {
   EXPECT_TRUE(ToGrpcStatus(Status::Ok()).ok());
-  const grpc::Status failed = ToGrpcStatus(Status(Error{ErrorCode::kNotFound, "cal-000001"}));
+  const grpc::Status failed = ToGrpcStatus(Status(NotFound("cal-000001")));
   EXPECT_EQ(failed.error_code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(failed.error_message(), "cal-000001");
 }
 
 TEST(ToGrpcStatus, LongMessagesAreTruncatedAndSaySo) {
   const std::string exact(2048, 'x');
-  EXPECT_EQ(ToGrpcStatus(ErrorCode::kInvalidArgument, exact).error_message(), exact);
-  const grpc::Status long_one = ToGrpcStatus(ErrorCode::kInvalidArgument, std::string(100000, 'y'));
+  EXPECT_EQ(ToGrpcStatus(InvalidArgument(exact)).error_message(), exact);
+  const grpc::Status long_one = ToGrpcStatus(InvalidArgument(std::string(100000, 'y')));
   EXPECT_EQ(long_one.error_message(), std::string(2048, 'y') + "... (truncated)");
 }
 

@@ -25,6 +25,9 @@
 #include "tests/server/truth_check.h"
 #include "tests/testing/data.h"
 #include "tests/testing/sanitized.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::server {
 namespace {
@@ -848,7 +851,7 @@ TEST(ServerStart, RefusesABadConfigBeforeOpeningAnything) {
   config.mutable_source()->set_kind(v1::SOURCE_KIND_IMAGES);
   Result<std::unique_ptr<Server>> server = Server::Start(config);
   ASSERT_FALSE(server.ok());
-  EXPECT_EQ(server.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(server, IsError(ErrorCode::kInvalidArgument));
   EXPECT_THAT(server.error().message,
               AllOf(HasSubstr("listen"), HasSubstr("pipeline.range.min_disparity_px"),
                     HasSubstr("source.left")));

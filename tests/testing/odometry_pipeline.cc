@@ -53,7 +53,7 @@ Result<std::vector<OdometryFrame>> RunOdometrySequence(const OdometrySequence& s
   if (options.max_width_px) config.max_width_px = *options.max_width_px;
   if (std::vector<std::string> problems = pipeline::ApplySettings(config, options.settings);
       !problems.empty()) {
-    return Error{ErrorCode::kInvalidArgument, "settings: " + problems.front()};
+    return InvalidArgument("settings: " + problems.front());
   }
   const auto rig = std::make_shared<const geometry::StereoRig>(
       geometry::StereoRig::Ideal(sequence.left.front().size(), sequence.f_px, sequence.baseline_m,

@@ -43,7 +43,7 @@
   const TOPIC_RE = /^\/(rig[0-9]+)\/(tracks|status|vehicle|image\/annotated|image\/disparity)$/;
   const RIG_RE = /^rig[0-9]+$/;
   // Used before a schema arrives (config.proto's Algorithm).
-  const FALLBACK_ALGORITHMS = ['ALGORITHM_CANONICAL', 'ALGORITHM_STEVIE', 'ALGORITHM_STEVIS'];
+  const FALLBACK_ALGORITHMS = ['ALGORITHM_CANONICAL', 'ALGORITHM_STEVIE', 'ALGORITHM_STEVIS', 'ALGORITHM_STIXELS'];
 
   const stevi = {
     rigs: {},

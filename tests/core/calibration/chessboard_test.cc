@@ -13,6 +13,9 @@
 #include "core/calibration/chessboard_render.h"
 #include "core/calibration/image_header.h"
 #include "tests/core/calibration/synthetic_rig.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::calibration {
 namespace {
@@ -118,8 +121,7 @@ TEST(ImageHeaderSize, RefusesTruncatedAndGarbageBytes) {
   for (const auto& c : cases) {
     const Result<cv::Size> size = ImageHeaderSize(c.bytes);
     ASSERT_FALSE(size.ok()) << "accepted: " << c.message;
-    EXPECT_EQ(size.error().code, ErrorCode::kInvalidArgument);
-    EXPECT_THAT(size.error().message, HasSubstr(c.message));
+    EXPECT_THAT(size, IsError(ErrorCode::kInvalidArgument, HasSubstr(c.message)));
   }
   // A PNG whose first chunk is not IHDR.
   std::string bad_chunk = png;
@@ -155,7 +157,7 @@ TEST(DecodeGreyImage, RefusesOversizedHeadersWithoutDecoding) {
         std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()),
         {4096, 4096});
     ASSERT_FALSE(decoded.ok());
-    EXPECT_EQ(decoded.error().code, ErrorCode::kResourceExhausted);
+    EXPECT_THAT(decoded, IsError(ErrorCode::kResourceExhausted));
     EXPECT_THAT(decoded.error().message,
                 HasSubstr("exceeds the maximum of 4096x4096; not decoded"));
   }
@@ -174,8 +176,7 @@ TEST(DecodeGreyImage, RefusesCorruptData) {
       std::span<const uint8_t>(reinterpret_cast<const uint8_t*>(png.data()), png.size()),
       {4096, 4096});
   ASSERT_FALSE(decoded.ok());
-  EXPECT_EQ(decoded.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(decoded.error().message, HasSubstr("cannot decode the image"));
+  EXPECT_THAT(decoded, IsError(ErrorCode::kInvalidArgument, HasSubstr("cannot decode the image")));
 }
 
 TEST(BoardSpec, ValidatesAndListsObjectPoints) {
@@ -265,19 +266,19 @@ TEST(DetectChessboard, ReportsNoBoardAndWrongSizes) {
   const cv::Mat blank(testing::kImageSize, CV_8UC1, cv::Scalar(128));
   const Result<std::vector<cv::Point2f>> none = DetectChessboard(blank, board);
   ASSERT_FALSE(none.ok());
-  EXPECT_EQ(none.error().code, ErrorCode::kNotFound);
-  EXPECT_THAT(none.error().message, HasSubstr("no board of 9x6 inner corners found"));
+  EXPECT_THAT(none,
+              IsError(ErrorCode::kNotFound, HasSubstr("no board of 9x6 inner corners found")));
 
   for (const BoardSpec wrong :
        {BoardSpec{10, 6, 0.03}, BoardSpec{9, 7, 0.03}, BoardSpec{11, 8, 0.03}}) {
     const Result<std::vector<cv::Point2f>> found = DetectChessboard(images->left, wrong);
     ASSERT_FALSE(found.ok()) << wrong.Name();
-    EXPECT_EQ(found.error().code, ErrorCode::kNotFound);
+    EXPECT_THAT(found, IsError(ErrorCode::kNotFound));
   }
 
   const Result<std::vector<cv::Point2f>> colour = DetectChessboard(cv::Mat(20, 20, CV_8UC3), board);
   ASSERT_FALSE(colour.ok());
-  EXPECT_EQ(colour.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(colour, IsError(ErrorCode::kInvalidArgument));
   EXPECT_THAT(colour.error().message,
               HasSubstr("expected a non-empty 8-bit grey image (CV_8UC1), got CV_8UC3"));
   EXPECT_EQ(DetectChessboard(images->left, BoardSpec{5, 5, 0.03}).error().code,
@@ -362,7 +363,7 @@ TEST(GenerateBoardPoses, IsDeterministicVariedAndInViewOfBothCameras) {
       GenerateBoardPoses(rig, BoardSpec{9, 6, 0.03}, testing::kImageSize, 1, 1,
                          {.min_width_fraction = 1.0, .max_width_fraction = 1.0});
   ASSERT_FALSE(impossible.ok());
-  EXPECT_EQ(impossible.error().code, ErrorCode::kOutOfRange);
+  EXPECT_THAT(impossible, IsError(ErrorCode::kOutOfRange));
 }
 
 }  // namespace

@@ -13,6 +13,9 @@
 #include <opencv2/calib3d.hpp>
 
 #include "tests/testing/data.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::calibration {
 namespace {
@@ -99,7 +102,7 @@ TEST(CalibrationStore, RoundTripsACalibrationAndItsReport) {
   std::unique_ptr<CalibrationStore> store = OpenClean(dir);
   EXPECT_THAT(store->List(), IsEmpty());
   EXPECT_FALSE(store->ActiveId().has_value());
-  EXPECT_EQ(store->Active().error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_THAT(store->Active(), IsError(ErrorCode::kFailedPrecondition));
 
   const geometry::StereoCalibration calibration = MakeCalibration(0);
   const Result<CalibrationId> id = store->Add(calibration, MakeReport(true, 0.21));
@@ -207,7 +210,7 @@ TEST(CalibrationStore, StoresButRefusesToActivateAFailedCalibration) {
 
   const Status s = store->Activate(*failed);
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_THAT(s, IsError(ErrorCode::kFailedPrecondition));
   EXPECT_EQ(
       s.error().message,
       "cal-000002 failed its quality gates (stereo RMS reprojection error 1.700 px > 1.000 px "
@@ -223,8 +226,8 @@ TEST(CalibrationStore, RefusesAnInvalidCalibration) {
   bad.M1(0, 0) = -5;
   const Result<CalibrationId> id = store->Add(bad, MakeReport(true, 0.2));
   ASSERT_FALSE(id.ok());
-  EXPECT_EQ(id.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(id.error().message, HasSubstr("M1: focal lengths fx, fy must be > 0"));
+  EXPECT_THAT(
+      id, IsError(ErrorCode::kInvalidArgument, HasSubstr("M1: focal lengths fx, fy must be > 0")));
   EXPECT_THAT(store->List(), IsEmpty());
   EXPECT_TRUE(fs::is_empty(dir));
 }
@@ -308,7 +311,7 @@ TEST(CalibrationStore, NoGoodCalibrationMeansNoneActive) {
   EXPECT_THAT(opened->problems, ElementsAre("active: points to cal-000001, which failed its "
                                             "quality gates; no calibration is active"));
   EXPECT_FALSE(opened->store->ActiveId().has_value());
-  EXPECT_EQ(opened->store->Active().error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_THAT(opened->store->Active(), IsError(ErrorCode::kFailedPrecondition));
 }
 
 TEST(CalibrationStore, RefusesAFileAsItsDirectory) {
@@ -316,8 +319,7 @@ TEST(CalibrationStore, RefusesAFileAsItsDirectory) {
   WriteText(dir + "/plain", "x");
   const Result<OpenedStore> opened = CalibrationStore::Open(dir + "/plain");
   ASSERT_FALSE(opened.ok());
-  EXPECT_EQ(opened.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(opened.error().message, HasSubstr("is not a directory"));
+  EXPECT_THAT(opened, IsError(ErrorCode::kInvalidArgument, HasSubstr("is not a directory")));
 }
 
 TEST(CalibrationStore, ConcurrentAddsGetDistinctIds) {

@@ -24,6 +24,9 @@
 #include <gtest/gtest.h>
 
 #include "tests/testing/data.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi {
 namespace {
@@ -163,7 +166,7 @@ TEST_F(AtomicWriteFileTest, AMissingFolderFailsNamingThePathAndTheStep) {
   const std::string path = Path("no_such_folder/file.txt");
   const Status s = AtomicWriteFile(path, "text");
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.error().code, ErrorCode::kInternal);
+  EXPECT_THAT(s, IsError(ErrorCode::kInternal));
   EXPECT_THAT(s.error().message,
               AllOf(StartsWith(path + ": "), HasSubstr("cannot create a temporary file beside it"),
                     HasSubstr(std::strerror(ENOENT))));
@@ -177,7 +180,7 @@ TEST_F(AtomicWriteFileTest, AFileWhereTheFolderShouldBeFailsAndIsLeftAlone) {
   const std::string path = blocker + "/file.txt";
   const Status s = AtomicWriteFile(path, "text");
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.error().code, ErrorCode::kInternal);
+  EXPECT_THAT(s, IsError(ErrorCode::kInternal));
   EXPECT_THAT(s.error().message,
               AllOf(StartsWith(path + ": "), HasSubstr("cannot create a temporary file beside it"),
                     HasSubstr(std::strerror(ENOTDIR))));
@@ -193,7 +196,7 @@ TEST_F(AtomicWriteFileTest, AFolderAtThePathFailsAtTheRenameAndCleansUp) {
   WritePlain(path + "/inside.txt", "inside");
   const Status s = AtomicWriteFile(path, "text");
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.error().code, ErrorCode::kInternal);
+  EXPECT_THAT(s, IsError(ErrorCode::kInternal));
   EXPECT_THAT(s.error().message, AllOf(StartsWith(path + ": "), HasSubstr("rename failed"),
                                        HasSubstr(std::strerror(EISDIR))));
   EXPECT_TRUE(fs::is_directory(path));
@@ -216,7 +219,7 @@ TEST_F(AtomicWriteFileTest, AFailedWriteLeavesTheOldFileAndNoTemporary) {
   ::signal(SIGXFSZ, saved_handler);
 
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.error().code, ErrorCode::kInternal);
+  EXPECT_THAT(s, IsError(ErrorCode::kInternal));
   EXPECT_THAT(s.error().message, AllOf(StartsWith(path + ": "), HasSubstr("write failed"),
                                        HasSubstr(std::strerror(EFBIG))));
   EXPECT_EQ(ReadAll(path), "the old, good contents\n");
@@ -236,7 +239,7 @@ TEST_F(AtomicWriteFileTest, AnUnwritableFolderFailsAndLeavesTheOldFile) {
   const Status s = AtomicWriteFile(path, "replaced");
   fs::permissions(dir_, fs::perms::owner_all);
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.error().code, ErrorCode::kInternal);
+  EXPECT_THAT(s, IsError(ErrorCode::kInternal));
   EXPECT_THAT(s.error().message,
               AllOf(StartsWith(path + ": "), HasSubstr("cannot create a temporary file beside it"),
                     HasSubstr(std::strerror(EACCES))));

@@ -512,7 +512,7 @@ TEST(PipelineRangeScan, PublishesTheScanAndTheTracksInTheBodyFrame) {
   config.mount = geo::MountOptions{.yaw_deg = 90, .lever_arm_m = Eigen::Vector3d(0.5, 0.2, -0.1)};
   auto rig = std::make_shared<const geometry::StereoRig>(renderer.Rig());
   pipeline::Pipeline pipe;
-  Result<pipeline::FrameResult> result = Error{ErrorCode::kInternal, "not run"};
+  Result<pipeline::FrameResult> result = Internal("not run");
   for (int k = 0; k < 3; ++k) {
     result = pipe.Process(renderer.Render(k),
                           {std::make_shared<const pipeline::PipelineConfig>(config), rig});

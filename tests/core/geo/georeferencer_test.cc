@@ -16,6 +16,9 @@
 #include <gtest/gtest.h>
 
 #include "tests/core/geo/geo_reference.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::geo {
 namespace {
@@ -389,8 +392,8 @@ TEST(Georeference, RefusesInvalidInputNamingTheFields) {
   bad_point.covariance_m2(0, 1) = 1;  // not symmetric
   const Result<GeoPoint> out = g.Georeference(VehiclePose{.state = bad_state}, bad_point);
   ASSERT_FALSE(out.ok());
-  EXPECT_EQ(out.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(out.error().message, HasSubstr("pose.state.lat_deg: must be in [-90, 90]"));
+  EXPECT_THAT(out, IsError(ErrorCode::kInvalidArgument,
+                           HasSubstr("pose.state.lat_deg: must be in [-90, 90]")));
   EXPECT_THAT(out.error().message, HasSubstr("point.position_m: must be finite"));
   EXPECT_THAT(out.error().message, HasSubstr("point.covariance_m2: must be symmetric"));
 

@@ -1,4 +1,5 @@
 #include "core/geo/pose_buffer.h"
+#include "tests/testing/status_matchers.h"
 
 #include <atomic>
 #include <chrono>
@@ -14,6 +15,8 @@
 #include <GeographicLib/GeodesicLine.hpp>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+using stevi::testing::IsError;
 
 namespace stevi::geo {
 namespace {
@@ -64,8 +67,7 @@ TEST(PoseBuffer, AddRefusesOutOfOrderAndRepeatedTimes) {
   for (int64_t t : {kSecond, 2 * kSecond}) {
     const Status status = buffer.Add(State(t, 43.68, 10.39, 60));
     ASSERT_FALSE(status.ok());
-    EXPECT_EQ(status.error().code, ErrorCode::kInvalidArgument);
-    EXPECT_THAT(status.error().message, HasSubstr("t_ns: out of order"));
+    EXPECT_THAT(status, IsError(ErrorCode::kInvalidArgument, HasSubstr("t_ns: out of order")));
     EXPECT_THAT(status.error().message, HasSubstr("newest state (2000000000 ns)"));
   }
   EXPECT_EQ(buffer.size(), 1u);

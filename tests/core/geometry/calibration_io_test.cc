@@ -26,6 +26,9 @@
 #include "core/geometry/stereo_rig.h"
 #include "tests/core/geometry/calibration_fixtures.h"
 #include "tests/testing/data.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::geometry {
 namespace {
@@ -67,8 +70,8 @@ TEST(ParseCalibrationYaml, MissingKeyIsNamed) {
   text.erase(from, to - from);
   Result<StereoCalibration> c = ParseCalibrationYaml(text);
   ASSERT_FALSE(c.ok());
-  EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(c.error().message, HasSubstr("M2: missing (expected a 3x3 matrix)"));
+  EXPECT_THAT(
+      c, IsError(ErrorCode::kInvalidArgument, HasSubstr("M2: missing (expected a 3x3 matrix)")));
 }
 
 TEST(ParseCalibrationYaml, MalformedMatrixIsNamedWithItsShape) {
@@ -77,8 +80,8 @@ TEST(ParseCalibrationYaml, MalformedMatrixIsNamedWithItsShape) {
       "   cols: 2\n   dt: d\n   data: [ 500., 0., 320., 0., 500., 240. ]");
   Result<StereoCalibration> c = ParseCalibrationYaml(text);
   ASSERT_FALSE(c.ok());
-  EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(c.error().message, HasSubstr("M1: expected a 3x3 matrix, got 3x2"));
+  EXPECT_THAT(
+      c, IsError(ErrorCode::kInvalidArgument, HasSubstr("M1: expected a 3x3 matrix, got 3x2")));
 }
 
 // Fuzz regression (tests/fuzz/corpus/calibration_yaml/regression-huge-matrix): OpenCV allocates
@@ -90,8 +93,8 @@ TEST(ParseCalibrationYaml, AHugeAnnouncedMatrixIsRefusedBeforeItIsAllocated) {
       "   rows: 100000\n   cols: 100000\n   dt: d\n   data: [ 1. ]");
   Result<StereoCalibration> c = ParseCalibrationYaml(text);
   ASSERT_FALSE(c.ok());
-  EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(c.error().message, HasSubstr("M1: expected a 3x3 matrix, got 100000x100000"));
+  EXPECT_THAT(c, IsError(ErrorCode::kInvalidArgument,
+                         HasSubstr("M1: expected a 3x3 matrix, got 100000x100000")));
 
   // A size OpenCV would read from something else than an integer is not handed over either
   // (regression-huge-matrix-text-cols).
@@ -113,7 +116,7 @@ TEST(ParseCalibrationYaml, AnEmptyKeyIsRefusedBeforeOpenCvParsesIt) {
     const std::string text = Replace(kIdealYaml, "   dt: d", line);
     Result<StereoCalibration> c = ParseCalibrationYaml(text);
     ASSERT_FALSE(c.ok()) << line;
-    EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
+    EXPECT_THAT(c, IsError(ErrorCode::kInvalidArgument));
     EXPECT_THAT(c.error().message, HasSubstr("line 8: an empty key")) << line;
   }
   EXPECT_THAT(YamlTextProblem("a: 1\n  b: 2\n  :c: 3\n"), HasSubstr("line 3: an empty key"));
@@ -167,8 +170,8 @@ TEST(ParseCalibrationYaml, ScalarWhereMatrixExpectedIsNamed) {
 TEST(ParseCalibrationYaml, UnparsableTextIsInvalidArgumentWithTheLine) {
   Result<StereoCalibration> c = ParseCalibrationYaml("image_width: 5\nM1: [ 1, 2\n  : : {\n");
   ASSERT_FALSE(c.ok());
-  EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(c.error().message, AllOf(HasSubstr("not valid YAML"), HasSubstr("line 3")));
+  EXPECT_THAT(c, IsError(ErrorCode::kInvalidArgument,
+                         AllOf(HasSubstr("not valid YAML"), HasSubstr("line 3"))));
 }
 
 TEST(ParseCalibrationYaml, AcceptsPlainListsOfNumbers) {
@@ -210,8 +213,7 @@ TEST(LoadCalibrationYaml, MissingFileIsNotFoundAndNamesThePath) {
   const std::string path = testing::MakeTempDir("stevi_rig") + "/nope.yaml";
   Result<StereoCalibration> c = LoadCalibrationYaml(path);
   ASSERT_FALSE(c.ok());
-  EXPECT_EQ(c.error().code, ErrorCode::kNotFound);
-  EXPECT_THAT(c.error().message, HasSubstr(path));
+  EXPECT_THAT(c, IsError(ErrorCode::kNotFound, HasSubstr(path)));
 }
 
 TEST(LoadCalibrationYaml, BrokenFileNamesFileAndKey) {
@@ -221,14 +223,12 @@ TEST(LoadCalibrationYaml, BrokenFileNamesFileAndKey) {
   const std::string path = WriteFile(dir, "broken.yaml", text);
   Result<StereoCalibration> c = LoadCalibrationYaml(path);
   ASSERT_FALSE(c.ok());
-  EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(c.error().message, AllOf(HasSubstr(path), HasSubstr("M2")));
+  EXPECT_THAT(c, IsError(ErrorCode::kInvalidArgument, AllOf(HasSubstr(path), HasSubstr("M2"))));
 
   const std::string garbage = WriteFile(dir, "garbage.yaml", "%YAML:1.0\n---\n[ {: ]]] x\n");
   Result<StereoCalibration> g = LoadCalibrationYaml(garbage);
   ASSERT_FALSE(g.ok());
-  EXPECT_EQ(g.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(g.error().message, HasSubstr(garbage));
+  EXPECT_THAT(g, IsError(ErrorCode::kInvalidArgument, HasSubstr(garbage)));
 }
 
 TEST(SaveCalibrationYaml, RoundTripsEveryField) {
@@ -471,7 +471,7 @@ std::string ParseError(const std::string& text) {
     ADD_FAILURE() << "parsed although it should not:\n" << text;
     return "";
   }
-  EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(c, IsError(ErrorCode::kInvalidArgument));
   return c.error().message;
 }
 
@@ -554,7 +554,7 @@ TEST(CalibrationYamlText, RefusesAnInvalidCalibrationNamingTheProblem) {
   bad.M2(1, 1) = 0;
   Result<std::string> text = CalibrationYamlText(bad);
   ASSERT_FALSE(text.ok());
-  EXPECT_EQ(text.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(text, IsError(ErrorCode::kInvalidArgument));
   EXPECT_THAT(text.error().message, AllOf(StartsWith("refusing to write an invalid calibration: "),
                                           HasSubstr("M2: focal lengths fx, fy must be > 0")));
 }
@@ -565,7 +565,7 @@ TEST(CalibrationYamlText, RefusesAnInvalidCalibrationNamingTheProblem) {
 TEST_F(CalibrationFileTest, AFolderIsNotACalibrationFile) {
   Result<StereoCalibration> c = LoadCalibrationYaml(dir_);
   ASSERT_FALSE(c.ok());
-  EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(c, IsError(ErrorCode::kInvalidArgument));
   EXPECT_EQ(c.error().message, dir_ + ": is a directory, not a calibration file");
 }
 
@@ -573,7 +573,7 @@ TEST_F(CalibrationFileTest, MissingFileMessageNamesThePath) {
   const std::string path = Path("absent/rig.yaml");
   Result<StereoCalibration> c = LoadCalibrationYaml(path);
   ASSERT_FALSE(c.ok());
-  EXPECT_EQ(c.error().code, ErrorCode::kNotFound);
+  EXPECT_THAT(c, IsError(ErrorCode::kNotFound));
   EXPECT_EQ(c.error().message, "calibration file not found: " + path);
 }
 
@@ -583,8 +583,8 @@ TEST_F(CalibrationFileTest, EmptyOrUnparsableFilesAreInvalidAndNamed) {
     const std::string path = WriteFile(dir_, "bad.yaml", text);
     Result<StereoCalibration> c = LoadCalibrationYaml(path);
     ASSERT_FALSE(c.ok()) << text;
-    EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
-    EXPECT_THAT(c.error().message, StartsWith(path + ": not a valid calibration YAML file ("));
+    EXPECT_THAT(c, IsError(ErrorCode::kInvalidArgument,
+                           StartsWith(path + ": not a valid calibration YAML file (")));
   }
 }
 
@@ -594,7 +594,7 @@ TEST_F(CalibrationFileTest, ProblemsInAFileArePrefixedWithItsPath) {
                 Yaml(With(AnalyticEntries(), "M1", MatrixNode(3, 2, {1, 2, 3, 4, 5, 6}))));
   Result<StereoCalibration> c = LoadCalibrationYaml(path);
   ASSERT_FALSE(c.ok());
-  EXPECT_EQ(c.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(c, IsError(ErrorCode::kInvalidArgument));
   EXPECT_EQ(c.error().message, path + ": M1: expected a 3x3 matrix, got 3x2");
 
   const std::string list = WriteFile(dir_, "list.yaml", "%YAML:1.0\n---\n[ 1, 2 ]\n");
@@ -617,7 +617,7 @@ TEST_F(CalibrationFileTest, SavingAnInvalidCalibrationCreatesNoFile) {
   bad.D1 = cv::Mat();
   const Status s = SaveCalibrationYaml(bad, path);
   ASSERT_FALSE(s.ok());
-  EXPECT_EQ(s.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(s, IsError(ErrorCode::kInvalidArgument));
   EXPECT_EQ(s.error().message,
             path +
                 ": refusing to write an invalid calibration: D1: expected a 1xN CV_64F row with N "

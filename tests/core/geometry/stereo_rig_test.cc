@@ -17,6 +17,9 @@
 #include "core/geometry/range.h"
 #include "tests/core/geometry/calibration_fixtures.h"
 #include "tests/testing/data.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::geometry {
 namespace {
@@ -63,8 +66,8 @@ TEST(StereoRigRectify, RejectsWrongTypeOrSizeNamingTheImage) {
   const Status wrong_type =
       rig.Rectify(cv::Mat(48, 64, CV_16UC1, cv::Scalar(0)), cv::Mat1b(48, 64), out_left, out_right);
   ASSERT_FALSE(wrong_type.ok());
-  EXPECT_EQ(wrong_type.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(wrong_type.error().message, AllOf(HasSubstr("left image"), HasSubstr("CV_16UC1")));
+  EXPECT_THAT(wrong_type, IsError(ErrorCode::kInvalidArgument,
+                                  AllOf(HasSubstr("left image"), HasSubstr("CV_16UC1"))));
   const Status wrong_size = rig.Rectify(cv::Mat1b(48, 64), cv::Mat1b(48, 63), out_left, out_right);
   ASSERT_FALSE(wrong_size.ok());
   EXPECT_THAT(wrong_size.error().message, AllOf(HasSubstr("right image"), HasSubstr("63x48")));
@@ -97,8 +100,8 @@ TEST(StereoRigFromCalibration, LeftCameraOnTheRightIsAClearError) {
   c.T = cv::Vec3d(0.0925, 0.001, 0.0);
   Result<StereoRig> rig = StereoRig::FromCalibration(c);
   ASSERT_FALSE(rig.ok());
-  EXPECT_EQ(rig.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(rig.error().message, AllOf(HasSubstr("T_x > 0"), HasSubstr("swap left and right")));
+  EXPECT_THAT(rig, IsError(ErrorCode::kInvalidArgument,
+                           AllOf(HasSubstr("T_x > 0"), HasSubstr("swap left and right"))));
 }
 
 TEST(StereoRigFromCalibration, InvalidCalibrationListsProblems) {
@@ -319,7 +322,7 @@ TEST(StereoRigFromFile, DefaultsCalibrationIdToTheFileStem) {
 
   Result<StereoRig> missing = StereoRig::FromFile(dir + "/absent.yaml");
   ASSERT_FALSE(missing.ok());
-  EXPECT_EQ(missing.error().code, ErrorCode::kNotFound);
+  EXPECT_THAT(missing, IsError(ErrorCode::kNotFound));
 
   const std::string swapped =
       WriteFile(dir, "swapped.yaml", Replace(kIdealYaml, "[ -0.12, 0., 0. ]", "[ 0.12, 0., 0. ]"));

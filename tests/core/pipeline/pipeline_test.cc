@@ -16,6 +16,9 @@
 #include "core/pipeline/config.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/testing/truth_match.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::pipeline {
 namespace {
@@ -169,7 +172,7 @@ TEST(PipelineProcess, BadTrackingOptionsAreInvalidArgumentNamingTheField) {
   Result<FrameResult> result =
       pipeline.Process(frame, Snapshot{std::make_shared<const PipelineConfig>(config), fx.rig});
   ASSERT_FALSE(result.ok());
-  EXPECT_EQ(result.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(result, IsError(ErrorCode::kInvalidArgument));
   EXPECT_NE(result.error().message.find("tracking.gates.max_depth_ratio"), std::string::npos)
       << result.error().message;
 }
@@ -202,7 +205,7 @@ TEST(PipelineProcess, WrongSizeIsInvalidArgument) {
   cv::resize(frame.left, frame.left, cv::Size(320, 240));
   Result<FrameResult> result = pipeline.Process(frame, Snapshot{store.Get(), fx.rig});
   ASSERT_FALSE(result.ok());
-  EXPECT_EQ(result.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(result, IsError(ErrorCode::kInvalidArgument));
   EXPECT_NE(result.error().message.find("320x240"), std::string::npos) << result.error().message;
   EXPECT_NE(result.error().message.find("640x480"), std::string::npos) << result.error().message;
   EXPECT_NE(result.error().message.find("left"), std::string::npos) << result.error().message;
@@ -210,12 +213,12 @@ TEST(PipelineProcess, WrongSizeIsInvalidArgument) {
   frame.left = cv::Mat();
   result = pipeline.Process(frame, Snapshot{store.Get(), fx.rig});
   ASSERT_FALSE(result.ok());
-  EXPECT_EQ(result.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(result, IsError(ErrorCode::kInvalidArgument));
 
   // No rig: refused, not a crash.
   result = pipeline.Process(fx.renderer.Render(0), Snapshot{store.Get(), nullptr});
   ASSERT_FALSE(result.ok());
-  EXPECT_EQ(result.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(result, IsError(ErrorCode::kInvalidArgument));
 }
 
 // A 1280x960 camera with the field of view of the default 640x480 one (f 1400 px): by default
@@ -346,7 +349,7 @@ TEST(ConfigStoreSet, RejectsABadConfigNamingEveryFieldAndKeepsTheActiveOne) {
   bad.max_width_px = 10;  // neither 0 nor 64..16384
   Result<std::shared_ptr<const PipelineConfig>> set = store.Set(bad);
   ASSERT_FALSE(set.ok());
-  EXPECT_EQ(set.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(set, IsError(ErrorCode::kInvalidArgument));
   for (const char* field : {"matcher.block_matching.num_disparities", "canonical.open_size_px",
                             "range.min_disparity_px", "max_width_px"}) {
     EXPECT_NE(set.error().message.find(field), std::string::npos)

@@ -38,7 +38,7 @@ TEST(StixelsPipeline, TheAirfieldsLargeObstaclesAtTheirRange) {
                           std::make_shared<const geometry::StereoRig>(renderer.Rig())};
   Pipeline pipe;
   drivers::FrameTruth truth;
-  Result<FrameResult> result = Error{ErrorCode::kInternal, "not run"};
+  Result<FrameResult> result = Internal("not run");
   for (int k = 0; k < 3; ++k) {
     result = pipe.Process(renderer.Render(k, &truth), snapshot);
     ASSERT_TRUE(result.ok()) << result.error().message;

@@ -16,6 +16,9 @@
 #include "core/pipeline/pipeline.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/testing/data.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::drivers {
 namespace {
@@ -163,7 +166,7 @@ TEST(ImageSequence, DepthOfFrontoParallelTargetsFrom10To40MetresWithin2Percent) 
   for (;;) {
     Result<StereoFrame> frame = (*source)->Next();
     if (!frame.ok()) {
-      EXPECT_EQ(frame.error().code, ErrorCode::kOutOfRange) << frame.error().message;
+      EXPECT_THAT(frame, IsError(ErrorCode::kOutOfRange)) << frame.error().message;
       break;
     }
     ASSERT_LT(frame->index, static_cast<int64_t>(truths.size()));
@@ -218,7 +221,7 @@ TEST(OpenImageSource, MissingFilesAreNamed) {
   options.first_index = 7;
   source = OpenImageSource(options);
   ASSERT_FALSE(source.ok());
-  EXPECT_EQ(source.error().code, ErrorCode::kNotFound);
+  EXPECT_THAT(source, IsError(ErrorCode::kNotFound));
   EXPECT_TRUE(Contains(source.error().message, "left_007.png")) << source.error().message;
 
   std::filesystem::remove(FileName(seq.dir, "right_%03d.png", 0));
@@ -238,7 +241,7 @@ TEST(ImageSourceOptionsValidate, RefusesBadPatternsAndListsEveryProblem) {
     EXPECT_EQ(problems[0].rfind("left: ", 0), 0u) << problems[0];
     Result<std::unique_ptr<StereoSource>> source = OpenImageSource(options);
     ASSERT_FALSE(source.ok()) << bad;
-    EXPECT_EQ(source.error().code, ErrorCode::kInvalidArgument);
+    EXPECT_THAT(source, IsError(ErrorCode::kInvalidArgument));
   }
   // A literal '%' next to the one conversion is fine.
   ImageSourceOptions ok = seq.options;
@@ -264,7 +267,7 @@ TEST(OpenImageSource, RefusesMismatchedSizesAndSixteenBitImages) {
   ASSERT_TRUE(cv::imwrite(FileName(seq.dir, "right_%03d.png", 0), Noise(cv::Size(150, 120), 9)));
   Result<std::unique_ptr<StereoSource>> source = OpenImageSource(seq.options);
   ASSERT_FALSE(source.ok());
-  EXPECT_EQ(source.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(source, IsError(ErrorCode::kInvalidArgument));
   EXPECT_TRUE(Contains(source.error().message, "left_000.png")) << source.error().message;
   EXPECT_TRUE(Contains(source.error().message, "right_000.png")) << source.error().message;
   EXPECT_TRUE(Contains(source.error().message, "150x120")) << source.error().message;
@@ -280,7 +283,7 @@ TEST(OpenImageSource, RefusesMismatchedSizesAndSixteenBitImages) {
   ASSERT_TRUE(cv::imwrite(FileName(seq.dir, "right_%03d.png", 0), sixteen));
   source = OpenImageSource(seq.options);
   ASSERT_FALSE(source.ok());
-  EXPECT_EQ(source.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(source, IsError(ErrorCode::kInvalidArgument));
   EXPECT_TRUE(Contains(source.error().message, "16-bit")) << source.error().message;
   EXPECT_TRUE(Contains(source.error().message, "left_000.png")) << source.error().message;
 }
@@ -304,7 +307,7 @@ TEST(ImageSourceNext, PlaysTheSequenceThenReportsItsEnd) {
   }
   Result<StereoFrame> end = s.Next();
   ASSERT_FALSE(end.ok());
-  EXPECT_EQ(end.error().code, ErrorCode::kOutOfRange);
+  EXPECT_THAT(end, IsError(ErrorCode::kOutOfRange));
 }
 
 TEST(ImageSourceNext, BrokenPairInTheMiddleNamesTheFile) {
@@ -315,7 +318,7 @@ TEST(ImageSourceNext, BrokenPairInTheMiddleNamesTheFile) {
   ASSERT_TRUE((*source)->Next().ok());
   Result<StereoFrame> broken = (*source)->Next();
   ASSERT_FALSE(broken.ok());
-  EXPECT_EQ(broken.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(broken, IsError(ErrorCode::kInvalidArgument));
   EXPECT_TRUE(Contains(broken.error().message, "right_001.png")) << broken.error().message;
 }
 
@@ -372,7 +375,7 @@ TEST(ImageSourceNext, VideoPairPlaysInLockStep) {
   }
   Result<StereoFrame> end = (*source)->Next();
   ASSERT_FALSE(end.ok());
-  EXPECT_EQ(end.error().code, ErrorCode::kOutOfRange);
+  EXPECT_THAT(end, IsError(ErrorCode::kOutOfRange));
 
   options.left = dir + "/missing.avi";
   source = OpenImageSource(options);

@@ -16,6 +16,9 @@
 
 #include "core/common/format.h"
 #include "drivers/gstreamer/gst_capture.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::drivers {
 namespace {
@@ -39,7 +42,7 @@ Error OpenError(const GstOptions& options,
   Result<std::unique_ptr<GstStereoSource>> source = GstStereoSource::Open(options, rig);
   const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
   EXPECT_FALSE(source.ok());
-  if (source.ok()) return Error{ErrorCode::kInternal, "opened"};
+  if (source.ok()) return Internal("opened");
   std::printf("%.2f s: [%s] %s\n", seconds, std::string(ErrorCodeName(source.error().code)).c_str(),
               source.error().message.c_str());
   return source.error();
@@ -194,7 +197,7 @@ TEST(GstLive, EndOfStreamIsALossAndTheRebuildDeliversAgain) {
   for (int k = 0; k < 200 && frames_after < 5; ++k) {
     Result<StereoFrame> frame = s.Next();
     if (!frame.ok()) {
-      EXPECT_EQ(frame.error().code, ErrorCode::kUnavailable);
+      EXPECT_THAT(frame, IsError(ErrorCode::kUnavailable));
       if (!lost) message = frame.error().message;
       lost = true;
     } else if (lost) {
@@ -224,8 +227,7 @@ TEST(GstLive, InterruptReturnsAtOnce) {
   Result<StereoFrame> result = next.get();
   // Either the interrupt, or (when the next second's frame won the race) the frame.
   if (!result.ok()) {
-    EXPECT_EQ(result.error().code, ErrorCode::kUnavailable);
-    EXPECT_THAT(result.error().message, HasSubstr("stopped"));
+    EXPECT_THAT(result, IsError(ErrorCode::kUnavailable, HasSubstr("stopped")));
   }
   EXPECT_FALSE(s.Next().ok());
   EXPECT_LT(Clock::now() - start, std::chrono::seconds(10));
@@ -268,7 +270,7 @@ TEST(GstTwoPipelines, FilesPairEveryFrameAtTheOffset) {
     EXPECT_EQ(frame->right.size(), cv::Size(160, 120));
   }
   ASSERT_FALSE(frame.ok());
-  EXPECT_EQ(frame.error().code, ErrorCode::kOutOfRange) << frame.error().message;
+  EXPECT_THAT(frame, IsError(ErrorCode::kOutOfRange)) << frame.error().message;
   EXPECT_THAT(frame.error().message, HasSubstr("end of the stream after 30 pairs"));
   EXPECT_EQ(pairs, 30);
   const SourceCounters c = s.Counters();
@@ -291,7 +293,7 @@ TEST(GstTwoPipelines, FilesBeyondTheToleranceCountUnpairedFrames) {
   ASSERT_TRUE(source.ok()) << source.error().message;
   Result<StereoFrame> frame = source.value()->Next();
   ASSERT_FALSE(frame.ok());
-  EXPECT_EQ(frame.error().code, ErrorCode::kOutOfRange) << frame.error().message;
+  EXPECT_THAT(frame, IsError(ErrorCode::kOutOfRange)) << frame.error().message;
   EXPECT_THAT(frame.error().message, HasSubstr("after 0 pairs"));
   const SourceCounters c = source.value()->Counters();
   std::printf("files, right +16 ms, tolerance 4 ms: %llu pairs, %llu unpaired dropped\n",
@@ -336,7 +338,7 @@ TEST(GstTwoPipelines, LiveBeyondTheToleranceSaysWhyNoPairComes) {
   ASSERT_TRUE(source.ok()) << source.error().message;
   Result<StereoFrame> frame = source.value()->Next();
   ASSERT_FALSE(frame.ok());
-  EXPECT_EQ(frame.error().code, ErrorCode::kUnavailable);
+  EXPECT_THAT(frame, IsError(ErrorCode::kUnavailable));
   std::printf("%s\n", frame.error().message.c_str());
   EXPECT_THAT(frame.error().message, AllOf(HasSubstr("no pair for 1 s (left: "),
                                            HasSubstr("frames do not pair within 4.0 ms")));

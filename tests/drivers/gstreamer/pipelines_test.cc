@@ -14,6 +14,9 @@
 #include "drivers/gstreamer/gst_errors.h"
 #include "drivers/gstreamer/gst_ptr.h"
 #include "drivers/gstreamer/gst_source.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::drivers {
 namespace {
@@ -31,8 +34,8 @@ TEST(UvcPipeline, BuildsMjpegCapsAndDecoder) {
 TEST(UvcPipeline, RejectsBadNumbers) {
   Result<std::string> p = UvcPipeline("/dev/video0", 8, 480, 0);
   ASSERT_FALSE(p.ok());
-  EXPECT_EQ(p.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(p.error().message, HasSubstr("width: must be in [16, 16384] pixels (got 8)"));
+  EXPECT_THAT(p, IsError(ErrorCode::kInvalidArgument,
+                         HasSubstr("width: must be in [16, 16384] pixels (got 8)")));
   EXPECT_THAT(p.error().message, HasSubstr("fps: must be in [1, 1000] (got 0)"));
   EXPECT_FALSE(UvcPipeline("", 640, 480, 30).ok());
 }
@@ -77,8 +80,7 @@ TEST(QuoteGstValue, RejectsWhatCannotBeQuoted) {
     Result<std::string> q = QuoteGstValue(value, "path");
     EXPECT_FALSE(q.ok()) << "accepted '" << value << "' as " << q.value();
     if (!q.ok()) {
-      EXPECT_EQ(q.error().code, ErrorCode::kInvalidArgument);
-      EXPECT_THAT(q.error().message, HasSubstr("path: "));
+      EXPECT_THAT(q, IsError(ErrorCode::kInvalidArgument, HasSubstr("path: ")));
     }
   }
   EXPECT_THAT(QuoteGstValue("a\\b", "path").error().message, HasSubstr("backslash"));

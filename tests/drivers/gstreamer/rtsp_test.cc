@@ -23,6 +23,9 @@
 #include "drivers/gstreamer/gst_source.h"
 #include "drivers/gstreamer/pipelines.h"
 #include "tests/testing/gst_testing.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::drivers {
 namespace {
@@ -107,7 +110,7 @@ TEST(GstRtsp, ReadsTheStreamSurvivesTheServersLossAndReconnects) {
   for (int k = 0; k < 100 && loss.empty(); ++k) {  // frames still queued may come first
     Result<StereoFrame> frame = source.Next();
     if (!frame.ok()) {
-      EXPECT_EQ(frame.error().code, ErrorCode::kUnavailable);
+      EXPECT_THAT(frame, IsError(ErrorCode::kUnavailable));
       loss = frame.error().message;
     }
   }

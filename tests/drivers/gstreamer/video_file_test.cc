@@ -24,6 +24,9 @@
 #include "drivers/gstreamer/pipelines.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/testing/gst_testing.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::drivers {
 namespace {
@@ -94,7 +97,7 @@ Reading ReadAll(GstStereoSource& source, int limit) {
     }
     reading.frames.push_back(std::move(frame.value()));
   }
-  reading.end = Error{ErrorCode::kInternal, "no end after " + std::to_string(limit) + " pairs"};
+  reading.end = Internal("no end after " + std::to_string(limit) + " pairs");
   return reading;
 }
 
@@ -269,7 +272,7 @@ TEST(GstVideoFile, MissingFileIsNotFound) {
   GstOptions options = FileOptions(TempPath("no such file.avi"), GstLayout::kSideBySide);
   Result<std::unique_ptr<GstStereoSource>> source = GstStereoSource::Open(options, nullptr);
   ASSERT_FALSE(source.ok());
-  EXPECT_EQ(source.error().code, ErrorCode::kNotFound) << source.error().message;
+  EXPECT_THAT(source, IsError(ErrorCode::kNotFound)) << source.error().message;
   EXPECT_THAT(source.error().message, HasSubstr("no such file.avi"));
 }
 

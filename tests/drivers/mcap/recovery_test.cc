@@ -12,6 +12,9 @@
 #include "drivers/mcap/mcap.h"
 #include "tests/drivers/mcap/mcap_test_util.h"
 #include "tests/testing/data.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::mcap {
 namespace {
@@ -165,7 +168,7 @@ TEST(Corruption, EveryFlippedByteIsRejectedOrNoted) {
       Result<std::unique_ptr<Reader>> reader = Reader::FromBytes(bytes, "bad.mcap");
       if (!reader.ok()) {
         ++rejected;
-        EXPECT_EQ(reader.error().code, ErrorCode::kInvalidArgument);
+        EXPECT_THAT(reader, IsError(ErrorCode::kInvalidArgument));
         EXPECT_THAT(reader.error().message, HasSubstr("bad.mcap: byte ")) << at;
         continue;
       }

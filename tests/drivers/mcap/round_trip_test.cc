@@ -18,6 +18,9 @@
 #include "drivers/mcap/mcap.h"
 #include "tests/drivers/mcap/mcap_test_util.h"
 #include "tests/testing/data.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::mcap {
 namespace {
@@ -193,7 +196,7 @@ TEST(Writer, IdsAreStableAndRefusalsAreZero) {
   // A caller's mistake is not a write failure: refused, not sticky.
   const Status bad = (*w)->Write(7, 1, 1, "x");
   ASSERT_FALSE(bad.ok());
-  EXPECT_EQ(bad.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(bad, IsError(ErrorCode::kInvalidArgument));
   EXPECT_TRUE((*w)->Write(1, 1, 1, "x").ok());
   EXPECT_TRUE((*w)->Close().ok());
 }
@@ -223,7 +226,7 @@ TEST(Writer, CountersAndFlushMakeTheFileReadableWhileOpen) {
   EXPECT_TRUE(w.Close().ok()) << "Close() is idempotent";
   const Status late = w.Write(channel, 1, 1, "{}");
   ASSERT_FALSE(late.ok());
-  EXPECT_EQ(late.error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_THAT(late, IsError(ErrorCode::kFailedPrecondition));
 }
 
 TEST(Writer, DestructorClosesTheFile) {
@@ -246,8 +249,7 @@ TEST(WriterErrors, NeverOverwritesAnExistingFile) {
   test::WriteFile(path, "an earlier flight");
   Result<std::unique_ptr<Writer>> w = Writer::Create(path);
   ASSERT_FALSE(w.ok());
-  EXPECT_EQ(w.error().code, ErrorCode::kAlreadyExists);
-  EXPECT_THAT(w.error().message, HasSubstr(path));
+  EXPECT_THAT(w, IsError(ErrorCode::kAlreadyExists, HasSubstr(path)));
   EXPECT_EQ(test::ReadFile(path), "an earlier flight");
 }
 
@@ -255,8 +257,7 @@ TEST(WriterErrors, MissingOrUnwritableDirectory) {
   const std::string missing = TempDir() + "/no/such/dir/f.mcap";
   Result<std::unique_ptr<Writer>> w = Writer::Create(missing);
   ASSERT_FALSE(w.ok());
-  EXPECT_EQ(w.error().code, ErrorCode::kNotFound);
-  EXPECT_THAT(w.error().message, HasSubstr(missing));
+  EXPECT_THAT(w, IsError(ErrorCode::kNotFound, HasSubstr(missing)));
   // A read-only directory; root ignores the mode bits, but not sysfs, which refuses new files.
   std::string unwritable = TempDir() + "/ro";
   std::filesystem::create_directory(unwritable);
@@ -264,7 +265,7 @@ TEST(WriterErrors, MissingOrUnwritableDirectory) {
   unwritable = (::geteuid() == 0 ? std::string("/sys") : unwritable) + "/f.mcap";
   w = Writer::Create(unwritable);
   ASSERT_FALSE(w.ok());
-  EXPECT_EQ(w.error().code, ErrorCode::kInternal) << w.error().message;
+  EXPECT_THAT(w, IsError(ErrorCode::kInternal)) << w.error().message;
   EXPECT_THAT(w.error().message, HasSubstr(unwritable));
 }
 
@@ -277,7 +278,7 @@ TEST(WriterErrors, InvalidOptionsAreListedAndNothingIsCreated) {
   o.library = std::string(5000, 'x');
   Result<std::unique_ptr<Writer>> w = Writer::Create(path, o);
   ASSERT_FALSE(w.ok());
-  EXPECT_EQ(w.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(w, IsError(ErrorCode::kInvalidArgument));
   for (const char* field : {"compression", "chunk_bytes", "chunk_span_ns", "library"}) {
     EXPECT_THAT(w.error().message, HasSubstr(std::string("options.") + field));
   }
@@ -291,8 +292,8 @@ TEST(WriterErrors, DevFullFailsAtTheHeader) {
   ASSERT_GE(fd, 0);
   Result<std::unique_ptr<Writer>> w = Writer::FromFd(fd, "/dev/full");
   ASSERT_FALSE(w.ok());
-  EXPECT_EQ(w.error().code, ErrorCode::kResourceExhausted);
-  EXPECT_THAT(w.error().message, HasSubstr("/dev/full: cannot write (No space left on device)"));
+  EXPECT_THAT(w, IsError(ErrorCode::kResourceExhausted,
+                         HasSubstr("/dev/full: cannot write (No space left on device)")));
 }
 
 // Writes 1 KiB messages until one fails; returns how many messages were in whole chunks then.
@@ -338,8 +339,8 @@ TEST(WriterErrors, WriteFailureIsStickyAndTheFileKeepsItsWholeChunks) {
   Status failure;
   EXPECT_EQ(WriteUntilFailure(w, channel, sent, failure), 0u);
   ASSERT_FALSE(failure.ok());
-  EXPECT_EQ(failure.error().code, ErrorCode::kResourceExhausted);
-  EXPECT_THAT(failure.error().message, HasSubstr("No space left on device"));
+  EXPECT_THAT(failure,
+              IsError(ErrorCode::kResourceExhausted, HasSubstr("No space left on device")));
   // Sticky: every later call returns it, nothing more is written.
   for (const Status& again : {w.Write(channel, 1, 1, "x"), w.AddMetadata("m", {}), w.Flush(),
                               w.AddAttachment("a", "text/plain", 1, "x"), w.Close(), w.Close()}) {
@@ -401,8 +402,7 @@ TEST(WriterErrors, PartialChunkWriteIsCutBackToTheLastWholeChunk) {
     flushed = WriteUntilFailure(w, channel, sent, failure);
   }
   ASSERT_FALSE(failure.ok());
-  EXPECT_EQ(failure.error().code, ErrorCode::kResourceExhausted);
-  EXPECT_THAT(failure.error().message, HasSubstr("File too large"));
+  EXPECT_THAT(failure, IsError(ErrorCode::kResourceExhausted, HasSubstr("File too large")));
   EXPECT_EQ(w.chunks(), 2u);
   EXPECT_EQ(std::filesystem::file_size(path), w.bytes()) << "the partial chunk was cut off";
   EXPECT_FALSE(w.Close().ok());
@@ -419,11 +419,11 @@ TEST(WriterErrors, PartialChunkWriteIsCutBackToTheLastWholeChunk) {
 TEST(ReaderErrors, MissingFileNotMcapAndBadOptions) {
   Result<std::unique_ptr<Reader>> r = Reader::Open(TempDir() + "/none.mcap");
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kNotFound);
+  EXPECT_THAT(r, IsError(ErrorCode::kNotFound));
   r = Reader::FromBytes("GIF89a, not a flight", "picture.gif");
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(r.error().message, HasSubstr("picture.gif: byte 0: not an MCAP file"));
+  EXPECT_THAT(
+      r, IsError(ErrorCode::kInvalidArgument, HasSubstr("picture.gif: byte 0: not an MCAP file")));
   ReaderOptions o;
   o.max_chunk_bytes = 10;
   r = Reader::FromBytes(std::string(kMagic), "x", o);
@@ -431,7 +431,7 @@ TEST(ReaderErrors, MissingFileNotMcapAndBadOptions) {
   EXPECT_THAT(r.error().message, HasSubstr("options.max_chunk_bytes"));
   r = Reader::Open(TempDir());
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kInvalidArgument) << "a directory is not a file";
+  EXPECT_THAT(r, IsError(ErrorCode::kInvalidArgument)) << "a directory is not a file";
 }
 
 }  // namespace

@@ -30,6 +30,9 @@
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/testing/data.h"
 #include "tests/testing/image_match.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::drivers {
 namespace {
@@ -168,8 +171,8 @@ TEST(RecorderOptions, ValidateListsEveryProblem) {
   o.png_compression = 10;
   const std::vector<std::string> problems = o.Validate();
   ASSERT_EQ(problems.size(), 3u);
-  EXPECT_EQ(problems[0], "max_bytes: must be > 0 (got 0)");
-  EXPECT_EQ(problems[1], "queue_frames: must be in [1, 1024] (got 0)");
+  EXPECT_EQ(problems[0], "max_bytes: must be >= 1048576 bytes (got 0)");
+  EXPECT_EQ(problems[1], "queue_frames: must be in [1, 1024] frames (got 0)");
   EXPECT_EQ(problems[2], "png_compression: must be in [0, 9] (got 10)");
 }
 
@@ -179,7 +182,7 @@ TEST(Recorder, StartRefusesBadArguments) {
   bad.png_compression = -1;
   Result<std::unique_ptr<Recorder>> r = Recorder::Start(dir + "/rec", bad, RecordingInfo{});
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(r, IsError(ErrorCode::kInvalidArgument));
   EXPECT_TRUE(Contains(r.error().message, "options.png_compression: must be in [0, 9] (got -1)"))
       << r.error().message;
   EXPECT_TRUE(Contains(r.error().message, "info.rig: missing")) << r.error().message;
@@ -190,7 +193,7 @@ TEST(Recorder, StartRefusesBadArguments) {
   SyntheticSource source(SmallSynthetic());
   r = Recorder::Start(dir + "/file", RecorderOptions{}, InfoFor(source));
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(r, IsError(ErrorCode::kInvalidArgument));
   EXPECT_TRUE(Contains(r.error().message, "is not a directory")) << r.error().message;
 }
 
@@ -205,7 +208,7 @@ TEST(Recorder, RefusesADirectoryThatHoldsARecording) {
   Result<std::unique_ptr<Recorder>> second =
       Recorder::Start(dir, RecorderOptions{}, InfoFor(source));
   ASSERT_FALSE(second.ok());
-  EXPECT_EQ(second.error().code, ErrorCode::kAlreadyExists);
+  EXPECT_THAT(second, IsError(ErrorCode::kAlreadyExists));
   EXPECT_TRUE(Contains(second.error().message, "already holds a recording"))
       << second.error().message;
   EXPECT_EQ(ReadFile(dir + "/manifest.json"), manifest_before) << "the recording is untouched";
@@ -215,7 +218,7 @@ TEST(Recorder, RefusesADirectoryThatHoldsARecording) {
   WriteFile(other + "/records.bin", "");
   second = Recorder::Start(other, RecorderOptions{}, InfoFor(source));
   ASSERT_FALSE(second.ok());
-  EXPECT_EQ(second.error().code, ErrorCode::kAlreadyExists);
+  EXPECT_THAT(second, IsError(ErrorCode::kAlreadyExists));
   EXPECT_TRUE(Contains(second.error().message, "records.bin exists")) << second.error().message;
 }
 
@@ -385,7 +388,7 @@ TEST(RecordedRig, ARigOverThePixelLimitIsRefusedBeforeItIsBuilt) {
   Result<geometry::StereoRig> rebuilt = RigFromRecorded(*recorded);
   ASSERT_FALSE(rebuilt.ok());
   EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(1));
-  EXPECT_EQ(rebuilt.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(rebuilt, IsError(ErrorCode::kInvalidArgument));
   EXPECT_TRUE(Contains(rebuilt.error().message, "at most 67108864 pixels in all (got 16384x16384)"))
       << rebuilt.error().message;
 }
@@ -401,7 +404,7 @@ TEST(Recorder, CalibrationChangesAreRecordedInOrderAndBadOnesRefused) {
 
   const stevi::Status bad = recorder->SetCalibration("cal-bad", "M1: [1, 2]\n");
   ASSERT_FALSE(bad.ok());
-  EXPECT_EQ(bad.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(bad, IsError(ErrorCode::kInvalidArgument));
   EXPECT_TRUE(Contains(bad.error().message, "calibration change refused")) << bad.error().message;
   EXPECT_TRUE(Contains(bad.error().message, "image_width: missing")) << bad.error().message;
   ASSERT_FALSE(recorder->SetCalibration("", *yaml).ok());
@@ -437,9 +440,9 @@ TEST(Recorder, StopIsIdempotentAndLaterRecordsAreRefused) {
 
   const stevi::Status late = recorder->AddFrame(*source.Next());
   ASSERT_FALSE(late.ok());
-  EXPECT_EQ(late.error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_THAT(late, IsError(ErrorCode::kFailedPrecondition));
   EXPECT_TRUE(Contains(late.error().message, "has stopped (first)")) << late.error().message;
-  EXPECT_EQ(recorder->AddVehicleState(State(0)).error().code, ErrorCode::kFailedPrecondition);
+  EXPECT_THAT(recorder->AddVehicleState(State(0)), IsError(ErrorCode::kFailedPrecondition));
   EXPECT_EQ(recorder->Status().frames_written, 1u);
 
   // Bad images are refused up front, naming the problem.
@@ -450,7 +453,7 @@ TEST(Recorder, StopIsIdempotentAndLaterRecordsAreRefused) {
   bad.right = cv::Mat1f(bad.left.size(), 0.5f);
   const stevi::Status refused = recorder->AddFrame(bad);
   ASSERT_FALSE(refused.ok());
-  EXPECT_EQ(refused.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_THAT(refused, IsError(ErrorCode::kInvalidArgument));
   EXPECT_TRUE(Contains(refused.error().message, "right: expected 8-bit grey (CV_8UC1) or BGR"))
       << refused.error().message;
   // Destruction stops the recording with a reason.
@@ -467,17 +470,18 @@ TEST(Recorder, DiskLimitStopsWithTheReasonAndKeepsWholeRecords) {
   const std::string dir = testing::MakeTempDir("stevi-rec-limit") + "/rec";
   SyntheticSource source(SmallSynthetic());  // 160x120 noisy frames: tens of KiB each
   RecorderOptions options;
-  options.max_bytes = 100 * 1024;
-  options.queue_frames = 20;
+  options.max_bytes = RecorderOptions::kMinMaxBytes;
+  constexpr int kOffered = 100;
+  options.queue_frames = kOffered;
   std::unique_ptr<Recorder> recorder = StartOrDie(dir, options, InfoFor(source));
   ASSERT_TRUE(recorder);
   std::vector<StereoFrame> frames;
-  for (int k = 0; k < 20; ++k) {
+  for (int k = 0; k < kOffered; ++k) {
     frames.push_back(Stamped(*source.Next(), k));
     // Queued, or refused because the writer already reached the limit: never blocked.
     const stevi::Status added = recorder->AddFrame(frames.back());
     if (!added.ok()) {
-      EXPECT_EQ(added.error().code, ErrorCode::kFailedPrecondition);
+      EXPECT_THAT(added, IsError(ErrorCode::kFailedPrecondition));
     }
   }
   // The limit is not an error: Stop() succeeds, and the first reason stays.
@@ -485,8 +489,8 @@ TEST(Recorder, DiskLimitStopsWithTheReasonAndKeepsWholeRecords) {
   const RecorderStatus status = recorder->Status();
   EXPECT_FALSE(status.recording);
   ASSERT_GT(status.frames_written, 0u);
-  ASSERT_LT(status.frames_written, 20u);
-  EXPECT_EQ(status.stop_reason, "disk limit of 100.0 KiB reached after " +
+  ASSERT_LT(status.frames_written, static_cast<uint64_t>(kOffered));
+  EXPECT_EQ(status.stop_reason, "disk limit of 1.0 MiB reached after " +
                                     std::to_string(status.frames_written) + " frames");
   EXPECT_EQ(status.error, "");
   EXPECT_LE(status.bytes_written, options.max_bytes);
@@ -510,7 +514,7 @@ TEST(Recorder, DiskLimitStopsWithTheReasonAndKeepsWholeRecords) {
     ASSERT_TRUE(frame.ok()) << frame.error().message;
     ExpectSameFrame(frames[k], *frame);
   }
-  EXPECT_EQ((*replay)->Next().error().code, ErrorCode::kOutOfRange);
+  EXPECT_THAT((*replay)->Next(), IsError(ErrorCode::kOutOfRange));
 }
 
 // A file-size limit (RLIMIT_FSIZE) makes write() fail part-way through a record, as a full disk
@@ -539,7 +543,7 @@ TEST(Recorder, WriteErrorStopsAndTruncatesToTheLastWholeRecord) {
   signal(SIGXFSZ, old_handler);
 
   ASSERT_FALSE(stopped.ok());
-  EXPECT_EQ(stopped.error().code, ErrorCode::kResourceExhausted);
+  EXPECT_THAT(stopped, IsError(ErrorCode::kResourceExhausted));
   const RecorderStatus status = recorder->Status();
   ASSERT_GT(status.frames_written, 0u);
   EXPECT_EQ(status.error, dir + "/records.bin: write failed after " +
@@ -586,7 +590,7 @@ TEST(Recorder, FullQueueDropsAndCountsWithoutBlocking) {
     if (added.ok()) {
       ++queued;
     } else {
-      EXPECT_EQ(added.error().code, ErrorCode::kResourceExhausted) << added.error().message;
+      EXPECT_THAT(added, IsError(ErrorCode::kResourceExhausted)) << added.error().message;
       EXPECT_TRUE(Contains(added.error().message, "dropped")) << added.error().message;
       ++dropped;
     }
@@ -784,12 +788,12 @@ TEST(RecordingReader, DamagedManifestsAreClearErrors) {
   fs::remove(manifest);
   r = RecordingReader::Open(dir);
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kNotFound);
+  EXPECT_THAT(r, IsError(ErrorCode::kNotFound));
   EXPECT_EQ(r.error().message, manifest + ": not found (" + dir + " is not a recording directory)");
 
   r = RecordingReader::Open(dir + "/nope");
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kNotFound);
+  EXPECT_THAT(r, IsError(ErrorCode::kNotFound));
 }
 
 // Writes records with protobuf's own delimited writer (the format is its framing).

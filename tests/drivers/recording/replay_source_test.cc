@@ -16,6 +16,9 @@
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/testing/data.h"
 #include "tests/testing/image_match.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::drivers {
 namespace {
@@ -112,19 +115,19 @@ TEST(ReplayOptions, ValidateListsEveryProblem) {
 
   Result<std::unique_ptr<ReplaySource>> r = ReplaySource::Open("/nonexistent", o);
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kInvalidArgument) << "options are checked first";
+  EXPECT_THAT(r, IsError(ErrorCode::kInvalidArgument)) << "options are checked first";
 }
 
 TEST(ReplaySource, OpenNamesTheMissingOrBadFile) {
   const std::string root = testing::MakeTempDir("stevi-replay-errors");
   Result<std::unique_ptr<ReplaySource>> r = ReplaySource::Open(root + "/missing", ReplayOptions{});
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kNotFound);
+  EXPECT_THAT(r, IsError(ErrorCode::kNotFound));
   EXPECT_EQ(r.error().message, "recording " + root + "/missing: no such directory");
 
   r = ReplaySource::Open(root, ReplayOptions{});
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kNotFound);
+  EXPECT_THAT(r, IsError(ErrorCode::kNotFound));
   EXPECT_EQ(r.error().message,
             root + "/manifest.json: not found (" + root + " is not a recording directory)");
 
@@ -133,7 +136,7 @@ TEST(ReplaySource, OpenNamesTheMissingOrBadFile) {
   fs::remove(dir + "/records.bin");
   r = ReplaySource::Open(dir, ReplayOptions{});
   ASSERT_FALSE(r.ok());
-  EXPECT_EQ(r.error().code, ErrorCode::kNotFound);
+  EXPECT_THAT(r, IsError(ErrorCode::kNotFound));
   EXPECT_EQ(r.error().message, dir + "/records.bin: not found");
 }
 
@@ -214,7 +217,7 @@ TEST(ReplaySource, ReplaysFramesRigStatesAndCalibrationExactly) {
 
   Result<StereoFrame> end = replay->Next();
   ASSERT_FALSE(end.ok());
-  EXPECT_EQ(end.error().code, ErrorCode::kOutOfRange);
+  EXPECT_THAT(end, IsError(ErrorCode::kOutOfRange));
   EXPECT_EQ(end.error().message, "end of the recording " + dir + " after 10 frames");
 }
 
@@ -297,7 +300,7 @@ TEST(ReplaySource, TruncatedRecordingReplaysItsCompletePrefix) {
   }
   Result<StereoFrame> end = replay->Next();
   ASSERT_FALSE(end.ok());
-  EXPECT_EQ(end.error().code, ErrorCode::kOutOfRange);
+  EXPECT_THAT(end, IsError(ErrorCode::kOutOfRange));
   EXPECT_EQ(end.error().message,
             "end of the recording " + dir + " after 4 frames (" + replay->notes()[0] + ")");
 }

@@ -15,6 +15,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "tests/testing/truth_match.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::drivers {
 namespace {
@@ -313,8 +316,7 @@ TEST(Validate, ListsEveryProblem) {
 
   const auto source = OpenSyntheticSource(o);
   ASSERT_FALSE(source.ok());
-  EXPECT_EQ(source.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(source.error().message, HasSubstr("width"));
+  EXPECT_THAT(source, IsError(ErrorCode::kInvalidArgument, HasSubstr("width")));
   EXPECT_THAT(source.error().message, HasSubstr("baseline_m"));
   EXPECT_THAT(source.error().message, HasSubstr("scene.obstacles[2].size_m"));
 

@@ -173,7 +173,7 @@ class AlternatingSource : public drivers::StereoSource {
   std::shared_ptr<const geometry::StereoRig> Rig() const override { return rig_; }
   double NominalFps() const override { return 400; }
   Result<StereoFrame> Next() override {
-    if (next_ >= frames_) return Error{ErrorCode::kOutOfRange, "end"};
+    if (next_ >= frames_) return OutOfRange("end");
     StereoFrame f;
     f.index = next_;
     f.t_ns = int64_t{next_} * 2'500'000;

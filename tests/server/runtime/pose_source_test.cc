@@ -2,9 +2,12 @@
 // precedence (published, recorded, synthetic path, fixed, none). The synthetic rig's own pose and
 // motion: tests/drivers/synthetic/scene_registry_test.cc.
 #include "server/runtime/pose_source.h"
+#include "tests/testing/status_matchers.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+
+using stevi::testing::IsError;
 
 namespace stevi::server {
 namespace {
@@ -27,8 +30,7 @@ TEST(PoseSource, CreateNamesEveryBadFieldAsTheConfigDoes) {
   options.max_age_s = -1;
   const Result<std::unique_ptr<PoseSource>> bad = PoseSource::Create(options, At(91, 0, 0));
   ASSERT_FALSE(bad.ok());
-  EXPECT_EQ(bad.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(bad.error().message, HasSubstr("geo.max_age_s"));
+  EXPECT_THAT(bad, IsError(ErrorCode::kInvalidArgument, HasSubstr("geo.max_age_s")));
   EXPECT_THAT(bad.error().message, HasSubstr("geo.fixed_pose.lat_deg"));
   EXPECT_TRUE(PoseSource::Create({}, std::nullopt).ok());
 }

@@ -9,6 +9,9 @@
 #include <gtest/gtest.h>
 
 #include "drivers/synthetic/scenarios.h"
+#include "tests/testing/status_matchers.h"
+
+using stevi::testing::IsError;
 
 namespace stevi::server {
 namespace {
@@ -118,8 +121,7 @@ TEST(OpenSource, RefusesABadSpecBeforeOpeningAndPrefixesTheDriversErrors) {
   spec.kind = "images";
   Result<std::unique_ptr<drivers::StereoSource>> source = OpenSource(spec);
   ASSERT_FALSE(source.ok());
-  EXPECT_EQ(source.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(source.error().message, HasSubstr("source.left: required"));
+  EXPECT_THAT(source, IsError(ErrorCode::kInvalidArgument, HasSubstr("source.left: required")));
 
   spec = SourceSpec{};
   spec.synthetic.width = 8;  // the driver's own check, under the config's name
