@@ -27,8 +27,10 @@ using Clock = std::chrono::steady_clock;
 constexpr auto kReconnectFirst = std::chrono::milliseconds(250);
 constexpr auto kReconnectMax = std::chrono::milliseconds(1000);
 
-// out[i] = in[2 * i] for i < n. In fixed blocks of 16, which GCC vectorises at -O2 (its cheap cost
-// model refuses the open loop); the remainder byte by byte. cv::extractChannel measured 3x slower.
+// out[i] = in[2 * i] for i < n, in blocks of 16 that GCC unrolls, then the remainder. Scalar code
+// (GCC 12 at -O2 does not vectorise it; the object has no packing instructions): in a profile of
+// raw YUY2 video flat out it took about 5 % of the samples; with cv::extractChannel instead,
+// libopencv_core as a whole took 7.5 %.
 void TakeEveryOtherByte(const uint8_t* in, uint8_t* out, int n) {
   int x = 0;
   for (; x + 16 <= n; x += 16) {
