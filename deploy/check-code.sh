@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The code checks of CI: every C++ file formatted as .clang-format says (clang-format --dry-run),
-# and the sources (core, drivers, server, client; not the tests) within .clang-tidy's checks.
+# the station page's scripts within .eslintrc.json's rules (eslint), and the sources (core,
+# drivers, server, client; not the tests) within .clang-tidy's checks.
 # Usage: bash deploy/check-code.sh [BUILD_DIR]   (a build configured with
 #        -DCMAKE_EXPORT_COMPILE_COMMANDS=ON, as deploy/test.sh does; default ./build)
 #        bash deploy/check-code.sh --format-only
@@ -18,6 +19,19 @@ if ! clang-format --dry-run --Werror "${all[@]}" 2> /tmp/stevi-format.$$; then
 fi
 rm -f /tmp/stevi-format.$$
 echo "check-code: ${#all[@]} files formatted"
+
+# The station's page (client/station/web/*.js, ES modules) within .eslintrc.json's rules, with
+# Debian's eslint (deploy/install-deps.sh), which finds its plugins only through NODE_PATH.
+web_scripts=(client/station/web/*.js)
+if ! NODE_PATH=/usr/share/nodejs eslint --format unix --no-eslintrc -c .eslintrc.json \
+    "${web_scripts[@]}" > /tmp/stevi-eslint.$$ 2>&1; then
+  cat /tmp/stevi-eslint.$$ >&2
+  rm -f /tmp/stevi-eslint.$$
+  echo "check-code: eslint found the problems above in client/station/web (.eslintrc.json)" >&2
+  exit 1
+fi
+rm -f /tmp/stevi-eslint.$$
+echo "check-code: ${#web_scripts[@]} station page scripts within .eslintrc.json's rules"
 [ "$build_dir" = "--format-only" ] && exit 0
 
 if [ ! -f "$build_dir/compile_commands.json" ]; then

@@ -13,7 +13,7 @@ packages=(
   libaravis-dev libusb-1.0-0-dev aravis-tools iproute2 util-linux openssl
   libcivetweb-dev civetweb nlohmann-json3-dev libjs-leaflet chromium
   libgtest-dev libgmock-dev libbenchmark-dev systemd
-  clang-format clang-tidy
+  clang-format clang-tidy eslint
   clang libfuzzer-14-dev libclang-rt-14-dev
   libgstreamer1.0-dev libgstreamer-plugins-base1.0-dev libgstrtspserver-1.0-dev
   gstreamer1.0-plugins-base gstreamer1.0-plugins-good gstreamer1.0-tools

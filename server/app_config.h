@@ -20,32 +20,14 @@
 #include "server/mcap_recording.h"
 #include "server/runtime/pose_source.h"
 #include "server/runtime/source_factory.h"
+#include "server/server_options.h"
 #include "stevi/v1/config.pb.h"
 
 namespace stevi::server {
 
-// Defaults of the server (also documented in config.proto).
-inline constexpr char kDefaultListen[] = "127.0.0.1:50051";
-inline constexpr uint32_t kDefaultQueueFrames = 8;
-inline constexpr uint32_t kDefaultMaxMessageBytes = 16u << 20;
-inline constexpr uint32_t kDefaultMaxStreams = 64;
-// ServerConfig.pipeline_workers: the largest accepted (unset: Engine::kDefaultWorkers at most).
-inline constexpr uint32_t kMaxPipelineWorkers = 16;
-inline constexpr uint32_t kMaxOpenCvThreads = 64;
-inline constexpr double kDefaultFps = 10.0;
 // How long a stop waits for calls in progress (a Calibrate, a snapshot download) before
 // cancelling them; with the other steps a SIGTERM ends well within 5 s.
 inline constexpr std::chrono::milliseconds kShutdownGrace{2000};
-inline constexpr char kDefaultDataDir[] = "stevi-data";
-
-// Parsed "--name value" / "--name=value" flags. Flags not in `known` are an error, and so is a
-// flag given twice or without its value. `switches` take no value ("--help").
-struct Flags {
-  std::map<std::string, std::string> values;
-  std::vector<std::string> positional;
-};
-Result<Flags> ParseFlags(int argc, const char* const* argv, const std::set<std::string>& known,
-                         const std::set<std::string>& switches = {});
 
 // Reads a config file: JSON when it starts with '{', else protobuf text format. Errors name the
 // file, the line and the problem. Files over 1 MiB are refused.
@@ -57,12 +39,11 @@ Result<v1::ServerConfig> LoadServerConfig(const std::string& path);
 Status ParseConfigText(const std::string& text, const std::string& name,
                        google::protobuf::Message& config);
 
-// Applies the source and pipeline flags (--source --left --right --calibration --fps --algorithm
-// --listen) over `config`. Bad values are named, and then `config` is left as it was.
-Status ApplyFlags(const Flags& flags, v1::ServerConfig& config);
-
 // Cross-field checks before anything is opened: every problem named.
 std::vector<std::string> ValidateServerConfig(const v1::ServerConfig& config);
+
+// The server's own settings of `config` over their defaults (server/server_options.h), checked.
+Result<ServerOptions> ServerOptionsFrom(const v1::ServerConfig& config);
 
 // The MCAP flight log's options (--record-mcap FILE); problems named "record_mcap.FIELD".
 McapRecordingOptions McapRecordingOptionsFrom(const v1::McapRecordConfig& config,

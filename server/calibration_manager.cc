@@ -1,5 +1,7 @@
 #include "server/calibration_manager.h"
 
+#include "server/field_mapping.h"
+
 #include "core/common/format.h"
 
 #include <algorithm>
@@ -67,50 +69,41 @@ cv::Mat1b Grey(const cv::Mat& image) {
   return grey;
 }
 
+// The cv::CALIB_* bits of `flags` this service maps onto the solver's options.
+void ApplyCalibrationFlags(int flags, calibration::CalibrationModel& m,
+                           std::vector<std::string>& problems) {
+  const auto take = [&](int bit, bool& option) {
+    if (flags & bit) {
+      option = true;
+      flags &= ~bit;
+    }
+  };
+  take(cv::CALIB_FIX_INTRINSIC, m.fix_intrinsics);
+  take(cv::CALIB_SAME_FOCAL_LENGTH, m.same_focal_length);
+  take(cv::CALIB_FIX_ASPECT_RATIO, m.fix_aspect_ratio);
+  take(cv::CALIB_FIX_PRINCIPAL_POINT, m.fix_principal_point);
+  take(cv::CALIB_ZERO_TANGENT_DIST, m.zero_tangent_distortion);
+  take(cv::CALIB_FIX_K3, m.fix_k3);
+  take(cv::CALIB_RATIONAL_MODEL, m.rational_model);
+  if (flags != 0) {
+    problems.push_back("flags: unsupported cv::CALIB_* bits " + std::to_string(flags) +
+                       " (supported: FIX_INTRINSIC, SAME_FOCAL_LENGTH, FIX_ASPECT_RATIO, "
+                       "FIX_PRINCIPAL_POINT, ZERO_TANGENT_DIST, FIX_K3, RATIONAL_MODEL)");
+  }
+}
+
 }  // namespace
 
 Result<calibration::CalibrationOptions> ToCalibrationOptions(const v1::CalibrationSettings& s) {
   calibration::CalibrationOptions o;
-  o.board.inner_cols = s.board().columns();
-  o.board.inner_rows = s.board().rows();
-  o.board.square_size_m = s.board().square_m();
-  if (s.gates().has_min_pairs()) o.gates.min_pairs = s.gates().min_pairs();
-  if (s.gates().has_max_rms_px()) o.gates.max_rms_px = s.gates().max_rms_px();
-  if (s.gates().has_max_epipolar_px()) o.gates.max_epipolar_px = s.gates().max_epipolar_px();
-  if (s.has_alpha()) o.rectify_alpha = s.alpha();
+  // The board has no default: a proto3 zero is "not given", which the field list would keep.
   std::vector<std::string> problems;
-  if (s.has_flags()) {
-    // The cv::CALIB_* flags this service maps onto the solver's options.
-    int flags = s.flags();
-    const auto take = [&](int bit, bool& option) {
-      if (flags & bit) {
-        option = true;
-        flags &= ~bit;
-      }
-    };
-    calibration::CalibrationModel& m = o.model;
-    take(cv::CALIB_FIX_INTRINSIC, m.fix_intrinsics);
-    take(cv::CALIB_SAME_FOCAL_LENGTH, m.same_focal_length);
-    take(cv::CALIB_FIX_ASPECT_RATIO, m.fix_aspect_ratio);
-    take(cv::CALIB_FIX_PRINCIPAL_POINT, m.fix_principal_point);
-    take(cv::CALIB_ZERO_TANGENT_DIST, m.zero_tangent_distortion);
-    take(cv::CALIB_FIX_K3, m.fix_k3);
-    take(cv::CALIB_RATIONAL_MODEL, m.rational_model);
-    if (flags != 0) {
-      problems.push_back("flags: unsupported cv::CALIB_* bits " + std::to_string(flags) +
-                         " (supported: FIX_INTRINSIC, SAME_FOCAL_LENGTH, FIX_ASPECT_RATIO, "
-                         "FIX_PRINCIPAL_POINT, ZERO_TANGENT_DIST, FIX_K3, RATIONAL_MODEL)");
-    }
+  if (s.board().columns() == 0 || s.board().rows() == 0 || s.board().square_m() == 0) {
+    problems.push_back("board: columns, rows and square_m are required");
   }
-  std::vector<std::string> own = o.Validate();
-  // The core names the board fields by its own names; say the wire's.
-  for (std::string& p : own) {
-    if (p.rfind("board.inner_cols", 0) == 0) p.replace(0, 16, "board.columns");
-    if (p.rfind("board.inner_rows", 0) == 0) p.replace(0, 16, "board.rows");
-    if (p.rfind("board.square_size_m", 0) == 0) p.replace(0, 19, "board.square_m");
-    if (p.rfind("rectify_alpha", 0) == 0) p.replace(0, 13, "alpha");
-  }
-  problems.insert(problems.end(), own.begin(), own.end());
+  AppendPrefixed(problems, "", FieldsFromProto(s, o));
+  if (s.has_flags()) ApplyCalibrationFlags(s.flags(), o.model, problems);
+  AppendPrefixed(problems, "", o.Validate());
   if (!problems.empty()) {
     std::vector<std::string> prefixed;
     AppendPrefixed(prefixed, "settings.", problems);

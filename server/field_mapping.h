@@ -1,7 +1,7 @@
 // Core options structs to and from their stevi.v1 messages, by field name through protobuf
 // reflection: each struct's field list (core/common/fields.h) names its proto fields, so no pair of
-// fields is kept by hand. A field of the list that its message lacks is a bug: std::logic_error
-// naming both (server/convert_test walks every field).
+// fields is kept by hand. Fields marked NoProto() are skipped; any other field of the list that its
+// message lacks is a bug: std::logic_error naming both (server/convert_test walks every field).
 #pragma once
 
 #include <cstdint>
@@ -41,6 +41,7 @@ class Writer {
 
   template <class T>
   void Number(const T& value, const fields::Field& f) {
+    if (!f.in_proto()) return;
     if constexpr (requires { value.has_value(); }) {
       if (value) Number(*value, f);
     } else {
@@ -49,24 +50,29 @@ class Writer {
   }
   template <class T>
   void List(const std::vector<T>& values, const fields::Field& f) {
+    if (!f.in_proto()) return;
     const FieldDescriptor* d = Find(m_, f);
     m_.GetReflection()->ClearField(&m_, d);
     for (const T& v : values) AddNumber(m_, d, static_cast<double>(v));
   }
   void Flag(const bool& value, const fields::Field& f) {
+    if (!f.in_proto()) return;
     m_.GetReflection()->SetBool(&m_, Find(m_, f), value);
   }
   void Text(const std::string& value, const fields::Field& f) {
+    if (!f.in_proto()) return;
     m_.GetReflection()->SetString(&m_, Find(m_, f), value);
   }
   template <class E, std::size_t N>
   void Choice(const E& value, const fields::Field& f, const fields::ChoiceName<E> (&names)[N]) {
+    if (!f.in_proto()) return;
     if (auto name = fields::NameOf(value, std::span<const fields::ChoiceName<E>>(names))) {
       SetChoice(m_, Find(m_, f), *name);
     }
   }
   template <class T>
   void Nested(const T& nested, const fields::Field& f) {
+    if (!f.in_proto()) return;
     Writer sub(*m_.GetReflection()->MutableMessage(&m_, Find(m_, f)));
     fields::Visit(nested, sub);
   }
@@ -85,6 +91,7 @@ class Reader {
 
   template <class T>
   void Number(T& value, const fields::Field& f) {
+    if (!f.in_proto()) return;
     const FieldDescriptor* d = Find(m_, f);
     if (!m_.GetReflection()->HasField(m_, d)) return;
     if constexpr (requires { value.has_value(); }) {
@@ -97,6 +104,7 @@ class Reader {
   }
   template <class T>
   void List(std::vector<T>& values, const fields::Field& f) {
+    if (!f.in_proto()) return;
     const FieldDescriptor* d = Find(m_, f);
     const int size = m_.GetReflection()->FieldSize(m_, d);
     if (size == 0) return;
@@ -107,15 +115,18 @@ class Reader {
     values = std::move(read);
   }
   void Flag(bool& value, const fields::Field& f) {
+    if (!f.in_proto()) return;
     const FieldDescriptor* d = Find(m_, f);
     if (m_.GetReflection()->HasField(m_, d)) value = m_.GetReflection()->GetBool(m_, d);
   }
   void Text(std::string& value, const fields::Field& f) {
+    if (!f.in_proto()) return;
     const FieldDescriptor* d = Find(m_, f);
     if (m_.GetReflection()->HasField(m_, d)) value = m_.GetReflection()->GetString(m_, d);
   }
   template <class E, std::size_t N>
   void Choice(E& value, const fields::Field& f, const fields::ChoiceName<E> (&names)[N]) {
+    if (!f.in_proto()) return;
     const FieldDescriptor* d = Find(m_, f);
     const int number = m_.GetReflection()->GetEnumValue(m_, d);
     if (number == 0) return;  // *_UNSPECIFIED: keep
@@ -130,6 +141,7 @@ class Reader {
   }
   template <class T>
   void Nested(T& nested, const fields::Field& f) {
+    if (!f.in_proto()) return;
     const FieldDescriptor* d = Find(m_, f);
     if (!m_.GetReflection()->HasField(m_, d)) return;
     Reader sub(m_.GetReflection()->GetMessage(m_, d), path_ + std::string(f.name()) + ".",

@@ -3,7 +3,6 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
-#include <set>
 #include <string>
 
 #include "core/common/allocator.h"
@@ -11,6 +10,7 @@
 #include "drivers/synthetic/scenarios.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/app_config.h"
+#include "server/server_flags.h"
 #include "server/convert.h"
 #include "server/runtime/pose_source.h"
 #include "server/runtime/preview_hub.h"
@@ -19,38 +19,28 @@
 
 namespace {
 
-constexpr char kUsage[] = R"(usage: stevi-process [flags]
+constexpr char kAbout[] =
+    R"(Runs the detection pipeline over every frame of a source (no drops) and writes one
+stevi.v1.TrackFrame per line as protobuf JSON (proto field names). Sources: synthetic (default),
+images, replay (frames, timestamps, vehicle states and calibration as recorded), video or gst (not
+live: every frame). Each setting flag sets the config field named after it.)";
 
-Runs the detection pipeline over every frame of a source (no drops) and writes one
-stevi.v1.TrackFrame per line as protobuf JSON (proto field names).
+// The settings stevi-process takes: the source's and the pipeline's, but no camera's (record
+// cameras with stevi-server --record DIR), and the MCAP file's image rate.
+bool OfflineSetting(const stevi::server::SettingFlag& flag) {
+  const std::string& path = flag.paths.front();
+  if (path.rfind("pipeline.", 0) == 0 || path == "record_mcap.image_hz") return true;
+  return path.rfind("source.", 0) == 0 && path.rfind("source.aravis.", 0) != 0 &&
+         path != "source.gst.device" && path != "source.gst.url" &&
+         path != "source.gst.latency_ms" && path != "source.replay.rate";
+}
 
-  --source KIND          synthetic (default), images, replay, video or gst
-  --replay DIR           replay: a recording (stevi-server --record DIR or StartRecording); its
-                         frames, timestamps, vehicle states and calibration are used as recorded,
-                         so that the same recording and config always give the same output
-  --left PATTERN|VIDEO   images: left images as a printf pattern ("left_%04d.png") or a video file
-  --right PATTERN|VIDEO  images: right images, likewise
-  --calibration FILE     images, video, gst: calibration YAML (OpenCV FileStorage)
-  --file VIDEO           video: a video file with both views (--layout side-by-side, the
-                         default, or top-bottom; two: --left and --right files)
-  --layout L             video, gst: side-by-side, top-bottom or two
-  --size WxH             video, gst: the size of one view expected (default: as it comes)
-  --pipeline P           gst: a gst-launch-1.0 pipeline up to the frames (not live: every frame)
-  --fps N                the sequence's frame rate, for capture times (default 10)
-  --algorithm NAME       canonical (default), stevie or stevis
-  --config FILE          stevi.v1.ServerConfig (text format or JSON): its source and pipeline
-  --frames N             process at most N frames (synthetic: default 100; images: all)
-  --out FILE             write the frames here instead of stdout
-  --mcap FILE            also write the flight as an MCAP file for Foxglove: the station's
-                         channels (tracks, annotations, scene, vehicle) and the left and
-                         disparity images (FILE must not exist)
-  --mcap-image-hz N      images per second of each kind in the MCAP file, on capture time
-                         (default 5; 0 = none)
-  --truth FILE           synthetic source: write its truth per frame (stevi.v1.TruthFrame lines)
-  --timings              include the stage timings in each frame (wall-clock measurements: the
-                         output then differs from run to run)
-  --help                 this text
-)";
+// stevi-process's own flags.
+struct ProcessFlags {
+  int64_t frames = 0;  // 0: not given
+  std::string out, truth, mcap;
+  bool timings = false;
+};
 
 int Fail(const std::string& message, int code = 2) {
   std::cerr << "stevi-process: " << message << "\n";
@@ -81,21 +71,6 @@ Result<std::unique_ptr<server::PoseSource>> MakePoses(const v1::ServerConfig& co
       (*created)->SetSyntheticPath(std::move(path));
   }
   return created;
-}
-
-// --frames N (>= 1); by default 100 of the endless synthetic rig, all of the others (-1).
-int64_t MaxFrames(const server::Flags& flags, bool synthetic, std::vector<std::string>& problems) {
-  int64_t max_frames = synthetic ? 100 : -1;
-  if (auto it = flags.values.find("frames"); it != flags.values.end()) {
-    try {
-      size_t used = 0;
-      max_frames = std::stoll(it->second, &used);
-      if (used != it->second.size() || max_frames < 1) throw std::invalid_argument("frames");
-    } catch (const std::exception&) {
-      problems.push_back("--frames: must be a whole number >= 1 (got '" + it->second + "')");
-    }
-  }
-  return max_frames;
 }
 
 // What stevi-process reads, and how: every frame of a recorded or generated source, in order, as
@@ -132,87 +107,70 @@ Status WriteFlight(drivers::FlightLog& flight, const pipeline::FrameResult& resu
   return Status::Ok();
 }
 
-}  // namespace
+// Closes the flight log, if any, and says what it holds.
+int CloseFlight(drivers::FlightLog* flight) {
+  if (flight == nullptr) return 0;
+  if (Status s = flight->Close(); !s.ok()) return Fail("--mcap: " + s.error().message, 1);
+  const drivers::FlightLogCounts c = flight->counts();
+  std::cerr << "stevi-process: wrote " << flight->path() << ": " << c.track_frames << " frames, "
+            << c.images << " images, " << c.messages << " messages, " << c.bytes << " bytes\n";
+  return 0;
+}
 
-int main(int argc, char** argv) {
-  stevi::KeepFrameMemory();  // first: before any thread starts
-  using namespace stevi;
-  const std::set<std::string> known = {
-      "source", "left",     "right",         "calibration",    "fps",  "algorithm",     "config",
-      "frames", "out",      "truth",         "replay",         "mcap", "mcap-image-hz", "layout",
-      "file",   "pipeline", "left-pipeline", "right-pipeline", "size"};
-  Result<server::Flags> flags = server::ParseFlags(argc, argv, known, {"help", "timings"});
-  if (!flags.ok()) return Fail(flags.error().message);
-  if (flags->values.count("help")) {
-    std::cout << kUsage;
-    return 0;
+// The outputs of --out and --truth (stdout without --out); "" or the problem.
+struct Outputs {
+  std::ofstream out_file, truth_file;
+  std::ostream& out() {
+    return out_file.is_open() ? static_cast<std::ostream&>(out_file) : std::cout;
   }
-  if (!flags->positional.empty()) return Fail("unexpected argument '" + flags->positional[0] + "'");
+};
 
-  v1::ServerConfig config;
-  if (auto it = flags->values.find("config"); it != flags->values.end()) {
-    Result<v1::ServerConfig> loaded = server::LoadServerConfig(it->second);
-    if (!loaded.ok()) return Fail(loaded.error().message);
-    config = std::move(loaded).value();
+std::string OpenOutputs(const ProcessFlags& own, Outputs& outputs) {
+  if (!own.out.empty()) {
+    outputs.out_file.open(own.out, std::ios::trunc);
+    if (!outputs.out_file) return "--out: cannot write " + own.out;
   }
-  if (Status applied = server::ApplyFlags(*flags, config); !applied.ok()) {
-    return Fail(applied.error().message);
+  if (!own.truth.empty()) {
+    outputs.truth_file.open(own.truth, std::ios::trunc);
+    if (!outputs.truth_file) return "--truth: cannot write " + own.truth;
   }
-  if (auto it = flags->values.find("mcap"); it != flags->values.end()) {
-    config.mutable_record_mcap()->set_file(it->second);
-  }
-  std::vector<std::string> problems = server::ValidateServerConfig(config);
-  if (flags->values.count("mcap-image-hz") && !config.record_mcap().has_file()) {
-    problems.push_back("--mcap-image-hz: needs --mcap FILE");
-  }
-  const v1::SourceKind kind = config.source().kind();
-  OfflineSource(*config.mutable_source(), problems);
-  const bool synthetic = kind == v1::SOURCE_KIND_SYNTHETIC || kind == v1::SOURCE_KIND_UNSPECIFIED;
-  const int64_t max_frames = MaxFrames(*flags, synthetic, problems);
-  const bool timings = flags->values.count("timings") > 0;
-  const std::string truth_path = flags->values.count("truth") ? flags->values.at("truth") : "";
-  if (!truth_path.empty() && !synthetic) {
-    problems.push_back("--truth: only the synthetic source knows the truth");
-  }
-  Result<pipeline::PipelineConfig> pipeline_config = server::BuildPipelineConfig(config.pipeline());
-  if (!pipeline_config.ok()) problems.push_back(pipeline_config.error().message);
-  if (!problems.empty()) return Fail(InvalidArgument(problems).message);
+  return "";
+}
 
+// The MCAP flight log of --mcap FILE (the server's record_mcap.file, checked with the config),
+// or null without it.
+Result<std::unique_ptr<drivers::FlightLog>> OpenFlight(const v1::ServerConfig& config,
+                                                       const server::McapRecordingOptions& options,
+                                                       const drivers::StereoSource& source) {
+  if (!config.has_record_mcap()) return std::unique_ptr<drivers::FlightLog>();
+  Result<std::unique_ptr<drivers::FlightLog>> created = drivers::FlightLog::Create(
+      options.file, options.log,
+      {{"source", source.Describe()}, {"writer", "stevi-process --mcap"}});
+  if (!created.ok()) return created.error().Prefixed("--mcap: ");
+  return created;
+}
+
+int Run(const v1::ServerConfig& config, const ProcessFlags& own, bool synthetic, int64_t max_frames,
+        pipeline::PipelineConfig pipeline_config) {
   Result<std::unique_ptr<drivers::StereoSource>> source =
       server::OpenSource(config.source(), /*loop_images=*/false);
   if (!source.ok()) return Fail(source.error().message, 1);
-
-  std::ofstream out_file, truth_file;
-  if (auto it = flags->values.find("out"); it != flags->values.end()) {
-    out_file.open(it->second, std::ios::trunc);
-    if (!out_file) return Fail("--out: cannot write " + it->second, 1);
-  }
-  if (!truth_path.empty()) {
-    truth_file.open(truth_path, std::ios::trunc);
-    if (!truth_file) return Fail("--truth: cannot write " + truth_path, 1);
-  }
-  std::ostream& out = out_file.is_open() ? static_cast<std::ostream&>(out_file) : std::cout;
-
+  Outputs outputs;
+  if (std::string problem = OpenOutputs(own, outputs); !problem.empty()) return Fail(problem, 1);
+  std::ostream& out = outputs.out();
   for (const std::string& note : (*source)->Notes()) std::cerr << "stevi-process: " << note << "\n";
-  // The MCAP flight log: --mcap FILE is the server's record_mcap.file (--mcap-image-hz is the
-  // server's flag), checked by ValidateServerConfig above.
   std::vector<std::string> checked_above;
   const server::McapRecordingOptions mcap_options =
       server::McapRecordingOptionsFrom(config.record_mcap(), checked_above);
-  std::unique_ptr<drivers::FlightLog> flight;
-  if (config.has_record_mcap()) {
-    Result<std::unique_ptr<drivers::FlightLog>> created = drivers::FlightLog::Create(
-        mcap_options.file, mcap_options.log,
-        {{"source", (*source)->Describe()}, {"writer", "stevi-process --mcap"}});
-    if (!created.ok()) return Fail("--mcap: " + created.error().message, 1);
-    flight = std::move(created).value();
-  }
+  Result<std::unique_ptr<drivers::FlightLog>> opened = OpenFlight(config, mcap_options, **source);
+  if (!opened.ok()) return Fail(opened.error().message, 1);
+  std::unique_ptr<drivers::FlightLog> flight = std::move(opened).value();
   Result<std::unique_ptr<server::PoseSource>> made = MakePoses(config, **source, synthetic);
   if (!made.ok()) return Fail(made.error().message, 1);
   std::unique_ptr<server::PoseSource> poses = std::move(made).value();
   pipeline::Pipeline pipe;
   pipeline::Snapshot snapshot{
-      std::make_shared<const pipeline::PipelineConfig>(std::move(pipeline_config).value()),
+      std::make_shared<const pipeline::PipelineConfig>(std::move(pipeline_config)),
       (*source)->Rig()};
   if (poses) {
     snapshot.pose_at = [&poses](int64_t t, int64_t unix_t) { return poses->At(t, unix_t); };
@@ -228,7 +186,7 @@ int main(int argc, char** argv) {
     if (!result.ok())
       return Fail("frame " + std::to_string(frame->index) + ": " + result.error().message, 1);
     v1::TrackFrame track_frame = server::ToTrackFrame(*result);
-    if (!timings) track_frame.clear_timings();
+    if (!own.timings) track_frame.clear_timings();
     out << server::ToJsonLine(track_frame) << "\n";
     if (flight) {
       if (Status s = WriteFlight(*flight, *result, track_frame, mcap_options); !s.ok()) {
@@ -236,17 +194,72 @@ int main(int argc, char** argv) {
       }
     }
     if (const drivers::FrameTruth* truth = (*source)->LastTruth();
-        truth_file.is_open() && truth != nullptr) {
-      truth_file << server::ToJsonLine(server::ToTruthFrame(*truth, frame->t_ns)) << "\n";
+        outputs.truth_file.is_open() && truth != nullptr) {
+      outputs.truth_file << server::ToJsonLine(server::ToTruthFrame(*truth, frame->t_ns)) << "\n";
     }
   }
   out.flush();
   if (!out) return Fail("cannot write the output", 1);
-  if (flight) {
-    if (Status s = flight->Close(); !s.ok()) return Fail("--mcap: " + s.error().message, 1);
-    const drivers::FlightLogCounts c = flight->counts();
-    std::cerr << "stevi-process: wrote " << flight->path() << ": " << c.track_frames << " frames, "
-              << c.images << " images, " << c.messages << " messages, " << c.bytes << " bytes\n";
+  return CloseFlight(flight.get());
+}
+
+// The command line's config, with its problems checked as the server checks them, and the
+// offline source's own rules.
+Result<v1::ServerConfig> OfflineConfig(const server::ServerCommandLine& command_line,
+                                       const ProcessFlags& own, bool mcap_image_hz_given) {
+  Result<v1::ServerConfig> configured = command_line.Config();
+  if (!configured.ok()) return configured.error();
+  v1::ServerConfig config = std::move(configured).value();
+  if (!own.mcap.empty()) config.mutable_record_mcap()->set_file(own.mcap);
+  std::vector<std::string> problems = server::ValidateServerConfig(config);
+  if (mcap_image_hz_given && !config.record_mcap().has_file()) {
+    problems.push_back("--mcap-image-hz: needs --mcap FILE");
   }
-  return 0;
+  OfflineSource(*config.mutable_source(), problems);
+  const v1::SourceKind kind = config.source().kind();
+  const bool synthetic = kind == v1::SOURCE_KIND_SYNTHETIC || kind == v1::SOURCE_KIND_UNSPECIFIED;
+  if (!own.truth.empty() && !synthetic) {
+    problems.push_back("--truth: only the synthetic source knows the truth");
+  }
+  if (!problems.empty()) return InvalidArgument(problems);
+  return config;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  stevi::KeepFrameMemory();  // first: before any thread starts
+  using namespace stevi;
+  server::ServerCommandLine command_line("stevi-process", OfflineSetting);
+  ProcessFlags own;
+  command_line.own()
+      .Whole("--frames", {1}, [&own](int64_t n) { own.frames = n; })
+      .Text("--out", &own.out)
+      .Text("--truth", &own.truth)
+      .Text("--mcap", &own.mcap)
+      .Switch("--timings", &own.timings);
+  command_line.Describe("frames", "N",
+                        "process at most N frames (synthetic: default 100; others: all)");
+  command_line.Describe("out", "FILE", "write the frames here instead of stdout");
+  command_line.Describe("truth", "FILE",
+                        "synthetic source: write its truth per frame (stevi.v1.TruthFrame lines)");
+  command_line.Describe("mcap", "FILE",
+                        "also write the flight as an MCAP file for Foxglove: the station's "
+                        "channels and the left and disparity images (FILE must not exist)");
+  command_line.Describe("timings", "",
+                        "include the stage timings in each frame (wall-clock measurements: "
+                        "the output then differs from run to run)");
+  if (std::optional<int> exit_code = command_line.ParseOrExit(argc, argv, kAbout)) {
+    return *exit_code;
+  }
+  Result<v1::ServerConfig> configured =
+      OfflineConfig(command_line, own, command_line.Given("mcap-image-hz"));
+  if (!configured.ok()) return Fail(configured.error().message);
+  v1::ServerConfig config = std::move(configured).value();
+  const v1::SourceKind kind = config.source().kind();
+  const bool synthetic = kind == v1::SOURCE_KIND_SYNTHETIC || kind == v1::SOURCE_KIND_UNSPECIFIED;
+  const int64_t max_frames = own.frames > 0 ? own.frames : (synthetic ? 100 : -1);
+  Result<pipeline::PipelineConfig> pipeline_config = server::BuildPipelineConfig(config.pipeline());
+  if (!pipeline_config.ok()) return Fail(pipeline_config.error().message);
+  return Run(config, own, synthetic, max_frames, std::move(pipeline_config).value());
 }

@@ -51,20 +51,14 @@ Status StartConfiguredRecording(const v1::RecordConfig& record, RecordingManager
 
 // The gRPC server's transport settings: message sizes and keepalive (idle connections are pinged
 // and dead, half-open ones of vanished clients closed).
-void ConfigureTransport(const v1::ServerConfig& config, grpc::ServerBuilder& builder) {
-  const auto ms = [](bool has, double seconds, double fallback) {
-    return static_cast<int>((has ? seconds : fallback) * 1000.0);
-  };
-  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS,
-                             ms(config.has_keepalive_time_s(), config.keepalive_time_s(), 30));
-  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, ms(config.has_keepalive_timeout_s(),
-                                                               config.keepalive_timeout_s(), 10));
+void ConfigureTransport(const ServerOptions& options, grpc::ServerBuilder& builder) {
+  const auto ms = [](double seconds) { return static_cast<int>(seconds * 1000.0); };
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, ms(options.keepalive_time_s));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, ms(options.keepalive_timeout_s));
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
-  builder.AddChannelArgument(
-      GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS,
-      ms(config.has_min_client_ping_interval_s(), config.min_client_ping_interval_s(), 10));
-  const int max_message = static_cast<int>(
-      config.has_max_message_bytes() ? config.max_message_bytes() : kDefaultMaxMessageBytes);
+  builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS,
+                             ms(options.min_client_ping_interval_s));
+  const int max_message = static_cast<int>(options.max_message_bytes);
   builder.SetMaxReceiveMessageSize(max_message);
   builder.SetMaxSendMessageSize(max_message);
 }
@@ -76,6 +70,8 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   Result<pipeline::PipelineConfig> pipeline_config = BuildPipelineConfig(config.pipeline());
   if (!pipeline_config.ok()) problems.push_back(pipeline_config.error().message);
   if (!problems.empty()) return InvalidArgument(problems);
+  Result<ServerOptions> options = ServerOptionsFrom(config);  // checked above
+  if (!options.ok()) return options.error();
 
   const std::optional<geo::VehicleState> synthetic_pose = SyntheticPose(config.source());
   Result<std::unique_ptr<PoseSource>> poses = MakePoseSource(config.geo(), synthetic_pose);
@@ -98,27 +94,28 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
   std::unique_ptr<Server> server(new Server());
   server->auth_ = std::move(auth).value();
   server->poses_ = std::move(poses).value();
-  server->listen_ = config.has_listen() ? config.listen() : kDefaultListen;
+  server->options_ = std::move(options).value();
+  server->listen_ = server->options_.listen;
   Status built =
       server->BuildRuntime(config, std::move(source).value(), std::move(pipeline_config).value());
   if (!built.ok()) return built.error();
-  built = server->BuildGrpcServer(config, *credentials);
+  built = server->BuildGrpcServer(*credentials);
   if (!built.ok()) return built.error();
   // The flight log last, once nothing else can fail: a server that did not start leaves no file.
   // Before the engine starts, so that it has every frame.
   if (config.has_record_mcap()) {
     std::vector<std::string> mcap_problems;
-    McapRecordingOptions options = McapRecordingOptionsFrom(config.record_mcap(), mcap_problems);
+    McapRecordingOptions mcap_options =
+        McapRecordingOptionsFrom(config.record_mcap(), mcap_problems);
     if (!mcap_problems.empty()) return InvalidArgument(mcap_problems);
     Result<std::unique_ptr<McapRecording>> mcap =
-        McapRecording::Start(std::move(options), *server->engine_, *server->broadcaster_,
+        McapRecording::Start(std::move(mcap_options), *server->engine_, *server->broadcaster_,
                              *server->previews_, server->recording_.get());
     if (!mcap.ok()) return mcap.error();
     server->mcap_recording_ = std::move(mcap).value();
   }
-  server->engine_->Start(
-      config.has_pipeline_workers() ? config.pipeline_workers() : 0,
-      config.has_opencv_threads() ? static_cast<int>(config.opencv_threads()) : 0);
+  server->engine_->Start(server->options_.pipeline_workers.value_or(0),
+                         server->options_.opencv_threads.value_or(0));
   server->health_thread_ = std::thread([raw = server.get()] {
     NameThisThread("stevi-health");
     raw->HealthLoop();
@@ -129,9 +126,8 @@ Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
 Status Server::BuildRuntime(const v1::ServerConfig& config,
                             std::unique_ptr<drivers::StereoSource> source,
                             pipeline::PipelineConfig pipeline_config) {
-  const uint32_t queue =
-      config.has_subscriber_queue_frames() ? config.subscriber_queue_frames() : kDefaultQueueFrames;
-  const uint32_t max_streams = config.has_max_streams() ? config.max_streams() : kDefaultMaxStreams;
+  const auto queue = static_cast<uint32_t>(options_.subscriber_queue_frames);
+  const auto max_streams = static_cast<uint32_t>(options_.max_streams);
   broadcaster_ = std::make_unique<FrameBroadcaster>(queue, max_streams);
   FrameBroadcaster* broadcaster = broadcaster_.get();
   PreviewHubOptions preview_options;
@@ -152,7 +148,7 @@ Status Server::BuildRuntime(const v1::ServerConfig& config,
   PoseSource* pose_source = poses_.get();
   engine_->SetPoseSource(
       [pose_source](int64_t t, int64_t unix_t) { return pose_source->At(t, unix_t); });
-  const std::string data_dir = config.has_data_dir() ? config.data_dir() : kDefaultDataDir;
+  const std::string& data_dir = options_.data_dir;
   Result<std::unique_ptr<CalibrationManager>> calibration =
       CalibrationManager::Open(data_dir, *engine_);
   if (!calibration.ok()) return calibration.error();
@@ -168,8 +164,7 @@ Status Server::BuildRuntime(const v1::ServerConfig& config,
   return Status::Ok();
 }
 
-Status Server::BuildGrpcServer(const v1::ServerConfig& config,
-                               const std::shared_ptr<grpc::ServerCredentials>& credentials) {
+Status Server::BuildGrpcServer(const std::shared_ptr<grpc::ServerCredentials>& credentials) {
   // grpc.health.v1 (gRPC's own implementation) and server reflection (grpcurl, grpc_cli).
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -177,7 +172,7 @@ Status Server::BuildGrpcServer(const v1::ServerConfig& config,
   builder.AddListeningPort(listen_, credentials, &port_);
   builder.RegisterService(service_.get());
   builder.RegisterService(calibration_service_.get());
-  ConfigureTransport(config, builder);
+  ConfigureTransport(options_, builder);
   grpc_server_ = builder.BuildAndStart();
   if (grpc_server_ == nullptr || port_ == 0) {
     return Unavailable("cannot listen on " + listen_ + " (address in use or not local?)");

@@ -12,6 +12,7 @@
 #include "server/auth.h"
 #include "server/calibration_manager.h"
 #include "server/calibration_service.h"
+#include "server/server_options.h"
 #include "server/runtime/engine.h"
 #include "server/mcap_recording.h"
 #include "server/recording_manager.h"
@@ -47,12 +48,12 @@ class Server {
   // services; then the gRPC server listening with them.
   Status BuildRuntime(const v1::ServerConfig& config, std::unique_ptr<drivers::StereoSource> source,
                       pipeline::PipelineConfig pipeline_config);
-  Status BuildGrpcServer(const v1::ServerConfig& config,
-                         const std::shared_ptr<grpc::ServerCredentials>& credentials);
+  Status BuildGrpcServer(const std::shared_ptr<grpc::ServerCredentials>& credentials);
   // Keeps the gRPC health service (grpc.health.v1) in step with the source and the pipeline:
   // SERVING while frames are processed, NOT_SERVING while the source is starting, down or ended.
   void HealthLoop();
 
+  ServerOptions options_;
   std::string listen_;
   int port_ = 0;
   std::unique_ptr<FrameBroadcaster> broadcaster_;

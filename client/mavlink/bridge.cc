@@ -1,328 +1,434 @@
 #include "client/mavlink/bridge.h"
 
-#include <algorithm>
-#include <cmath>
-#include <limits>
+#include <ctime>
+#include <future>
+#include <iomanip>
+#include <initializer_list>
+#include <iostream>
+#include <sstream>
+#include <thread>
+
+#include "client/lib/thread_name.h"
 
 namespace stevi::client::mavlink {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
-constexpr double kRadToDeg = 180.0 / kPi;
-constexpr uint16_t kUnknown = std::numeric_limits<uint16_t>::max();
-constexpr int64_t kMaxGeoidUndulationMm = 150'000;
-// Above this, max_cm + 1 would read as UINT16_MAX (unknown).
-constexpr uint16_t kLargestMaxCm = 65533;
+using Clock = Bridge::Clock;
+using std::chrono::milliseconds;
 
-// Azimuth folded into [0, 360).
-double Wrap360(double deg) {
-  double w = std::fmod(deg, 360.0);
-  if (w < 0) w += 360.0;
-  return w >= 360.0 ? 0.0 : w;
-}
-
-// The overlap (degrees) of [a0, a0 + aw) and [b0, b0 + bw) on the circle.
-double CircularOverlap(double a0, double aw, double b0, double bw) {
-  double total = 0;
-  // b shifted by whole turns so that each copy near a is counted once.
-  for (const double shift : {-360.0, 0.0, 360.0}) {
-    const double lo = std::max(a0, b0 + shift);
-    const double hi = std::min(a0 + aw, b0 + shift + bw);
-    if (hi > lo) total += hi - lo;
-  }
-  return total;
-}
-
-bool IsHeld(const v1::Track& t) {
-  return t.state() == v1::TRACK_STATE_CONFIRMED || t.state() == v1::TRACK_STATE_COASTING;
-}
-
-// A range in centimetres within the limits: nearer than min_cm is min_cm (never 0).
-uint16_t ClampedCm(double range_m, const SectorLimits& limits) {
-  const double cm = std::round(range_m * 100.0);
-  if (!(cm >= limits.min_cm)) return std::max<uint16_t>(limits.min_cm, 1);
-  return static_cast<uint16_t>(std::min<double>(cm, limits.max_cm));
-}
-
-// Each sector from the range scan: the nearest return of the bins whose centre lies in it, else
-// clear when the scan covers at least half of it, else unknown. A bin goes to the sector of its
-// centre, not to every sector it touches: a bin straddling an edge would otherwise put an obstacle
-// in the next sector too. (The scan's bins are centred on multiples of their width, so 1-degree
-// bins nest in the 5-degree sectors; a centre on an edge goes to both, to be safe.)
-void FillFromScan(const v1::RangeScan& scan, const SectorLimits& limits,
-                  std::array<uint16_t, 72>& distances) {
-  const double width = scan.bin_width_deg();
-  std::array<double, kSectors> covered{};
-  std::array<std::optional<double>, kSectors> nearest{};
-  for (int b = 0; b < scan.range_m_size(); ++b) {
-    const double lo = scan.start_azimuth_deg() + b * width;
-    for (int s = 0; s < kSectors; ++s) {
-      covered[static_cast<size_t>(s)] +=
-          CircularOverlap(Wrap360(s * kSectorDeg - kSectorDeg / 2), kSectorDeg, Wrap360(lo), width);
+// One logfmt line on stderr: "ts=... level=info event=EVENT key=value ...".
+void Log(const char* level, const std::string& event,
+         std::initializer_list<std::pair<std::string, std::string>> fields) {
+  const auto now = std::chrono::system_clock::now();
+  const std::time_t seconds = std::chrono::system_clock::to_time_t(now);
+  const auto ms = std::chrono::duration_cast<milliseconds>(now.time_since_epoch()).count() % 1000;
+  std::tm utc{};
+  gmtime_r(&seconds, &utc);
+  char ts[32];
+  std::strftime(ts, sizeof ts, "%Y-%m-%dT%H:%M:%S", &utc);
+  std::ostringstream line;
+  line << "ts=" << ts << '.' << std::setw(3) << std::setfill('0') << ms << "Z level=" << level
+       << " event=" << event;
+  for (const auto& [key, value] : fields) {
+    const bool quote = value.empty() || value.find_first_of(" \"=") != std::string::npos;
+    line << ' ' << key << '=';
+    if (!quote) {
+      line << value;
+      continue;
     }
-    const double r = scan.range_m(b);
-    if (!(r > 0) || !std::isfinite(r)) continue;
-    // The sectors holding the bin's centre (two when it lies on their shared edge).
-    const double centre = Wrap360(lo + width / 2) / kSectorDeg;
-    for (const double edge_side : {-1e-9, 1e-9}) {
-      const auto s = static_cast<size_t>(std::lround(centre + edge_side) % kSectors);
-      if (!nearest[s] || r < *nearest[s]) nearest[s] = r;
+    line << '"';
+    for (const char c : value) {
+      if (c == '"' || c == '\\') line << '\\';
+      line << (c == '\n' ? ' ' : c);
     }
+    line << '"';
   }
-  for (size_t s = 0; s < kSectors; ++s) {
-    if (nearest[s] && std::round(*nearest[s] * 100.0) <= limits.max_cm) {
-      distances[s] = ClampedCm(*nearest[s], limits);
-    } else if (covered[s] >= kSectorDeg / 2) {
-      distances[s] = static_cast<uint16_t>(limits.max_cm + 1);
-    } else {
-      distances[s] = kUnknown;
-    }
-  }
+  std::cerr << line.str() << "\n" << std::flush;
 }
+
+std::string Str(uint64_t n) { return std::to_string(n); }
+
+int64_t UnixNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+// The messages the bridge asks the autopilot for, and how often (microseconds).
+struct WantedMessage {
+  uint32_t id;
+  int32_t interval_us;
+};
+constexpr WantedMessage kWanted[] = {
+    {GlobalPositionInt::kId, 50'000},  // 20 Hz
+    {Attitude::kId, 50'000},           // 20 Hz
+    {GpsRawInt::kId, 200'000},         // 5 Hz: the ellipsoid height and accuracies
+    {SystemTime::kId, 1'000'000},      // 1 Hz: Unix time
+};
 
 }  // namespace
 
-double BodyBearingDeg(const v1::PointBody& p) {
-  return Wrap360(std::atan2(p.y_m(), p.x_m()) * kRadToDeg);
-}
-
-double BodyHorizontalRangeM(const v1::PointBody& p) { return std::hypot(p.x_m(), p.y_m()); }
-
-int SectorOf(double bearing_deg) {
-  const int s = static_cast<int>(std::lround(Wrap360(bearing_deg) / kSectorDeg));
-  return s % kSectors;
-}
-
-SectorLimits LimitsOf(const v1::RangeScan& scan) {
-  SectorLimits limits;
-  const double min_cm = std::ceil(std::max(0.0, scan.min_range_m()) * 100.0);
-  const double max_cm = std::floor(std::max(0.0, scan.max_range_m()) * 100.0);
-  limits.max_cm =
-      static_cast<uint16_t>(std::clamp(max_cm, 1.0, static_cast<double>(kLargestMaxCm)));
-  limits.min_cm =
-      static_cast<uint16_t>(std::clamp(min_cm, 1.0, static_cast<double>(limits.max_cm)));
-  return limits;
-}
-
-std::optional<ObstacleDistance> ObstacleDistanceOf(const v1::TrackFrame& frame, std::string& why) {
-  if (!frame.has_range_scan() || frame.range_scan().range_m_size() == 0 ||
-      !(frame.range_scan().bin_width_deg() > 0)) {
-    why = "the frames carry no range scan (PipelineConfig.range_scan.enabled is false)";
-    return std::nullopt;
+bool Bridge::OpenLinkNow() {
+  std::string error;
+  std::unique_ptr<Link> link = OpenLink(args_.link, error);
+  if (!link) {
+    Log("error", "link_error", {{"link", args_.link.text}, {"error", error}});
+    return false;
   }
-  const v1::RangeScan& scan = frame.range_scan();
-  const SectorLimits limits = LimitsOf(scan);
-  ObstacleDistance m;
-  m.time_usec = static_cast<uint64_t>(std::max<int64_t>(0, frame.capture_unix_time_ns() / 1000));
-  m.sensor_type = kMavDistanceSensorUnknown;  // MAVLink has no stereo camera type
-  m.min_distance = limits.min_cm;
-  m.max_distance = limits.max_cm;
-  m.increment = static_cast<uint8_t>(kSectorDeg);
-  m.increment_f = static_cast<float>(kSectorDeg);
-  m.angle_offset = 0;
-  m.frame = kMavFrameBodyFrd;
-  FillFromScan(scan, limits, m.distances);
-  for (const v1::Track& t : frame.tracks()) {
-    if (!IsHeld(t) || !t.has_position_body()) continue;
-    const double range = BodyHorizontalRangeM(t.position_body());
-    if (!std::isfinite(range) || std::round(range * 100.0) > limits.max_cm) continue;
-    uint16_t& d = m.distances[static_cast<size_t>(SectorOf(BodyBearingDeg(t.position_body())))];
-    const uint16_t cm = ClampedCm(range, limits);
-    if (d == kUnknown || d > limits.max_cm || cm < d) d = cm;
-  }
-  why.clear();
-  return m;
+  Log("info", "link_open", {{"link", link->Describe()}});
+  std::lock_guard lock(link_mu_);
+  link_ = std::move(link);
+  return true;
 }
 
-std::array<char, 9> CallsignOf(uint64_t track_id) {
-  constexpr char kDigits[] = "0123456789ABCDEFGHIJKLMNOPQRSTUVWXYZ";
-  std::array<char, 9> callsign{'S', 'T', 'V', '0', '0', '0', '0', '0', '\0'};
-  uint64_t n = track_id % (36ULL * 36 * 36 * 36 * 36);
-  for (int i = 7; i >= 3; --i) {
-    callsign[static_cast<size_t>(i)] = kDigits[n % 36];
-    n /= 36;
-  }
-  return callsign;
-}
-
-uint32_t IcaoAddressOf(uint64_t track_id, uint32_t icao_base) {
-  return (icao_base + static_cast<uint32_t>(track_id % (1U << 20))) & 0xFFFFFFU;
-}
-
-std::vector<AdsbVehicle> AdsbTracks::Of(const v1::TrackFrame& frame) {
-  std::vector<AdsbVehicle> out;
-  std::unordered_map<uint64_t, int64_t> seen;
-  if (frame.geo_status() != v1::GEO_STATUS_OK) {
-    last_detected_ns_.clear();
-    return out;
-  }
-  for (const v1::Track& t : frame.tracks()) {
-    if (!IsHeld(t) || !t.has_geodetic()) continue;
-    int64_t detected_ns = frame.capture_time_ns();
-    if (t.state() == v1::TRACK_STATE_COASTING) {
-      const auto it = last_detected_ns_.find(t.track_id());
-      if (it != last_detected_ns_.end()) detected_ns = it->second;
-    }
-    seen[t.track_id()] = detected_ns;
-    AdsbVehicle a;
-    a.icao_address = IcaoAddressOf(t.track_id(), options_.icao_base);
-    a.lat = static_cast<int32_t>(std::lround(t.geodetic().lat_deg() * 1e7));
-    a.lon = static_cast<int32_t>(std::lround(t.geodetic().lon_deg() * 1e7));
-    a.altitude_type = kAdsbAltitudeTypeGeometric;
-    a.flags = kAdsbFlagsValidCoords | kAdsbFlagsValidVelocity | kAdsbFlagsValidCallsign |
-              kAdsbFlagsVerticalVelocityValid;
-    if (options_.geoid_undulation_m) {
-      const double msl_mm = (t.geodetic().alt_m() - *options_.geoid_undulation_m) * 1000.0;
-      a.altitude = static_cast<int32_t>(std::lround(std::clamp(msl_mm, -2e9, 2e9)));
-      a.flags |= kAdsbFlagsValidAltitude;
-    }
-    const v1::VelocityNed& v = t.velocity_ned();
-    const double speed = std::hypot(v.n_mps(), v.e_mps());
-    a.hor_velocity = static_cast<uint16_t>(std::lround(std::clamp(speed * 100.0, 0.0, 65535.0)));
-    a.ver_velocity =
-        static_cast<int16_t>(std::lround(std::clamp(-v.d_mps() * 100.0, -32768.0, 32767.0)));
-    // A course only when the track moves: below 0.5 m/s its direction is noise.
-    if (speed >= 0.5) {
-      a.heading = static_cast<uint16_t>(
-          std::lround(Wrap360(std::atan2(v.e_mps(), v.n_mps()) * kRadToDeg) * 100.0) % 36000);
-      a.flags |= kAdsbFlagsValidHeading;
-    }
-    a.callsign = CallsignOf(t.track_id());
-    a.emitter_type = kAdsbEmitterTypeNoInfo;  // class-agnostic: stevi does not know what it is
-    const double since_s = static_cast<double>(frame.capture_time_ns() - detected_ns) * 1e-9;
-    a.tslc = static_cast<uint8_t>(std::clamp(std::floor(since_s), 0.0, 255.0));
-    if (options_.simulated) a.flags |= kAdsbFlagsSimulated;
-    out.push_back(a);
-  }
-  last_detected_ns_ = std::move(seen);
-  return out;
-}
-
-std::array<double, 3> EulerDegOfQuaternion(double w, double x, double y, double z) {
-  const double roll = std::atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y));
-  const double pitch = std::asin(std::clamp(2 * (w * y - z * x), -1.0, 1.0));
-  const double yaw = std::atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z));
-  return {roll * kRadToDeg, pitch * kRadToDeg, yaw * kRadToDeg};
-}
-
-bool IsAutopilotHeartbeat(const Heartbeat& heartbeat) {
-  constexpr uint8_t kMavTypeGcs = 6;
-  return heartbeat.autopilot != kMavAutopilotInvalid && heartbeat.type != kMavTypeGcs &&
-         heartbeat.type != kMavTypeOnboardController;
-}
-
-CommandLong SetMessageInterval(uint8_t target_system, uint8_t target_component, uint32_t message_id,
-                               int32_t interval_us) {
-  CommandLong c;
-  c.target_system = target_system;
-  c.target_component = target_component;
-  c.command = kMavCmdSetMessageInterval;
-  c.param1 = static_cast<float>(message_id);
-  c.param2 = static_cast<float>(interval_us);
-  return c;
-}
-
-std::optional<double> PoseJoiner::geoid_undulation_m() const {
-  if (gps_ && gps_->alt_ellipsoid != 0 && gps_->fix_type >= kGpsFixType3dFix) {
-    // In 64 bits: two hostile 32-bit heights differ by more than an int holds. The geoid lies
-    // within about -107..+86 m of the ellipsoid everywhere (EGM2008); a farther one is a bad
-    // message, and the configured undulation stands.
-    const int64_t n_mm = static_cast<int64_t>(gps_->alt_ellipsoid) - gps_->alt;
-    if (std::abs(n_mm) <= kMaxGeoidUndulationMm) return static_cast<double>(n_mm) / 1000.0;
-  }
-  return options_.geoid_undulation_m;
-}
-
-std::optional<v1::VehicleState> PoseJoiner::OnMessage(const Frame& frame, int64_t host_unix_ns) {
-  if (const std::optional<mavlink::Attitude> a = Decode<mavlink::Attitude>(frame)) {
-    TakeAttitude({a->roll * kRadToDeg, a->pitch * kRadToDeg, a->yaw * kRadToDeg}, a->time_boot_ms,
-                 host_unix_ns, "ATTITUDE");
-  } else if (const std::optional<AttitudeQuaternion> q = Decode<AttitudeQuaternion>(frame)) {
-    TakeAttitude(EulerDegOfQuaternion(q->q1, q->q2, q->q3, q->q4), q->time_boot_ms, host_unix_ns,
-                 "ATTITUDE_QUATERNION");
-  } else if (const std::optional<GpsRawInt> g = Decode<GpsRawInt>(frame)) {
-    gps_ = *g;
-  } else if (const std::optional<SystemTime> t = Decode<SystemTime>(frame)) {
-    // 0 until the autopilot knows the time (from GNSS); anything before 2020 is not a Unix time,
-    // and anything from 2100 on is a bad message (it would also overflow the nanoseconds).
-    constexpr uint64_t k2020Us = 1577836800ULL * 1000000ULL;
-    constexpr uint64_t k2100Us = 4102444800ULL * 1000000ULL;
-    if (t->time_unix_usec >= k2020Us && t->time_unix_usec < k2100Us) {
-      boot_to_unix_us_ =
-          static_cast<int64_t>(t->time_unix_usec) - static_cast<int64_t>(t->time_boot_ms) * 1000;
-    }
-  } else if (const std::optional<GlobalPositionInt> p = Decode<GlobalPositionInt>(frame)) {
-    return OnPosition(*p, host_unix_ns);
-  }
-  return std::nullopt;
-}
-
-void PoseJoiner::TakeAttitude(const std::array<double, 3>& roll_pitch_yaw_deg,
-                              uint32_t time_boot_ms, int64_t host_unix_ns, const char* message) {
-  for (const double angle : roll_pitch_yaw_deg) {
-    if (!std::isfinite(angle)) {
-      // The last good attitude stays; it ages out if no good one follows.
-      rejected_ = std::string(message) + " with a non-finite angle: ignored";
-      return;
+template <class T>
+void Bridge::Send(const T& message) {
+  const std::shared_ptr<Link> link = CurrentLink();
+  if (!link || !link->HasPeer()) return;  // udpin: nobody spoke yet
+  uint8_t system_id = 1;
+  {
+    std::lock_guard lock(mu_);
+    if (args_.system_id) {
+      system_id = static_cast<uint8_t>(*args_.system_id);
+    } else if (autopilot_) {
+      system_id = autopilot_->first;
     }
   }
-  attitude_ = Attitude{roll_pitch_yaw_deg[0], roll_pitch_yaw_deg[1], roll_pitch_yaw_deg[2],
-                       time_boot_ms, host_unix_ns};
+  std::lock_guard lock(send_mu_);
+  const std::vector<uint8_t> bytes =
+      Encode(message, sequence_++, system_id, static_cast<uint8_t>(args_.component_id));
+  if (std::string error = link->Send(bytes); !error.empty()) {
+    ++send_errors_;
+    if (error != last_send_error_) Log("warn", "send_failed", {{"error", error}});
+    last_send_error_ = error;
+  }
 }
 
-std::optional<v1::VehicleState> PoseJoiner::OnPosition(const GlobalPositionInt& m,
-                                                       int64_t host_unix_ns) {
-  last_position_ns_ = host_unix_ns;
-  if (m.lat == 0 && m.lon == 0) {
-    waiting_ = "no position fix (GLOBAL_POSITION_INT at 0, 0)";
-    return std::nullopt;
+void Bridge::OnFrame(const v1::TrackFrame& frame) {
+  std::string why;
+  std::optional<ObstacleDistance> obstacles = ObstacleDistanceOf(frame, why);
+  std::lock_guard lock(mu_);
+  ++frames_in_;
+  frame_arrived_ = Clock::now();
+  geo_status_ = frame.geo_status();
+  geo_message_ = frame.geo_message();
+  if (!obstacles && why != no_obstacles_why_) Log("warn", "no_obstacle_distance", {{"why", why}});
+  no_obstacles_why_ = why;
+  obstacles_ = std::move(obstacles);
+  if (args_.adsb) {
+    adsb_.set_geoid_undulation_m(joiner_.geoid_undulation_m());
+    adsb_batch_ = adsb_.Of(frame);
+    adsb_pending_ = true;
   }
-  if (std::abs(static_cast<int64_t>(m.lat)) > 900'000'000 ||
-      std::abs(static_cast<int64_t>(m.lon)) > 1'800'000'000) {
-    rejected_ = "GLOBAL_POSITION_INT outside the Earth (lat " + std::to_string(m.lat) + ", lon " +
-                std::to_string(m.lon) + " in 1e-7 degrees): ignored";
-    return std::nullopt;
+}
+
+void Bridge::StreamLoop() {
+  StreamOptions options;
+  options.reconnect = true;
+  options.persist_once_streaming = true;
+  options.max_reconnect_attempts = 0;  // for ever: the bridge outlives any server restart
+  options.on_event = [this](const StreamEvent& e) {
+    if (e.kind == StreamEvent::Kind::kLost) {
+      {
+        std::lock_guard lock(mu_);
+        ++stream_gaps_;
+      }
+      Log("warn", "stream_lost",
+          {{"code", StatusCodeName(e.status.error_code())}, {"error", e.status.error_message()}});
+    } else {
+      Log("info", "stream_back", {{"gap_ms", Str(static_cast<uint64_t>(e.gap.count()))}});
+    }
+  };
+  const grpc::Status status = client_.StreamTracks(
+      [this](const v1::TrackFrame& frame) {
+        OnFrame(frame);
+        return !stopping_;
+      },
+      options);
+  if (!status.ok() && !stopping_) {
+    Log("error", "stream_failed",
+        {{"code", StatusCodeName(status.error_code())}, {"error", status.error_message()}});
   }
-  // The attitude's age on the autopilot's clock when both carry it, else on arrival.
-  const bool boot_times = m.time_boot_ms != 0 && attitude_ && attitude_->time_boot_ms != 0;
-  const int64_t attitude_age_ms =
-      !attitude_   ? std::numeric_limits<int64_t>::max()
-      : boot_times ? std::abs(static_cast<int64_t>(m.time_boot_ms) - attitude_->time_boot_ms)
-                   : std::abs(host_unix_ns - attitude_->host_unix_ns) / 1'000'000;
-  if (attitude_age_ms > options_.max_attitude_age_ms) {
-    waiting_ = "no attitude (ATTITUDE or ATTITUDE_QUATERNION) within " +
-               std::to_string(options_.max_attitude_age_ms) + " ms of the position";
-    return std::nullopt;
+}
+
+void Bridge::LinkLoop() {
+  Parser parser;
+  std::vector<uint8_t> buffer(kLinkBufferBytes);
+  while (!stopping_) {
+    std::shared_ptr<Link> link = CurrentLink();
+    if (!link) {
+      if (!OpenLinkNow()) {
+        if (!Wait(milliseconds(1000))) return;
+        std::lock_guard lock(mu_);
+        ++link_reopens_;
+      }
+      continue;
+    }
+    std::string error;
+    const int n = link->Receive(buffer, milliseconds(200), error);
+    if (n < 0) {
+      Log("error", "link_lost", {{"link", link->Describe()}, {"error", error}});
+      std::lock_guard lock(link_mu_);
+      link_.reset();
+      continue;
+    }
+    parser.Feed(std::span<const uint8_t>(buffer.data(), static_cast<size_t>(n)),
+                [this](const Frame& frame) { OnMessage(frame); });
+    std::lock_guard lock(mu_);
+    parser_stats_ = parser.stats();
   }
-  const std::optional<double> undulation = geoid_undulation_m();
-  if (!undulation) {
-    waiting_ =
-        "no ellipsoid height: the autopilot's GPS_RAW_INT has no alt_ellipsoid (or no 3D fix); "
-        "give --geoid-undulation";
-    return std::nullopt;
+}
+
+void Bridge::OnMessage(const Frame& frame) {
+  const int64_t host_unix_ns = UnixNowNs();
+  std::lock_guard lock(mu_);
+  ++messages_in_;
+  if (const std::optional<Heartbeat> hb = Decode<Heartbeat>(frame)) {
+    if (!IsAutopilotHeartbeat(*hb)) return;
+    if (autopilot_ && autopilot_->first != frame.system_id) return;  // the first one heard
+    if (!autopilot_ || autopilot_silent_) {
+      Log("info", "autopilot_seen",
+          {{"system_id", Str(frame.system_id)},
+           {"component_id", Str(frame.component_id)},
+           {"type", Str(hb->type)},
+           {"autopilot", Str(hb->autopilot)}});
+      last_request_ = {};  // ask for the streams at once
+    }
+    autopilot_ = std::make_pair(frame.system_id, frame.component_id);
+    autopilot_heard_ = Clock::now();
+    autopilot_silent_ = false;
+    return;
   }
-  v1::VehicleState s;
-  s.set_unix_time_ns(boot_to_unix_us_ && m.time_boot_ms != 0
-                         ? (*boot_to_unix_us_ + static_cast<int64_t>(m.time_boot_ms) * 1000) * 1000
-                         : host_unix_ns);
-  s.mutable_position()->set_lat_deg(m.lat * 1e-7);
-  s.mutable_position()->set_lon_deg(m.lon * 1e-7);
-  s.mutable_position()->set_alt_m(m.alt / 1000.0 + *undulation);
-  s.set_roll_deg(attitude_->roll_deg);
-  s.set_pitch_deg(attitude_->pitch_deg);
-  s.set_yaw_deg(attitude_->yaw_deg);
-  s.mutable_velocity()->set_n_mps(m.vx / 100.0);
-  s.mutable_velocity()->set_e_mps(m.vy / 100.0);
-  s.mutable_velocity()->set_d_mps(m.vz / 100.0);
-  const bool accuracies = gps_ && gps_->h_acc > 0 && gps_->v_acc > 0;
-  s.set_position_sigma_horizontal_m(accuracies ? gps_->h_acc / 1000.0
-                                               : options_.default_sigma_horizontal_m);
-  s.set_position_sigma_vertical_m(accuracies ? gps_->v_acc / 1000.0
-                                             : options_.default_sigma_vertical_m);
-  s.set_tilt_sigma_deg(options_.sigma_tilt_deg);
-  s.set_yaw_sigma_deg(options_.sigma_yaw_deg);
-  waiting_.clear();
-  return s;
+  if (!autopilot_ || frame.system_id != autopilot_->first) return;
+  if (const std::optional<CommandAck> ack = Decode<CommandAck>(frame)) {
+    if (ack->command == kMavCmdSetMessageInterval && ack->result != kMavResultAccepted) {
+      Log("warn", "message_interval_refused", {{"result", Str(ack->result)}});
+    }
+    return;
+  }
+  last_received_[frame.message_id] = Clock::now();
+  std::optional<v1::VehicleState> state = joiner_.OnMessage(frame, host_unix_ns);
+  if (!state || !args_.publish_poses) return;
+  ++states_made_;
+  if (states_.size() >= 64) {
+    states_.pop_front();  // the publisher is behind (the server is away): keep the newest
+    ++states_dropped_;
+  }
+  states_.push_back(std::move(*state));
+  cv_.notify_all();
+}
+
+void Bridge::PublishLoop() {
+  while (!stopping_) {
+    std::unique_ptr<VehicleStatePublisher> publisher = client_.OpenVehicleStatePublisher();
+    bool broken = false;
+    while (!broken) {
+      std::optional<v1::VehicleState> state;
+      {
+        std::unique_lock lock(mu_);
+        cv_.wait(lock, [this] { return stop_ || !states_.empty(); });
+        if (stop_) break;
+        state = std::move(states_.front());
+        states_.pop_front();
+      }
+      broken = !publisher->Write(*state);
+      std::lock_guard lock(mu_);
+      if (broken) continue;
+      ++states_published_;
+      if (!publishing_) Log("info", "publishing", {});
+      publishing_ = true;
+    }
+    if (stopping_) publisher->Cancel();
+    v1::PublishVehicleStateResponse response;
+    const grpc::Status status = publisher->Finish(&response);
+    if (stopping_) return;
+    bool was_publishing = false;
+    {
+      std::lock_guard lock(mu_);
+      std::swap(was_publishing, publishing_);
+    }
+    if (was_publishing) {  // once per outage, not at every retry
+      Log("warn", "publish_lost",
+          {{"code", StatusCodeName(status.error_code())},
+           {"error", status.error_message()},
+           {"accepted", Str(response.accepted())},
+           {"refused", Str(response.refused())},
+           {"last_refusal", response.last_error()}});
+    }
+    if (!Wait(milliseconds(1000))) return;
+  }
+}
+
+void Bridge::SendObstacles(Clock::time_point now) {
+  // Nothing older than this goes out (the frame's arrival here; the server's latency is tens of
+  // milliseconds on top): a stopped stream stops the obstacles within it.
+  constexpr milliseconds kMaxAge(400);
+  std::optional<ObstacleDistance> obstacles;
+  std::vector<AdsbVehicle> adsb;
+  {
+    std::lock_guard lock(mu_);
+    const bool fresh = obstacles_ && now - frame_arrived_ <= kMaxAge;
+    if (fresh != obstacles_flowing_) {
+      const auto age = std::chrono::duration_cast<milliseconds>(now - frame_arrived_).count();
+      if (fresh) {
+        Log("info", "obstacles_flowing", {});
+      } else {
+        Log("warn", "obstacles_stopped",
+            {{"why", frames_in_ == 0 || no_obstacles_why_.empty()
+                         ? "no frame for " + std::to_string(age) + " ms"
+                         : no_obstacles_why_}});
+      }
+      obstacles_flowing_ = fresh;
+    }
+    if (!fresh) return;
+    obstacles = obstacles_;
+    if (adsb_pending_) {
+      adsb = adsb_batch_;
+      adsb_pending_ = false;
+    }
+  }
+  Send(*obstacles);
+  for (const AdsbVehicle& a : adsb) Send(a);
+  std::lock_guard lock(mu_);
+  ++obstacle_sent_;
+  adsb_sent_ += adsb.size();
+}
+
+void Bridge::RequestStreams(Clock::time_point now) {
+  std::vector<CommandLong> requests;
+  {
+    std::lock_guard lock(mu_);
+    if (!autopilot_ || autopilot_silent_ || now - last_request_ < std::chrono::seconds(5)) return;
+    last_request_ = now;
+    for (const WantedMessage& w : kWanted) {
+      const auto it = last_received_.find(w.id);
+      if (it != last_received_.end() && now - it->second < std::chrono::seconds(2)) continue;
+      requests.push_back(
+          SetMessageInterval(autopilot_->first, autopilot_->second, w.id, w.interval_us));
+    }
+  }
+  for (const CommandLong& c : requests) Send(c);
+}
+
+void Bridge::Tick(Clock::time_point now) {
+  SendObstacles(now);
+  RequestStreams(now);
+  std::lock_guard lock(mu_);
+  if (autopilot_ && !autopilot_silent_ && now - autopilot_heard_ > std::chrono::seconds(3)) {
+    autopilot_silent_ = true;
+    Log("warn", "autopilot_silent",
+        {{"system_id", Str(autopilot_->first)},
+         {"effect",
+          "no vehicle states published: the server's georeferencing reports them stale"}});
+  }
+}
+
+void Bridge::LogStatus() {
+  std::shared_ptr<Link> link = CurrentLink();
+  std::lock_guard lock(mu_);
+  const bool pose_fresh =
+      joiner_.last_position_ns() > 0 && UnixNowNs() - joiner_.last_position_ns() < 1'000'000'000;
+  Log("info", "status",
+      {{"link", link ? link->Describe() : "down"},
+       {"autopilot", !autopilot_         ? "unseen"
+                     : autopilot_silent_ ? "silent"
+                                         : "ok"},
+       {"obstacles", obstacles_flowing_ ? "flowing" : "stopped"},
+       {"frames_in", Str(frames_in_)},
+       {"obstacle_distance_sent", Str(obstacle_sent_)},
+       {"adsb_sent", Str(adsb_sent_)},
+       {"heartbeats_sent", Str(heartbeats_sent_)},
+       {"messages_in", Str(messages_in_)},
+       {"crc_errors", Str(parser_stats_.crc_errors)},
+       {"signed_dropped", Str(parser_stats_.signed_or_unsupported)},
+       {"pose", !pose_fresh                 ? "none"
+                : joiner_.waiting().empty() ? "ok"
+                                            : joiner_.waiting()},
+       {"time_source", joiner_.time_source()},
+       {"last_rejected", joiner_.rejected()},
+       {"states_published", Str(states_published_)},
+       {"states_dropped", Str(states_dropped_)},
+       {"geo", v1::GeoStatus_Name(geo_status_)},
+       {"geo_message", geo_message_},
+       {"stream_gaps", Str(stream_gaps_)},
+       {"send_errors", Str(send_errors_)},
+       {"link_reopens", Str(link_reopens_)}});
+}
+
+int Bridge::Run() {
+  v1::GetStatusResponse status;
+  if (client_.GetStatus(&status).ok()) {
+    adsb_.set_simulated(status.source().rfind("synthetic", 0) == 0);
+  }
+  OpenLinkNow();  // else the link loop retries every second
+  std::promise<void> stream_ended;
+  std::future<void> stream_done = stream_ended.get_future();
+  std::thread stream([this, &stream_ended] {
+    NameThisThread("stevi-mav-strm");
+    StreamLoop();
+    stream_ended.set_value();
+  });
+  std::thread reader([this] {
+    NameThisThread("stevi-mav-link");
+    LinkLoop();
+  });
+  std::thread publisher([this] {
+    NameThisThread("stevi-mav-pub");
+    PublishLoop();
+  });
+  const auto period = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(1.0 / args_.rate_hz));
+  const auto status_period = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(args_.status_every_s));
+  auto next = Clock::now();
+  auto next_heartbeat = next;
+  auto next_status = next + status_period;
+  Heartbeat heartbeat;
+  heartbeat.type = kMavTypeOnboardController;
+  heartbeat.autopilot = kMavAutopilotInvalid;
+  heartbeat.system_status = kMavStateActive;
+  while (true) {
+    {
+      std::unique_lock lock(mu_);
+      if (cv_.wait_until(lock, next, [this] { return stop_; })) break;
+    }
+    const auto now = Clock::now();
+    next += period;
+    if (next < now) next = now + period;  // fell behind (a stalled link): no burst
+    if (now >= next_heartbeat) {
+      Send(heartbeat);
+      std::lock_guard lock(mu_);
+      ++heartbeats_sent_;
+      next_heartbeat += std::chrono::seconds(1);
+    }
+    Tick(now);
+    if (now >= next_status) {
+      LogStatus();
+      next_status += status_period;
+    }
+  }
+  // A Cancel() that comes before StreamTracks() begins is forgotten: repeat it until the stream
+  // thread is done.
+  do {
+    client_.Cancel();
+  } while (stream_done.wait_for(milliseconds(100)) != std::future_status::ready);
+  if (std::shared_ptr<Link> link = CurrentLink()) link->Interrupt();
+  stream.join();
+  reader.join();
+  publisher.join();
+  LogStatus();
+  return 0;
+}
+
+void Bridge::Stop() {
+  stopping_ = true;
+  {
+    std::lock_guard lock(mu_);
+    stop_ = true;
+  }
+  cv_.notify_all();
+  client_.Cancel();
+  if (std::shared_ptr<Link> link = CurrentLink()) link->Interrupt();
 }
 
 }  // namespace stevi::client::mavlink

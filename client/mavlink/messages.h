@@ -1,15 +1,19 @@
 // The MAVLink messages the autopilot bridge sends and reads, as plain structs, and the enum values
 // it needs (common.xml and minimal.xml). Fields are declared in the XML's order with its units;
-// Pack writes them in the wire order (base fields sorted by type size, largest first and stable
-// within a size, arrays by their element size; then the extension fields in XML order),
-// little-endian, byte by byte. The standard library only.
+// each struct's Fields lists them once more, in the wire order, and Pack and Unpack both work
+// from that list: little-endian, byte by byte. The standard library only.
 #pragma once
 
 #include <array>
+#include <bit>
+#include <concepts>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
 #include <span>
+#include <string_view>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "client/mavlink/codec.h"
@@ -79,6 +83,23 @@ inline constexpr uint16_t kAdsbFlagsVerticalVelocityValid = 128;
 inline constexpr uint16_t kObstacleDistanceUnknown = 0xFFFF;
 inline constexpr std::size_t kObstacleDistanceSectors = 72;
 
+// Each message struct below has its field table, the one place that says how it goes on the wire:
+//
+//   template <class Self, class V>
+//   static void Fields(Self& m, V& v) {
+//     v.Field(m.custom_mode, "custom_mode");  // a member and its name in the XML
+//     ...
+//     v.Extensions();  // where the extension fields start (only in messages that have them)
+//     ...
+//   }
+//
+// Self is the struct or the const struct; V a visitor with Field(value, name) and Extensions().
+// The table is in wire order: the base fields sorted by type size, largest first and stable within
+// a size (arrays by their element size), then the extension fields in XML order. A field's wire
+// type is its member's type (uint8_t ... uint64_t, int8_t ... int64_t, float, char, or a
+// std::array of one of those). codec.h's table holds each message's CRC_EXTRA and lengths; the
+// tests check them against these tables.
+
 // HEARTBEAT (0).
 struct Heartbeat {
   static constexpr uint32_t kId = 0;
@@ -90,6 +111,16 @@ struct Heartbeat {
   uint8_t mavlink_version = kMavlinkVersion;
 
   bool operator==(const Heartbeat&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& m, V& v) {
+    v.Field(m.custom_mode, "custom_mode");
+    v.Field(m.type, "type");
+    v.Field(m.autopilot, "autopilot");
+    v.Field(m.base_mode, "base_mode");
+    v.Field(m.system_status, "system_status");
+    v.Field(m.mavlink_version, "mavlink_version");
+  }
 };
 
 // SYSTEM_TIME (2).
@@ -99,6 +130,12 @@ struct SystemTime {
   uint32_t time_boot_ms = 0;
 
   bool operator==(const SystemTime&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& m, V& v) {
+    v.Field(m.time_unix_usec, "time_unix_usec");
+    v.Field(m.time_boot_ms, "time_boot_ms");
+  }
 };
 
 // GPS_RAW_INT (24).
@@ -123,6 +160,27 @@ struct GpsRawInt {
   uint16_t yaw = 0;           // centidegrees from north; 0 none, 36000 north
 
   bool operator==(const GpsRawInt&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& m, V& v) {
+    v.Field(m.time_usec, "time_usec");
+    v.Field(m.lat, "lat");
+    v.Field(m.lon, "lon");
+    v.Field(m.alt, "alt");
+    v.Field(m.eph, "eph");
+    v.Field(m.epv, "epv");
+    v.Field(m.vel, "vel");
+    v.Field(m.cog, "cog");
+    v.Field(m.fix_type, "fix_type");
+    v.Field(m.satellites_visible, "satellites_visible");
+    v.Extensions();
+    v.Field(m.alt_ellipsoid, "alt_ellipsoid");
+    v.Field(m.h_acc, "h_acc");
+    v.Field(m.v_acc, "v_acc");
+    v.Field(m.vel_acc, "vel_acc");
+    v.Field(m.hdg_acc, "hdg_acc");
+    v.Field(m.yaw, "yaw");
+  }
 };
 
 // ATTITUDE (30): body frame relative to NED, radians and rad/s.
@@ -137,6 +195,17 @@ struct Attitude {
   float yawspeed = 0;
 
   bool operator==(const Attitude&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& m, V& v) {
+    v.Field(m.time_boot_ms, "time_boot_ms");
+    v.Field(m.roll, "roll");
+    v.Field(m.pitch, "pitch");
+    v.Field(m.yaw, "yaw");
+    v.Field(m.rollspeed, "rollspeed");
+    v.Field(m.pitchspeed, "pitchspeed");
+    v.Field(m.yawspeed, "yawspeed");
+  }
 };
 
 // ATTITUDE_QUATERNION (31): q1..q4 are w, x, y, z.
@@ -154,6 +223,20 @@ struct AttitudeQuaternion {
   std::array<float, 4> repr_offset_q{};
 
   bool operator==(const AttitudeQuaternion&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& m, V& v) {
+    v.Field(m.time_boot_ms, "time_boot_ms");
+    v.Field(m.q1, "q1");
+    v.Field(m.q2, "q2");
+    v.Field(m.q3, "q3");
+    v.Field(m.q4, "q4");
+    v.Field(m.rollspeed, "rollspeed");
+    v.Field(m.pitchspeed, "pitchspeed");
+    v.Field(m.yawspeed, "yawspeed");
+    v.Extensions();
+    v.Field(m.repr_offset_q, "repr_offset_q");
+  }
 };
 
 // GLOBAL_POSITION_INT (33).
@@ -170,6 +253,19 @@ struct GlobalPositionInt {
   uint16_t hdg = 0;          // centidegrees; UINT16_MAX unknown
 
   bool operator==(const GlobalPositionInt&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& m, V& v) {
+    v.Field(m.time_boot_ms, "time_boot_ms");
+    v.Field(m.lat, "lat");
+    v.Field(m.lon, "lon");
+    v.Field(m.alt, "alt");
+    v.Field(m.relative_alt, "relative_alt");
+    v.Field(m.vx, "vx");
+    v.Field(m.vy, "vy");
+    v.Field(m.vz, "vz");
+    v.Field(m.hdg, "hdg");
+  }
 };
 
 // COMMAND_LONG (76).
@@ -188,6 +284,21 @@ struct CommandLong {
   float param7 = 0;
 
   bool operator==(const CommandLong&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& m, V& v) {
+    v.Field(m.param1, "param1");
+    v.Field(m.param2, "param2");
+    v.Field(m.param3, "param3");
+    v.Field(m.param4, "param4");
+    v.Field(m.param5, "param5");
+    v.Field(m.param6, "param6");
+    v.Field(m.param7, "param7");
+    v.Field(m.command, "command");
+    v.Field(m.target_system, "target_system");
+    v.Field(m.target_component, "target_component");
+    v.Field(m.confirmation, "confirmation");
+  }
 };
 
 // COMMAND_ACK (77).
@@ -202,6 +313,17 @@ struct CommandAck {
   uint8_t target_component = 0;
 
   bool operator==(const CommandAck&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& m, V& v) {
+    v.Field(m.command, "command");
+    v.Field(m.result, "result");
+    v.Extensions();
+    v.Field(m.progress, "progress");
+    v.Field(m.result_param2, "result_param2");
+    v.Field(m.target_system, "target_system");
+    v.Field(m.target_component, "target_component");
+  }
 };
 
 // ADSB_VEHICLE (246). The bridge reports obstacles as traffic with it.
@@ -222,6 +344,23 @@ struct AdsbVehicle {
   uint16_t squawk = 0;
 
   bool operator==(const AdsbVehicle&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& m, V& v) {
+    v.Field(m.icao_address, "ICAO_address");
+    v.Field(m.lat, "lat");
+    v.Field(m.lon, "lon");
+    v.Field(m.altitude, "altitude");
+    v.Field(m.heading, "heading");
+    v.Field(m.hor_velocity, "hor_velocity");
+    v.Field(m.ver_velocity, "ver_velocity");
+    v.Field(m.flags, "flags");
+    v.Field(m.squawk, "squawk");
+    v.Field(m.altitude_type, "altitude_type");
+    v.Field(m.callsign, "callsign");
+    v.Field(m.emitter_type, "emitter_type");
+    v.Field(m.tslc, "tslc");
+  }
 };
 
 // OBSTACLE_DISTANCE (330).
@@ -240,53 +379,120 @@ struct ObstacleDistance {
   uint8_t frame = 0;       // MAV_FRAME: kMavFrameGlobal or kMavFrameBodyFrd
 
   bool operator==(const ObstacleDistance&) const = default;
+
+  template <class Self, class V>
+  static void Fields(Self& m, V& v) {
+    v.Field(m.time_usec, "time_usec");
+    v.Field(m.distances, "distances");
+    v.Field(m.min_distance, "min_distance");
+    v.Field(m.max_distance, "max_distance");
+    v.Field(m.sensor_type, "sensor_type");
+    v.Field(m.increment, "increment");
+    v.Extensions();
+    v.Field(m.increment_f, "increment_f");
+    v.Field(m.angle_offset, "angle_offset");
+    v.Field(m.frame, "frame");
+  }
+};
+
+namespace detail {
+
+// The length of the payload of message `id` with its extensions (codec.h's table).
+std::size_t MaxLength(uint32_t id);
+
+// The unsigned word of a field's wire type, the bits that go on the wire.
+template <class T>
+struct Word {
+  using type = std::make_unsigned_t<T>;
+};
+template <>
+struct Word<float> {
+  using type = uint32_t;
+};
+
+// A field table's visitor that writes each field little-endian, byte by byte.
+class Packer {
+ public:
+  explicit Packer(uint32_t id);
+
+  template <class T>
+  void Field(const T& value, std::string_view /*name*/) {
+    Put(std::bit_cast<typename Word<T>::type>(value), sizeof(T));
+  }
+  template <class T, std::size_t N>
+  void Field(const std::array<T, N>& values, std::string_view name) {
+    for (const T& value : values) Field(value, name);
+  }
+  void Extensions() {}
+
+  std::vector<uint8_t> Take() { return std::move(bytes_); }
+
+ private:
+  void Put(uint64_t bits, std::size_t size);
+
+  std::vector<uint8_t> bytes_;
+};
+
+// A field table's visitor that reads each field; the bytes past the payload's end read as zero.
+class Unpacker {
+ public:
+  explicit Unpacker(std::span<const uint8_t> payload) : payload_(payload) {}
+
+  template <class T>
+  void Field(T& value, std::string_view /*name*/) {
+    value = std::bit_cast<T>(static_cast<typename Word<T>::type>(Get(sizeof(T))));
+  }
+  template <class T, std::size_t N>
+  void Field(std::array<T, N>& values, std::string_view name) {
+    for (T& value : values) Field(value, name);
+  }
+  void Extensions() {}
+
+ private:
+  uint64_t Get(std::size_t size);
+
+  std::span<const uint8_t> payload_;
+  std::size_t at_ = 0;
+};
+
+}  // namespace detail
+
+// A struct above: an id and a field table.
+template <class T>
+concept Message = requires(const T& in, T& out, detail::Packer& packer,
+                           detail::Unpacker& unpacker) {
+  { T::kId } -> std::convertible_to<uint32_t>;
+  T::Fields(in, packer);
+  T::Fields(out, unpacker);
 };
 
 // A message's payload in wire order, max_length bytes (EncodeFrame trims it).
-std::vector<uint8_t> Pack(const Heartbeat& m);
-std::vector<uint8_t> Pack(const SystemTime& m);
-std::vector<uint8_t> Pack(const GpsRawInt& m);
-std::vector<uint8_t> Pack(const Attitude& m);
-std::vector<uint8_t> Pack(const AttitudeQuaternion& m);
-std::vector<uint8_t> Pack(const GlobalPositionInt& m);
-std::vector<uint8_t> Pack(const CommandLong& m);
-std::vector<uint8_t> Pack(const CommandAck& m);
-std::vector<uint8_t> Pack(const AdsbVehicle& m);
-std::vector<uint8_t> Pack(const ObstacleDistance& m);
+template <Message T>
+std::vector<uint8_t> Pack(const T& m) {
+  detail::Packer packer(T::kId);
+  T::Fields(m, packer);
+  return packer.Take();
+}
 
 // A message from its payload. A shorter payload is zero-filled (a trimmed MAVLink 2 payload, or a
 // MAVLink 1 one without the extensions); nullopt when it is longer than the message's max_length.
-template <class T>
-std::optional<T> Unpack(std::span<const uint8_t> payload);
-template <>
-std::optional<Heartbeat> Unpack<Heartbeat>(std::span<const uint8_t> payload);
-template <>
-std::optional<SystemTime> Unpack<SystemTime>(std::span<const uint8_t> payload);
-template <>
-std::optional<GpsRawInt> Unpack<GpsRawInt>(std::span<const uint8_t> payload);
-template <>
-std::optional<Attitude> Unpack<Attitude>(std::span<const uint8_t> payload);
-template <>
-std::optional<AttitudeQuaternion> Unpack<AttitudeQuaternion>(std::span<const uint8_t> payload);
-template <>
-std::optional<GlobalPositionInt> Unpack<GlobalPositionInt>(std::span<const uint8_t> payload);
-template <>
-std::optional<CommandLong> Unpack<CommandLong>(std::span<const uint8_t> payload);
-template <>
-std::optional<CommandAck> Unpack<CommandAck>(std::span<const uint8_t> payload);
-template <>
-std::optional<AdsbVehicle> Unpack<AdsbVehicle>(std::span<const uint8_t> payload);
-template <>
-std::optional<ObstacleDistance> Unpack<ObstacleDistance>(std::span<const uint8_t> payload);
+template <Message T>
+std::optional<T> Unpack(std::span<const uint8_t> payload) {
+  if (payload.size() > detail::MaxLength(T::kId)) return std::nullopt;
+  T m;
+  detail::Unpacker unpacker(payload);
+  T::Fields(m, unpacker);
+  return m;
+}
 
 // A message as a MAVLink 2 frame's bytes.
-template <class T>
+template <Message T>
 std::vector<uint8_t> Encode(const T& m, uint8_t sequence, uint8_t system_id, uint8_t component_id) {
   return EncodeFrame(sequence, system_id, component_id, T::kId, Pack(m));
 }
 
 // The message a parsed frame carries; nullopt when the frame holds another message.
-template <class T>
+template <Message T>
 std::optional<T> Decode(const Frame& frame) {
   if (frame.message_id != T::kId) return std::nullopt;
   return Unpack<T>(frame.payload);

@@ -18,7 +18,7 @@
 #include <civetweb.h>
 
 #include "client/station/foxglove_server_impl.h"
-#include "client/thread_name.h"
+#include "client/lib/thread_name.h"
 
 namespace stevi::station {
 namespace {

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <utility>
 
-#include "client/track_points.h"
-#include "client/thread_name.h"
+#include "client/advisory/track_points.h"
+#include "client/lib/thread_name.h"
 
 namespace stevi::station {
 namespace {

@@ -15,8 +15,8 @@
 #include <thread>
 #include <vector>
 
-#include "client/client.h"
-#include "client/export.h"
+#include "client/lib/client.h"
+#include "client/advisory/export.h"
 #include "stevi/v1/station.pb.h"
 
 namespace stevi::station {

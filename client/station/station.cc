@@ -11,7 +11,7 @@
 #include <string_view>
 #include <utility>
 
-#include "client/export.h"
+#include "client/advisory/export.h"
 #include "proto/foxglove/convert.h"
 #include "client/station/web_assets.h"
 #include "stevi/v1/station.pb.h"

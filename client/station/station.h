@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "client/client.h"
+#include "client/lib/client.h"
 #include "client/station/foxglove_server.h"
 #include "client/station/rig_link.h"
 

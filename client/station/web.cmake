@@ -55,8 +55,46 @@ std::span<const WebAsset> WebAssets() { return kAssets; }
   return()
 endif()
 
-set(STEVI_STATION_WEB_FILES index.html app.js protobuf.js style.css)
+# Every file the page needs. The scripts are ES modules (app.js imports the others) except
+# protobuf.js, a classic script; web/README.md says what each holds.
+set(STEVI_STATION_WEB_FILES
+  index.html
+  style.css
+  protobuf.js
+  app.js
+  api.js
+  calibrations.js
+  config_editor.js
+  controls.js
+  map.js
+  plan_view.js
+  problems.js
+  rig.js
+  rigs.js
+  snapshot.js
+  socket.js
+  state.js
+  status.js
+  tracks_table.js
+  util.js
+  video.js)
 set(stevi_station_web_dir ${CMAKE_CURRENT_LIST_DIR}/web)
+# A script in web/ that is not listed would be missing from the binary, and the page would fail
+# to load its module only at run time: refuse to configure instead. CONFIGURE_DEPENDS re-runs this
+# check at build time when a script is added or removed.
+file(GLOB_RECURSE stevi_station_web_scripts RELATIVE ${stevi_station_web_dir} CONFIGURE_DEPENDS
+     ${stevi_station_web_dir}/*.js)
+foreach(script IN LISTS stevi_station_web_scripts)
+  if(NOT script IN_LIST STEVI_STATION_WEB_FILES)
+    message(FATAL_ERROR "client/station/web/${script} is not in STEVI_STATION_WEB_FILES "
+                        "(client/station/web.cmake): list it there so that the station serves it")
+  endif()
+endforeach()
+foreach(name IN LISTS STEVI_STATION_WEB_FILES)
+  if(NOT EXISTS ${stevi_station_web_dir}/${name})
+    message(FATAL_ERROR "client/station/web.cmake lists ${name}, which is not in client/station/web")
+  endif()
+endforeach()
 set(stevi_station_web_out ${CMAKE_CURRENT_BINARY_DIR}/web_assets_data.cc)
 list(TRANSFORM STEVI_STATION_WEB_FILES PREPEND ${stevi_station_web_dir}/ OUTPUT_VARIABLE stevi_station_web_deps)
 list(JOIN STEVI_STATION_WEB_FILES "," stevi_station_web_names)

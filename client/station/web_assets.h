@@ -1,5 +1,6 @@
-// The station's web page (client/station/web: index.html, app.js, protobuf.js, style.css),
-// compiled into the binary at build time by web.cmake, so the station serves it without files.
+// The station's web page (client/station/web: index.html, style.css, protobuf.js and the ES modules
+// app.js imports, as web.cmake lists them), compiled into the binary at build time by web.cmake, so
+// the station serves it without files.
 #pragma once
 
 #include <span>

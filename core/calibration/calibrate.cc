@@ -15,8 +15,6 @@
 namespace stevi::calibration {
 namespace {
 
-// Fewer pairs than this cannot be solved for two cameras' intrinsics and their relative pose.
-constexpr int kMinSolvablePairs = 3;
 // The thesis' rules of thumb (warnings, not gates).
 constexpr int kAdvisedPairs = 20;
 constexpr double kAdvisedViewCoverage = 0.4;
@@ -570,40 +568,14 @@ std::vector<std::string> CalibrationModel::Validate() const {
   return problems;
 }
 
-std::vector<std::string> QualityGates::Validate() const {
-  std::vector<std::string> problems;
-  if (min_pairs < kMinSolvablePairs || min_pairs > 10000) {
-    problems.push_back("min_pairs: must be in [3, 10000]" + Got(min_pairs));
-  }
-  if (!(max_rms_px > 0) || !std::isfinite(max_rms_px)) {
-    problems.push_back("max_rms_px: must be > 0 pixels" + Got(max_rms_px));
-  }
-  if (!(max_epipolar_px > 0) || !std::isfinite(max_epipolar_px)) {
-    problems.push_back("max_epipolar_px: must be > 0 pixels" + Got(max_epipolar_px));
-  }
-  return problems;
-}
-
 std::vector<std::string> CalibrationOptions::Validate() const {
-  std::vector<std::string> problems;
-  AppendPrefixed(problems, "board.", board.Validate());
+  std::vector<std::string> problems = fields::Check(*this);
   AppendPrefixed(problems, "detection.", detection.Validate());
   AppendPrefixed(problems, "model.", model.Validate());
-  AppendPrefixed(problems, "gates.", gates.Validate());
-  if (!(rectify_alpha == -1 || (rectify_alpha >= 0 && rectify_alpha <= 1))) {
-    problems.push_back("rectify_alpha: must be in [0, 1], or -1 for OpenCV's choice" +
-                       Got(rectify_alpha));
-  }
   if (max_image_size.width < 16 || max_image_size.height < 16 || max_image_size.width > 65535 ||
       max_image_size.height > 65535) {
     problems.push_back("max_image_size: each side must be in [16, 65535] pixels (got " +
                        SizeText(max_image_size) + ")");
-  }
-  if (!(outlier_factor == 0 || (outlier_factor >= 2 && outlier_factor <= 1000))) {
-    problems.push_back("outlier_factor: must be 0 (off) or in [2, 1000]" + Got(outlier_factor));
-  }
-  if (!(max_outlier_fraction >= 0 && max_outlier_fraction <= 0.5)) {
-    problems.push_back("max_outlier_fraction: must be in [0, 0.5]" + Got(max_outlier_fraction));
   }
   if (coverage_grid.width < 1 || coverage_grid.height < 1 || coverage_grid.width > 1000 ||
       coverage_grid.height > 1000) {

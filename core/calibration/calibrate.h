@@ -10,6 +10,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/calibration/chessboard.h"
+#include "core/common/fields.h"
 #include "core/calibration/report.h"
 #include "core/common/error.h"
 #include "core/geometry/calibration_io.h"
@@ -41,6 +42,9 @@ struct CalibrationModel {
 
 // Quality gates. A calibration that fails one is still returned, with report.passed = false and
 // the gate in report.failures; applying it is the caller's decision.
+// Fewer pairs than this cannot be solved for two cameras' intrinsics and their relative pose.
+inline constexpr int kMinSolvablePairs = 3;
+
 struct QualityGates {
   // Fewest pairs used (board found in both images). The thesis advises at least 20.
   int min_pairs = 10;
@@ -55,7 +59,19 @@ struct QualityGates {
   // RMS gate's value, would let through rigs whose rectified rows are a pixel apart.)
   double max_epipolar_px = 0.5;
 
-  std::vector<std::string> Validate() const;
+  std::vector<std::string> Validate() const { return fields::Check(*this); }
+
+  // The fields of stevi.v1.QualityGates.
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.min_pairs,
+             Field("min_pairs", "pairs", "fewest pairs used").In(kMinSolvablePairs, 10000));
+    v.Number(s.max_rms_px, Field("max_rms_px", "pixels", "stereo RMS reprojection error").Above(0));
+    v.Number(
+        s.max_epipolar_px,
+        Field("max_epipolar_px", "pixels", "mean row difference after rectification").Above(0));
+  }
 };
 
 struct CalibrationOptions {
@@ -80,6 +96,26 @@ struct CalibrationOptions {
   cv::Size coverage_grid{10, 8};
 
   std::vector<std::string> Validate() const;
+
+  // The fields of stevi.v1.CalibrationSettings (its model is the `flags` bit mask, mapped by the
+  // server), and the core's own numbers; Validate() adds the detection's, the model's and the
+  // sizes' checks.
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Nested(s.board, Field("board"));
+    v.Nested(s.gates, Field("gates"));
+    v.Number(s.rectify_alpha, Field("alpha", "", "Bouguet's free scaling of the rectification")
+                                  .In(0, 1)
+                                  .Or(-1, "OpenCV's choice"));
+    v.Number(s.outlier_factor, Field("outlier_factor", "", "outlier pairs' RMS over the median's")
+                                   .In(2, 1000)
+                                   .Or(0, "off")
+                                   .NoProto());
+    v.Number(
+        s.max_outlier_fraction,
+        Field("max_outlier_fraction", "", "outlier pairs left out at most").In(0, 0.5).NoProto());
+  }
 };
 
 // One image: encoded PNG or JPEG bytes (std::string or a byte vector), or an already decoded

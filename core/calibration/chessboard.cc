@@ -9,8 +9,6 @@
 namespace stevi::calibration {
 namespace {
 
-constexpr int kMaxInnerCorners = 100;
-
 // Smallest distance between neighbouring corners of the grid (pixels).
 double SmallestSpacing(const std::vector<cv::Point2f>& corners, cv::Size pattern) {
   double smallest = 1e30;
@@ -132,22 +130,11 @@ std::vector<cv::Point3f> BoardSpec::ObjectPoints() const {
 }
 
 std::vector<std::string> BoardSpec::Validate() const {
-  std::vector<std::string> problems;
-  if (inner_cols < 3 || inner_cols > kMaxInnerCorners) {
-    problems.push_back("inner_cols: must be in [3, 100]" + Got(inner_cols));
-  }
-  if (inner_rows < 3 || inner_rows > kMaxInnerCorners) {
-    problems.push_back("inner_rows: must be in [3, 100]" + Got(inner_rows));
-  }
+  std::vector<std::string> problems = fields::Check(*this);
   if (inner_cols == inner_rows) {
     problems.push_back(
-        "inner_cols, inner_rows: must differ (a square grid of corners is ambiguous under a "
-        "quarter "
-        "turn)" +
+        "columns, rows: must differ (a square grid of corners is ambiguous under a quarter turn)" +
         Got(inner_cols));
-  }
-  if (!(square_size_m > 0) || !std::isfinite(square_size_m) || square_size_m > 10) {
-    problems.push_back("square_size_m: must be in (0, 10] metres" + Got(square_size_m));
   }
   return problems;
 }

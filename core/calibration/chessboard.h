@@ -1,6 +1,8 @@
 // Chessboard targets: the board description and sub-pixel detection of its inner corners.
 #pragma once
 
+#include "core/common/fields.h"
+
 #include <string>
 #include <string_view>
 #include <vector>
@@ -13,6 +15,9 @@ namespace stevi::calibration {
 
 // A planar chessboard, counted by its inner corners (the points where four squares meet): a board
 // of 10x7 squares has 9x6 inner corners.
+// Most inner corners along either side of a board.
+inline constexpr int kMaxInnerCorners = 100;
+
 struct BoardSpec {
   // Inner corners along a row of the pattern (columns) and along a column (rows). Both >= 3 and
   // different (a square grid looks the same turned by 90 degrees, so left and right images could
@@ -31,6 +36,18 @@ struct BoardSpec {
   std::vector<cv::Point3f> ObjectPoints() const;
 
   std::vector<std::string> Validate() const;
+
+  // The fields of stevi.v1.BoardSpec, by its names.
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Number(s.inner_cols,
+             Field("columns", "", "inner corners along a row").In(3, kMaxInnerCorners));
+    v.Number(s.inner_rows,
+             Field("rows", "", "inner corners along a column").In(3, kMaxInnerCorners));
+    v.Number(s.square_size_m,
+             Field("square_m", "metres", "side of one square").Above(0).AtMost(10));
+  }
 };
 
 enum class CornerDetector {

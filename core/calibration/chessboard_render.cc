@@ -260,6 +260,71 @@ bool OutlineInView(const std::vector<cv::Point3d>& outline, const cv::Affine3d& 
   return true;
 }
 
+// The board with its margin as GenerateBoardPoses places it: its outline (sampled densely along
+// each edge), its centre and its sizes, in the board's frame.
+struct BoardOutline {
+  std::vector<cv::Point3d> points;
+  cv::Vec3d centre;
+  double board_width_m = 0;  // the printed squares' width
+  double width_m = 0, height_m = 0;
+};
+
+BoardOutline MakeBoardOutline(const BoardSpec& board, const PoseOptions& options) {
+  const double s = board.square_size_m;
+  const double m = options.margin_squares * s;
+  const double u0 = -s - m, u1 = board.inner_cols * s + m, v0 = -s - m,
+               v1 = board.inner_rows * s + m;
+  BoardOutline outline;
+  constexpr int kPerEdge = 16;
+  for (int k = 0; k < kPerEdge; ++k) {
+    const double f = static_cast<double>(k) / kPerEdge;
+    outline.points.emplace_back(u0 + f * (u1 - u0), v0, 0);
+    outline.points.emplace_back(u1, v0 + f * (v1 - v0), 0);
+    outline.points.emplace_back(u1 - f * (u1 - u0), v1, 0);
+    outline.points.emplace_back(u0, v1 - f * (v1 - v0), 0);
+  }
+  outline.centre = cv::Vec3d((board.inner_cols - 1) * s / 2, (board.inner_rows - 1) * s / 2, 0);
+  outline.board_width_m = (board.inner_cols + 1) * s;
+  outline.width_m = u1 - u0;
+  outline.height_m = v1 - v0;
+  return outline;
+}
+
+// One random pose of the board in the left camera: aimed at target cell `cell` of the image's
+// kTargetCells x kTargetCells grid, the aim pulled towards the middle by 1 - `pull`, with a random
+// width, tilt and roll; its centre kept where the board (about hw x hh pixels from its centre)
+// stays in both images (the right camera sees it shifted by the disparity).
+cv::Affine3d DrawPose(std::mt19937& rng, int cell, double pull, const BoardOutline& outline,
+                      const geometry::StereoCalibration& truth_rig, cv::Size image_size,
+                      const PoseOptions& options) {
+  const double deg = CV_PI / 180;
+  const double cx = 0.5 + pull * ((cell % kTargetCells + Uniform(rng, 0, 1)) / kTargetCells - 0.5);
+  const double cy = 0.5 + pull * ((cell / kTargetCells + Uniform(rng, 0, 1)) / kTargetCells - 0.5);
+  const double width_fraction =
+      Uniform(rng, options.min_width_fraction, options.max_width_fraction);
+  const double tilt_x = Uniform(rng, -options.max_tilt_deg, options.max_tilt_deg) * deg;
+  const double tilt_y = Uniform(rng, -options.max_tilt_deg, options.max_tilt_deg) * deg;
+  const double roll = Uniform(rng, -options.max_roll_deg, options.max_roll_deg) * deg;
+
+  const double z = truth_rig.M1(0, 0) * outline.board_width_m / (width_fraction * image_size.width);
+  const double hw =
+      0.5 * width_fraction * image_size.width * outline.width_m / outline.board_width_m +
+      options.border_px;
+  const double hh = hw * outline.height_m / outline.width_m;
+  const double shift = truth_rig.M2(0, 0) * truth_rig.T[0] / z;
+  double lo_x = hw + std::max(0.0, -shift), hi_x = image_size.width - 1 - hw - std::max(0.0, shift);
+  double lo_y = hh, hi_y = image_size.height - 1 - hh;
+  if (lo_x > hi_x) lo_x = hi_x = 0.5 * (lo_x + hi_x);
+  if (lo_y > hi_y) lo_y = hi_y = 0.5 * (lo_y + hi_y);
+  std::vector<cv::Point2d> target{{lo_x + cx * (hi_x - lo_x), lo_y + cy * (hi_y - lo_y)}}, ray;
+  cv::undistortPoints(target, ray, truth_rig.M1, truth_rig.D1, cv::noArray(), cv::noArray(),
+                      kUndistortCriteria);
+  const cv::Vec3d centre(ray[0].x * z, ray[0].y * z, z);
+  const cv::Matx33d rotation = Rotation(cv::Vec3d(0, 0, roll)) * Rotation(cv::Vec3d(0, tilt_y, 0)) *
+                               Rotation(cv::Vec3d(tilt_x, 0, 0));
+  return cv::Affine3d(rotation, centre - rotation * outline.centre);
+}
+
 }  // namespace
 
 Result<std::vector<cv::Affine3d>> GenerateBoardPoses(const geometry::StereoCalibration& truth_rig,
@@ -271,25 +336,7 @@ Result<std::vector<cv::Affine3d>> GenerateBoardPoses(const geometry::StereoCalib
   if (count < 0 || count > 100000) problems.push_back("count: must be in [0, 100000]" + Got(count));
   if (!problems.empty()) return InvalidArgument(problems);
 
-  const double s = board.square_size_m;
-  const double m = options.margin_squares * s;
-  const double u0 = -s - m, u1 = board.inner_cols * s + m, v0 = -s - m,
-               v1 = board.inner_rows * s + m;
-  std::vector<cv::Point3d> outline;
-  constexpr int kPerEdge = 16;
-  for (int k = 0; k < kPerEdge; ++k) {
-    const double f = static_cast<double>(k) / kPerEdge;
-    outline.emplace_back(u0 + f * (u1 - u0), v0, 0);
-    outline.emplace_back(u1, v0 + f * (v1 - v0), 0);
-    outline.emplace_back(u1 - f * (u1 - u0), v1, 0);
-    outline.emplace_back(u0, v1 - f * (v1 - v0), 0);
-  }
-  const cv::Vec3d centre_in_board((board.inner_cols - 1) * s / 2, (board.inner_rows - 1) * s / 2,
-                                  0);
-  const double board_width_m = (board.inner_cols + 1) * s;
-  const double outline_width_m = u1 - u0, outline_height_m = v1 - v0;
-  const double deg = CV_PI / 180;
-
+  const BoardOutline outline = MakeBoardOutline(board, options);
   std::mt19937 rng(seed);
   std::vector<int> cells(kTargetCells * kTargetCells);
   std::iota(cells.begin(), cells.end(), 0);
@@ -307,43 +354,13 @@ Result<std::vector<cv::Affine3d>> GenerateBoardPoses(const geometry::StereoCalib
         // middle a little with every attempt, so that the board ends up as far out as it fits.
         const int cell = cells[static_cast<std::size_t>(k) % cells.size()];
         const double pull = 1.0 - static_cast<double>(attempt) / kAttemptsPerPose;
-        const double cx =
-            0.5 + pull * ((cell % kTargetCells + Uniform(rng, 0, 1)) / kTargetCells - 0.5);
-        const double cy =
-            0.5 + pull * ((cell / kTargetCells + Uniform(rng, 0, 1)) / kTargetCells - 0.5);
-        const double width_fraction =
-            Uniform(rng, options.min_width_fraction, options.max_width_fraction);
-        const double tilt_x = Uniform(rng, -options.max_tilt_deg, options.max_tilt_deg) * deg;
-        const double tilt_y = Uniform(rng, -options.max_tilt_deg, options.max_tilt_deg) * deg;
-        const double roll = Uniform(rng, -options.max_roll_deg, options.max_roll_deg) * deg;
-
-        // Where the centre can go so that the board (about hw x hh pixels from its centre) stays in
-        // both images: the right camera sees it shifted by the disparity.
-        const double z = truth_rig.M1(0, 0) * board_width_m / (width_fraction * image_size.width);
-        const double hw =
-            0.5 * width_fraction * image_size.width * outline_width_m / board_width_m +
-            options.border_px;
-        const double hh = hw * outline_height_m / outline_width_m;
-        const double shift = truth_rig.M2(0, 0) * truth_rig.T[0] / z;
-        double lo_x = hw + std::max(0.0, -shift),
-               hi_x = image_size.width - 1 - hw - std::max(0.0, shift);
-        double lo_y = hh, hi_y = image_size.height - 1 - hh;
-        if (lo_x > hi_x) lo_x = hi_x = 0.5 * (lo_x + hi_x);
-        if (lo_y > hi_y) lo_y = hi_y = 0.5 * (lo_y + hi_y);
-        std::vector<cv::Point2d> target{{lo_x + cx * (hi_x - lo_x), lo_y + cy * (hi_y - lo_y)}},
-            ray;
-        cv::undistortPoints(target, ray, truth_rig.M1, truth_rig.D1, cv::noArray(), cv::noArray(),
-                            kUndistortCriteria);
-        const cv::Vec3d centre(ray[0].x * z, ray[0].y * z, z);
-        const cv::Matx33d rotation = Rotation(cv::Vec3d(0, 0, roll)) *
-                                     Rotation(cv::Vec3d(0, tilt_y, 0)) *
-                                     Rotation(cv::Vec3d(tilt_x, 0, 0));
-        const cv::Affine3d pose(rotation, centre - rotation * centre_in_board);
-        if (!OutlineInView(outline, pose, truth_rig.M1, truth_rig.D1, image_size,
+        const cv::Affine3d pose =
+            DrawPose(rng, cell, pull, outline, truth_rig, image_size, options);
+        if (!OutlineInView(outline.points, pose, truth_rig.M1, truth_rig.D1, image_size,
                            options.border_px))
           continue;
-        if (!OutlineInView(outline, left_to_right * pose, truth_rig.M2, truth_rig.D2, image_size,
-                           options.border_px)) {
+        if (!OutlineInView(outline.points, left_to_right * pose, truth_rig.M2, truth_rig.D2,
+                           image_size, options.border_px)) {
           continue;
         }
         poses.push_back(pose);

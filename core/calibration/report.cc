@@ -3,11 +3,15 @@
 #include "core/common/format.h"
 #include "core/geometry/calibration_io.h"
 
+#include <concepts>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <iomanip>
 #include <optional>
 #include <sstream>
+#include <type_traits>
+#include <utility>
 
 namespace stevi::calibration {
 namespace {
@@ -115,12 +119,13 @@ class Reader {
   }
 
   // A sequence (possibly empty); problems when it is something else.
-  std::vector<cv::FileNode> Seq(const cv::FileNode& parent, const std::string& key) {
+  std::vector<cv::FileNode> Seq(const cv::FileNode& parent, const std::string& key,
+                                const std::string& where = "") {
     std::vector<cv::FileNode> out;
-    const cv::FileNode node = Node(parent, key, "");
+    const cv::FileNode node = Node(parent, key, where);
     if (node.empty() || node.isNone()) return out;
     if (!node.isSeq()) {
-      problems_.push_back(key + ": expected a list");
+      problems_.push_back(where + key + ": expected a list");
       return out;
     }
     for (const cv::FileNode& element : node) out.push_back(element);
@@ -137,6 +142,194 @@ class Reader {
 std::string Where(const std::string& list, std::size_t i) {
   return list + "[" + std::to_string(i) + "].";
 }
+
+// The YAML's field tables: each key once, in the file's order, with its member and its kind. The
+// writer and the reader below are the two visitors of these tables. The keys are the file's own,
+// not the protos' field names.
+//   Number  a double                 Int   an int             Flag   a bool, written as 0 or 1
+//   Text    a quoted string (WriteText, ReportText)           Choice a RejectReason by its name
+//   Int64   a decimal string (FileStorage has no 64-bit integers)
+//   Map     a nested map of its own table                     Texts  a list of strings
+//   List    a list of maps, each element by its own table
+template <class Self, class T>
+concept Is = std::same_as<std::remove_const_t<Self>, T>;
+
+template <Is<BoardSpec> Self, class V>
+void YamlFields(Self& b, V& v) {
+  v.Int("inner_cols", b.inner_cols);
+  v.Int("inner_rows", b.inner_rows);
+  v.Number("square_size_m", b.square_size_m);
+}
+
+template <Is<GateFailure> Self, class V>
+void YamlFields(Self& f, V& v) {
+  v.Text("gate", f.gate);
+  v.Number("measured", f.measured);
+  v.Number("limit", f.limit);
+  v.Text("message", f.message);
+}
+
+template <Is<RejectedPair> Self, class V>
+void YamlFields(Self& p, V& v) {
+  v.Int("index", p.index);
+  v.Text("name", p.name);
+  v.Choice("reason", p.reason);
+  v.Text("detail", p.detail);
+}
+
+template <Is<PairReport> Self, class V>
+void YamlFields(Self& p, V& v) {
+  v.Int("index", p.index);
+  v.Text("name", p.name);
+  v.Number("rms_left_px", p.rms_left_px);
+  v.Number("rms_right_px", p.rms_right_px);
+  v.Number("epipolar_mean_px", p.epipolar_mean_px);
+  v.Number("coverage_left", p.coverage_left);
+  v.Number("coverage_right", p.coverage_right);
+}
+
+template <Is<CalibrationReport> Self, class V>
+void YamlFields(Self& r, V& v) {
+  v.Int64("created_unix_ms", r.created_unix_ms);
+  v.Flag("passed", r.passed);
+  v.Flag("swap_left_right", r.swap_left_right);
+  v.Int("image_width", r.image_size.width);
+  v.Int("image_height", r.image_size.height);
+  v.Map("board", r.board);
+  v.Text("detector", r.detector);
+  v.Int("pairs_given", r.pairs_given);
+  v.Int("pairs_used", r.pairs_used);
+  v.Number("rms_px", r.rms_px);
+  v.Number("rms_left_px", r.rms_left_px);
+  v.Number("rms_right_px", r.rms_right_px);
+  v.Number("epipolar_mean_px", r.epipolar_mean_px);
+  v.Number("epipolar_max_px", r.epipolar_max_px);
+  v.Int("coverage_grid_cols", r.coverage_grid.width);
+  v.Int("coverage_grid_rows", r.coverage_grid.height);
+  v.Number("coverage_mean_view", r.coverage_mean_view);
+  v.Number("coverage_min_view", r.coverage_min_view);
+  v.Number("coverage_union_left", r.coverage_union_left);
+  v.Number("coverage_union_right", r.coverage_union_right);
+  v.Number("fx_left_px", r.fx_left_px);
+  v.Number("fy_left_px", r.fy_left_px);
+  v.Number("fx_right_px", r.fx_right_px);
+  v.Number("fy_right_px", r.fy_right_px);
+  v.Number("baseline_m", r.baseline_m);
+  v.Number("rectified_f_px", r.rectified_f_px);
+  v.List("failures", r.failures);
+  v.Texts("warnings", r.warnings);
+  v.List("rejected", r.rejected);
+  v.List("pairs", r.pairs);
+}
+
+// Writes a table's fields into a FileStorage map.
+class YamlWriter {
+ public:
+  explicit YamlWriter(cv::FileStorage& fs) : fs_(fs) {}
+
+  void Number(const char* key, double value) { fs_ << key << value; }
+  void Int(const char* key, int value) { fs_ << key << value; }
+  void Flag(const char* key, bool value) { fs_ << key << static_cast<int>(value); }
+  void Text(const char* key, const std::string& text) { WriteText(fs_, key, text); }
+  void Int64(const char* key, std::int64_t value) { fs_ << key << std::to_string(value); }
+  void Choice(const char* key, RejectReason reason) {
+    fs_ << key << std::string(RejectReasonName(reason));
+  }
+
+  template <class T>
+  void Map(const char* key, const T& value) {
+    fs_ << key << "{";
+    YamlFields(value, *this);
+    fs_ << "}";
+  }
+
+  template <class T>
+  void List(const char* key, const std::vector<T>& elements) {
+    fs_ << key << "[";
+    for (const T& element : elements) {
+      fs_ << "{";
+      YamlFields(element, *this);
+      fs_ << "}";
+    }
+    fs_ << "]";
+  }
+
+  void Texts(const char* key, const std::vector<std::string>& texts) {
+    fs_ << key << "[";
+    for (const std::string& text : texts) WriteText(fs_, "", text);
+    fs_ << "]";
+  }
+
+ private:
+  cv::FileStorage& fs_;
+};
+
+// Reads a table's fields from the map `node`; each problem is named with `where` ("pairs[2].") in
+// front of the key, and the field keeps its default.
+class YamlReader {
+ public:
+  YamlReader(Reader& read, cv::FileNode node, std::string where)
+      : read_(read), node_(std::move(node)), where_(std::move(where)) {}
+
+  void Number(const char* key, double& value) { value = read_.Double(node_, key, where_); }
+  void Int(const char* key, int& value) { value = read_.Int(node_, key, where_); }
+  void Flag(const char* key, bool& value) { value = read_.Int(node_, key, where_) != 0; }
+  void Text(const char* key, std::string& text) { text = read_.String(node_, key, where_); }
+
+  void Int64(const char* key, std::int64_t& value) {
+    const std::string text = read_.String(node_, key, where_);
+    if (text.empty()) return;
+    char* end = nullptr;
+    value = std::strtoll(text.c_str(), &end, 10);
+    if (*end != '\0') read_.Problem(where_ + key + ": expected a decimal integer");
+  }
+
+  void Choice(const char* key, RejectReason& reason) {
+    const std::string name = read_.String(node_, key, where_);
+    for (const RejectReason candidate : kAllReasons) {
+      if (RejectReasonName(candidate) == name) {
+        reason = candidate;
+        return;
+      }
+    }
+    read_.Problem(where_ + key + ": unknown value \"" + name + "\"");
+  }
+
+  template <class T>
+  void Map(const char* key, T& value) {
+    const cv::FileNode map = read_.Node(node_, key, where_);
+    if (map.isMap()) {
+      YamlReader fields(read_, map, where_ + key + ".");
+      YamlFields(value, fields);
+    } else if (!map.empty() && !map.isNone()) {
+      read_.Problem(where_ + key + ": expected a map");
+    }
+  }
+
+  template <class T>
+  void List(const char* key, std::vector<T>& elements) {
+    const std::vector<cv::FileNode> nodes = read_.Seq(node_, key, where_);
+    for (std::size_t i = 0; i < nodes.size(); ++i) {
+      YamlReader fields(read_, nodes[i], where_ + Where(key, i));
+      YamlFields(elements.emplace_back(), fields);
+    }
+  }
+
+  void Texts(const char* key, std::vector<std::string>& texts) {
+    for (const cv::FileNode& node : read_.Seq(node_, key, where_)) {
+      if (node.isString()) {
+        texts.push_back(ReportText(static_cast<std::string>(node)));
+      } else {
+        read_.Problem(where_ + key + ": expected strings");
+      }
+    }
+  }
+
+ private:
+  Reader& read_;
+  cv::FileNode node_;
+  std::string where_;
+};
 
 }  // namespace
 
@@ -216,72 +409,8 @@ Result<std::string> ReportToYaml(const CalibrationReport& r) {
   try {
     cv::FileStorage fs(
         ".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
-    // FileStorage has no 64-bit integers: the time is written as a decimal string.
-    fs << "created_unix_ms" << std::to_string(r.created_unix_ms);
-    fs << "passed" << static_cast<int>(r.passed);
-    fs << "swap_left_right" << static_cast<int>(r.swap_left_right);
-    fs << "image_width" << r.image_size.width;
-    fs << "image_height" << r.image_size.height;
-    fs << "board"
-       << "{"
-       << "inner_cols" << r.board.inner_cols << "inner_rows" << r.board.inner_rows
-       << "square_size_m" << r.board.square_size_m << "}";
-    WriteText(fs, "detector", r.detector);
-    fs << "pairs_given" << r.pairs_given;
-    fs << "pairs_used" << r.pairs_used;
-    fs << "rms_px" << r.rms_px;
-    fs << "rms_left_px" << r.rms_left_px;
-    fs << "rms_right_px" << r.rms_right_px;
-    fs << "epipolar_mean_px" << r.epipolar_mean_px;
-    fs << "epipolar_max_px" << r.epipolar_max_px;
-    fs << "coverage_grid_cols" << r.coverage_grid.width;
-    fs << "coverage_grid_rows" << r.coverage_grid.height;
-    fs << "coverage_mean_view" << r.coverage_mean_view;
-    fs << "coverage_min_view" << r.coverage_min_view;
-    fs << "coverage_union_left" << r.coverage_union_left;
-    fs << "coverage_union_right" << r.coverage_union_right;
-    fs << "fx_left_px" << r.fx_left_px;
-    fs << "fy_left_px" << r.fy_left_px;
-    fs << "fx_right_px" << r.fx_right_px;
-    fs << "fy_right_px" << r.fy_right_px;
-    fs << "baseline_m" << r.baseline_m;
-    fs << "rectified_f_px" << r.rectified_f_px;
-    fs << "failures"
-       << "[";
-    for (const GateFailure& f : r.failures) {
-      fs << "{";
-      WriteText(fs, "gate", f.gate);
-      fs << "measured" << f.measured << "limit" << f.limit;
-      WriteText(fs, "message", f.message);
-      fs << "}";
-    }
-    fs << "]";
-    fs << "warnings"
-       << "[";
-    for (const std::string& w : r.warnings) WriteText(fs, "", w);
-    fs << "]";
-    fs << "rejected"
-       << "[";
-    for (const RejectedPair& p : r.rejected) {
-      fs << "{"
-         << "index" << p.index;
-      WriteText(fs, "name", p.name);
-      fs << "reason" << std::string(RejectReasonName(p.reason));
-      WriteText(fs, "detail", p.detail);
-      fs << "}";
-    }
-    fs << "]";
-    fs << "pairs"
-       << "[";
-    for (const PairReport& p : r.pairs) {
-      fs << "{"
-         << "index" << p.index;
-      WriteText(fs, "name", p.name);
-      fs << "rms_left_px" << p.rms_left_px << "rms_right_px" << p.rms_right_px << "epipolar_mean_px"
-         << p.epipolar_mean_px << "coverage_left" << p.coverage_left << "coverage_right"
-         << p.coverage_right << "}";
-    }
-    fs << "]";
+    YamlWriter writer(fs);
+    YamlFields(r, writer);
     return fs.releaseAndGetString();
   } catch (const cv::Exception& e) {
     return Internal("cannot format the calibration report (" + e.err + ")");
@@ -310,114 +439,6 @@ std::optional<Error> OpenYaml(const std::string& yaml_text, cv::FileStorage& fs)
   return std::nullopt;
 }
 
-// The single values: time, verdict, image, board, detector, pair counts and the figures.
-void ReadFigures(Reader& read, const cv::FileNode& root, CalibrationReport& r) {
-  const std::string created = read.String(root, "created_unix_ms");
-  if (!created.empty()) {
-    char* end = nullptr;
-    r.created_unix_ms = std::strtoll(created.c_str(), &end, 10);
-    if (*end != '\0') read.Problem("created_unix_ms: expected a decimal integer");
-  }
-  r.passed = read.Int(root, "passed") != 0;
-  r.swap_left_right = read.Int(root, "swap_left_right") != 0;
-  r.image_size = cv::Size(read.Int(root, "image_width"), read.Int(root, "image_height"));
-  const cv::FileNode board = read.Node(root, "board", "");
-  if (board.isMap()) {
-    r.board.inner_cols = read.Int(board, "inner_cols", "board.");
-    r.board.inner_rows = read.Int(board, "inner_rows", "board.");
-    r.board.square_size_m = read.Double(board, "square_size_m", "board.");
-  } else if (!board.empty() && !board.isNone()) {
-    read.Problem("board: expected a map");
-  }
-  r.detector = read.String(root, "detector");
-  r.pairs_given = read.Int(root, "pairs_given");
-  r.pairs_used = read.Int(root, "pairs_used");
-  r.rms_px = read.Double(root, "rms_px");
-  r.rms_left_px = read.Double(root, "rms_left_px");
-  r.rms_right_px = read.Double(root, "rms_right_px");
-  r.epipolar_mean_px = read.Double(root, "epipolar_mean_px");
-  r.epipolar_max_px = read.Double(root, "epipolar_max_px");
-  r.coverage_grid =
-      cv::Size(read.Int(root, "coverage_grid_cols"), read.Int(root, "coverage_grid_rows"));
-  r.coverage_mean_view = read.Double(root, "coverage_mean_view");
-  r.coverage_min_view = read.Double(root, "coverage_min_view");
-  r.coverage_union_left = read.Double(root, "coverage_union_left");
-  r.coverage_union_right = read.Double(root, "coverage_union_right");
-  r.fx_left_px = read.Double(root, "fx_left_px");
-  r.fy_left_px = read.Double(root, "fy_left_px");
-  r.fx_right_px = read.Double(root, "fx_right_px");
-  r.fy_right_px = read.Double(root, "fy_right_px");
-  r.baseline_m = read.Double(root, "baseline_m");
-  r.rectified_f_px = read.Double(root, "rectified_f_px");
-}
-
-// Each element of the list `key`, read by read_one(read, element, "key[i].").
-template <typename T, typename ReadOne>
-std::vector<T> ReadList(Reader& read, const cv::FileNode& root, const std::string& key,
-                        ReadOne read_one) {
-  std::vector<T> out;
-  const std::vector<cv::FileNode> elements = read.Seq(root, key);
-  for (std::size_t i = 0; i < elements.size(); ++i) {
-    out.push_back(read_one(read, elements[i], Where(key, i)));
-  }
-  return out;
-}
-
-GateFailure ReadFailure(Reader& read, const cv::FileNode& node, const std::string& where) {
-  GateFailure f;
-  f.gate = read.String(node, "gate", where);
-  f.measured = read.Double(node, "measured", where);
-  f.limit = read.Double(node, "limit", where);
-  f.message = read.String(node, "message", where);
-  return f;
-}
-
-std::vector<std::string> ReadWarnings(Reader& read, const cv::FileNode& root) {
-  std::vector<std::string> out;
-  const cv::FileNode warnings = read.Node(root, "warnings", "");
-  if (warnings.isSeq()) {
-    for (const cv::FileNode& w : warnings) {
-      if (w.isString()) {
-        out.push_back(ReportText(static_cast<std::string>(w)));
-      } else {
-        read.Problem("warnings: expected strings");
-      }
-    }
-  } else if (!warnings.empty() && !warnings.isNone()) {
-    read.Problem("warnings: expected a list");
-  }
-  return out;
-}
-
-RejectedPair ReadRejectedPair(Reader& read, const cv::FileNode& node, const std::string& where) {
-  RejectedPair p;
-  p.index = read.Int(node, "index", where);
-  p.name = read.String(node, "name", where);
-  const std::string reason = read.String(node, "reason", where);
-  bool known = false;
-  for (RejectReason candidate : kAllReasons) {
-    if (RejectReasonName(candidate) == reason) {
-      p.reason = candidate;
-      known = true;
-    }
-  }
-  if (!known) read.Problem(where + "reason: unknown value \"" + reason + "\"");
-  p.detail = read.String(node, "detail", where);
-  return p;
-}
-
-PairReport ReadPairReport(Reader& read, const cv::FileNode& node, const std::string& where) {
-  PairReport p;
-  p.index = read.Int(node, "index", where);
-  p.name = read.String(node, "name", where);
-  p.rms_left_px = read.Double(node, "rms_left_px", where);
-  p.rms_right_px = read.Double(node, "rms_right_px", where);
-  p.epipolar_mean_px = read.Double(node, "epipolar_mean_px", where);
-  p.coverage_left = read.Double(node, "coverage_left", where);
-  p.coverage_right = read.Double(node, "coverage_right", where);
-  return p;
-}
-
 }  // namespace
 
 Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
@@ -431,11 +452,8 @@ Result<CalibrationReport> ParseReportYaml(const std::string& yaml_text) {
       return InvalidArgument("calibration report: expected a map at the top level");
     }
     Reader read(problems);
-    ReadFigures(read, root, r);
-    r.failures = ReadList<GateFailure>(read, root, "failures", ReadFailure);
-    r.warnings = ReadWarnings(read, root);
-    r.rejected = ReadList<RejectedPair>(read, root, "rejected", ReadRejectedPair);
-    r.pairs = ReadList<PairReport>(read, root, "pairs", ReadPairReport);
+    YamlReader fields(read, root, "");
+    YamlFields(r, fields);
     if (static_cast<int>(r.pairs.size()) != r.pairs_used && problems.empty()) {
       problems.push_back("pairs_used: " + std::to_string(r.pairs_used) + " but " +
                          std::to_string(r.pairs.size()) + " pairs are listed");

@@ -121,6 +121,35 @@ std::string CalibrationStore::ReportPath(CalibrationId id) const {
   return (fs::path(directory_) / (id.Name() + kReportSuffix)).string();
 }
 
+namespace {
+
+// The ids of a store's files: the largest of any file (temporary ones included), and those of its
+// calibrations and its reports.
+struct StoreFiles {
+  std::int64_t max_id = 0;
+  std::set<std::int64_t> calibration_ids, report_ids;
+};
+
+Status ListStoreFiles(const std::string& directory, StoreFiles& files) {
+  std::error_code ec;
+  fs::directory_iterator it(directory, ec);
+  if (ec) {
+    return InvalidArgument("calibration store: cannot list " + directory + " (" + ec.message() +
+                           ")");
+  }
+  for (const fs::directory_entry& entry : it) {
+    const std::string name = entry.path().filename().string();
+    const std::optional<std::int64_t> id = IdOfFileName(name);
+    if (!id) continue;
+    files.max_id = std::max(files.max_id, *id);
+    if (name == CalibrationId{*id}.Name() + kCalibrationSuffix) files.calibration_ids.insert(*id);
+    if (name == CalibrationId{*id}.Name() + kReportSuffix) files.report_ids.insert(*id);
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
 Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
   std::error_code ec;
   if (directory.empty()) return InvalidArgument("calibration store: empty directory name");
@@ -136,26 +165,20 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
   OpenedStore opened;
   opened.store.reset(new CalibrationStore(directory));
   CalibrationStore& store = *opened.store;
-  std::vector<std::string>& problems = opened.problems;
-
-  std::int64_t max_id = 0;
-  std::set<std::int64_t> calibration_ids, report_ids;
-  fs::directory_iterator it(directory, ec);
-  if (ec) {
-    return InvalidArgument("calibration store: cannot list " + directory + " (" + ec.message() +
-                           ")");
-  }
-  for (const fs::directory_entry& entry : it) {
-    const std::string name = entry.path().filename().string();
-    const std::optional<std::int64_t> id = IdOfFileName(name);
-    if (!id) continue;
-    max_id = std::max(max_id, *id);
-    if (name == CalibrationId{*id}.Name() + kCalibrationSuffix) calibration_ids.insert(*id);
-    if (name == CalibrationId{*id}.Name() + kReportSuffix) report_ids.insert(*id);
-  }
-
+  StoreFiles files;
+  if (Status listed = ListStoreFiles(directory, files); !listed.ok()) return listed.error();
   // Why each unreadable id was left out, for the message about a dangling `active`.
   std::map<std::int64_t, std::string> left_out;
+  store.LoadEntries(files.calibration_ids, files.report_ids, opened.problems, left_out);
+  store.LoadActive(left_out, files.max_id, opened.problems);
+  store.next_id_ = files.max_id + 1;
+  return opened;
+}
+
+void CalibrationStore::LoadEntries(const std::set<std::int64_t>& calibration_ids,
+                                   const std::set<std::int64_t>& report_ids,
+                                   std::vector<std::string>& problems,
+                                   std::map<std::int64_t, std::string>& left_out) {
   for (std::int64_t raw : report_ids) {
     if (!calibration_ids.count(raw)) {
       const CalibrationId id{raw};
@@ -169,14 +192,13 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
     const std::string yaml_name = id.Name() + kCalibrationSuffix;
     const std::string report_name = id.Name() + kReportSuffix;
     Result<geometry::StereoCalibration> calibration =
-        geometry::LoadCalibrationYaml(store.CalibrationPath(id));
+        geometry::LoadCalibrationYaml(CalibrationPath(id));
     if (!calibration.ok()) {
-      problems.push_back(
-          WithFileName(calibration.error().message, store.CalibrationPath(id), yaml_name));
+      problems.push_back(WithFileName(calibration.error().message, CalibrationPath(id), yaml_name));
       left_out[raw] = "is unreadable";
       continue;
     }
-    Result<std::string> report_text = ReadFile(store.ReportPath(id), report_name);
+    Result<std::string> report_text = ReadFile(ReportPath(id), report_name);
     if (!report_text.ok()) {
       problems.push_back(report_text.error().message + "; " + id.Name() + " is left out");
       left_out[raw] = "has no readable report";
@@ -189,17 +211,19 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
       left_out[raw] = "has no readable report";
       continue;
     }
-    store.entries_.push_back(Summarise(id, *calibration, *report));
+    entries_.push_back(Summarise(id, *calibration, *report));
   }
+}
 
-  // The active calibration.
+void CalibrationStore::LoadActive(const std::map<std::int64_t, std::string>& left_out,
+                                  std::int64_t& max_id, std::vector<std::string>& problems) {
   std::optional<CalibrationId> last_good;
-  for (const CalibrationSummary& s : store.entries_) {
+  for (const CalibrationSummary& s : entries_) {
     if (s.passed) last_good = s.id;
   }
   const std::string fallback = last_good ? "using " + last_good->Name() + " (the last good one)"
                                          : std::string("no calibration is active");
-  const std::string active_path = (fs::path(directory) / kActiveFile).string();
+  const std::string active_path = (fs::path(directory_) / kActiveFile).string();
   Result<std::string> active_text = ReadFile(active_path, kActiveFile);
   if (active_text.ok()) {
     const std::string text = Trim(*active_text);
@@ -207,33 +231,31 @@ Result<OpenedStore> CalibrationStore::Open(const std::string& directory) {
     if (!named) {
       problems.push_back(std::string("active: cannot read \"") + Printable(text) +
                          "\" as a calibration id; " + fallback);
-      store.active_ = last_good;
+      active_ = last_good;
     } else {
       max_id = std::max(max_id, named->value);
-      const auto entry = std::find_if(store.entries_.begin(), store.entries_.end(),
+      const auto entry = std::find_if(entries_.begin(), entries_.end(),
                                       [&](const CalibrationSummary& s) { return s.id == *named; });
-      if (entry == store.entries_.end()) {
+      if (entry == entries_.end()) {
         const auto why = left_out.find(named->value);
         const std::string state =
             why != left_out.end() ? why->second
                                   : "is missing (no " + named->Name() + kCalibrationSuffix + ")";
         problems.push_back("active: points to " + named->Name() + ", which " + state + "; " +
                            fallback);
-        store.active_ = last_good;
+        active_ = last_good;
       } else if (!entry->passed) {
         problems.push_back("active: points to " + named->Name() +
                            ", which failed its quality gates; " + fallback);
-        store.active_ = last_good;
+        active_ = last_good;
       } else {
-        store.active_ = named;
+        active_ = named;
       }
     }
   } else if (active_text.error().code != ErrorCode::kNotFound) {
     problems.push_back(active_text.error().message + "; " + fallback);
-    store.active_ = last_good;
+    active_ = last_good;
   }
-  store.next_id_ = max_id + 1;
-  return opened;
 }
 
 std::vector<CalibrationSummary> CalibrationStore::List() const {

@@ -3,9 +3,11 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -111,6 +113,15 @@ class CalibrationStore {
   std::string CalibrationPath(CalibrationId id) const;
   std::string ReportPath(CalibrationId id) const;
   Result<StoredCalibration> ReadLocked(CalibrationId id) const;
+  // Open's steps. The calibrations of `calibration_ids` whose file and report are readable into
+  // entries_; a problem for each one left out (and a report without its calibration), and in
+  // `left_out` why, by id. Then the active calibration the `active` file names (raising `max_id`
+  // to its id), or the last good one with a problem when it cannot be used.
+  void LoadEntries(const std::set<std::int64_t>& calibration_ids,
+                   const std::set<std::int64_t>& report_ids, std::vector<std::string>& problems,
+                   std::map<std::int64_t, std::string>& left_out);
+  void LoadActive(const std::map<std::int64_t, std::string>& left_out, std::int64_t& max_id,
+                  std::vector<std::string>& problems);
 
   const std::string directory_;
   mutable std::mutex mu_;

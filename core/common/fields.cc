@@ -4,6 +4,15 @@
 
 namespace stevi::fields {
 
+std::string Field::flag() const {
+  if (!has_flag_) return "";
+  std::string name(flag_.empty() ? name_ : flag_);
+  for (char& c : name) {
+    if (c == '_') c = '-';
+  }
+  return name;
+}
+
 bool Field::Accepts(double value) const {
   if (!std::isfinite(value)) return false;
   if (special_ && value == *special_) return true;

@@ -69,9 +69,35 @@ class Field {
     return f;
   }
 
+  // The field is a command-line flag of the servers: --NAME, by default the field's name with '-'
+  // for '_' ("exposure_us" is --exposure-us). `metavar` names its value in the usage ("FILE");
+  // by default "N" for a number, "VALUE" for text, the names for a choice, none for a bool.
+  constexpr Field Flag(std::string_view name = {}, std::string_view metavar = {}) const {
+    Field f = *this;
+    f.has_flag_ = true;
+    f.flag_ = name;
+    f.metavar_ = metavar;
+    return f;
+  }
+  // The field has no counterpart in the stevi.v1 messages (a driver's own setting, or one the
+  // server fills from elsewhere): the proto mapping skips it, the checks and tables do not.
+  constexpr Field NoProto() const {
+    Field f = *this;
+    f.no_proto_ = true;
+    return f;
+  }
+
   std::string_view name() const { return name_; }
   std::string_view unit() const { return unit_; }
   std::string_view doc() const { return doc_; }
+  bool has_flag() const { return has_flag_; }
+  // "exposure-us" (without the dashes in front); empty when the field is no flag.
+  std::string flag() const;
+  std::string_view metavar() const { return metavar_; }
+  bool in_proto() const { return !no_proto_; }
+  // The value accepted besides the bounds, and its meaning ("off", "max"), if any.
+  std::optional<double> special() const { return special_; }
+  std::string_view special_meaning() const { return special_meaning_; }
 
   // Whether `value` is valid (NaN and infinities never are).
   bool Accepts(double value) const;
@@ -106,6 +132,10 @@ class Field {
   int multiple_of_ = 0;
   std::optional<double> special_;
   std::string_view special_meaning_;
+  bool has_flag_ = false;
+  std::string_view flag_;
+  std::string_view metavar_;
+  bool no_proto_ = false;
 };
 
 // One value of an enum and its name: lower case, the proto value's name without the enum's prefix

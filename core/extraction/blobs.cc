@@ -86,22 +86,21 @@ void Unite(std::vector<int>& parent, int a, int b) {
   }
 }
 
-}  // namespace
+// A blob's area, box and coordinate sums while its runs are labelled.
+struct BlobStats {
+  int area = 0, x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  int64_t sx = 0, sy = 0;
+};
 
-BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity, int max_step,
-                              int min_area_px, bool shapes) {
-  BlobSet set;
-  if (mask.empty()) return set;
-  CV_Assert(disparity.size() == mask.size());
+// The runs of `mask` (raster order) into `runs`, and in `parent` their union-find sets: two
+// 8-neighbours join when their disparities differ by at most max_step. Union-find over runs, not
+// pixels: a run is a stretch of a row whose neighbouring pixels join, so the sets are few and the
+// checks against the row above mostly meet a run already joined. `run_at`: two rows of the run of
+// each column, for this row and the last.
+void FindRuns(const cv::Mat1b& mask, const cv::Mat1s& disparity, int max_step,
+              std::vector<Run>& runs, std::vector<int>& parent, std::vector<int>& run_at) {
   const int w = mask.cols, h = mask.rows;
   const auto joins = [&](int16_t a, int16_t b) { return std::abs(a - b) <= max_step; };
-  // Union-find over runs, not pixels: a run is a stretch of a row whose neighbouring pixels join,
-  // so the sets are few and the checks against the row above mostly meet a run already joined.
-  // The buffers are reused from call to call on this thread (no allocation per frame).
-  thread_local std::vector<Run> runs;
-  thread_local std::vector<int> parent;
-  thread_local std::vector<int>
-      run_at;  // two rows: the run of each column, for this row and the last
   runs.clear();
   parent.clear();
   run_at.resize(2 * static_cast<size_t>(w));
@@ -141,16 +140,16 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
       }
     }
   }
-  // Consecutive labels from 1, in raster order of each blob's first pixel (its root run comes
-  // first), with the statistics of each.
-  set.labels = cv::Mat1i(h, w, 0);
-  int* labels = set.labels.ptr<int>(0);  // continuous: index y * w + x
-  struct Acc {
-    int area = 0, x0 = 0, y0 = 0, x1 = 0, y1 = 0;
-    int64_t sx = 0, sy = 0;
-  };
-  std::vector<Acc> acc(1);
-  thread_local std::vector<int> run_label;
+}
+
+// Consecutive labels from 1 into `labels` (continuous, zeroed), in raster order of each blob's
+// first pixel (its root run comes first), with the statistics of each (index 0 unused).
+// `run_label`: a buffer, the label of each run.
+std::vector<BlobStats> LabelRuns(const std::vector<Run>& runs, std::vector<int>& parent,
+                                 std::vector<int>& run_label, cv::Mat1i& labels) {
+  const int w = labels.cols;
+  int* out = labels.ptr<int>(0);  // continuous: index y * w + x
+  std::vector<BlobStats> acc(1);
   run_label.resize(runs.size());
   for (int r = 0; r < static_cast<int>(runs.size()); ++r) {
     const Run& run = runs[r];
@@ -164,9 +163,9 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
     }
     run_label[r] = label;
     const int length = run.x1 - run.x0 + 1;
-    std::fill(labels + static_cast<size_t>(run.y) * w + run.x0,
-              labels + static_cast<size_t>(run.y) * w + run.x1 + 1, label);
-    Acc& a = acc[label];
+    std::fill(out + static_cast<size_t>(run.y) * w + run.x0,
+              out + static_cast<size_t>(run.y) * w + run.x1 + 1, label);
+    BlobStats& a = acc[label];
     a.area += length;
     a.x0 = std::min(a.x0, run.x0);
     a.x1 = std::max(a.x1, run.x1);
@@ -174,8 +173,26 @@ BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity,
     a.sx += int64_t{run.x0 + run.x1} * length / 2;
     a.sy += int64_t{run.y} * length;
   }
+  return acc;
+}
+
+}  // namespace
+
+BlobSet ExtractDisparityBlobs(const cv::Mat1b& mask, const cv::Mat1s& disparity, int max_step,
+                              int min_area_px, bool shapes) {
+  BlobSet set;
+  if (mask.empty()) return set;
+  CV_Assert(disparity.size() == mask.size());
+  // The buffers are reused from call to call on this thread (no allocation per frame).
+  thread_local std::vector<Run> runs;
+  thread_local std::vector<int> parent;
+  thread_local std::vector<int> run_at;
+  thread_local std::vector<int> run_label;
+  FindRuns(mask, disparity, max_step, runs, parent, run_at);
+  set.labels = cv::Mat1i(mask.rows, mask.cols, 0);
+  const std::vector<BlobStats> acc = LabelRuns(runs, parent, run_label, set.labels);
   for (int label = 1; label < static_cast<int>(acc.size()); ++label) {
-    const Acc& a = acc[label];
+    const BlobStats& a = acc[label];
     if (a.area < min_area_px) continue;
     Blob blob;
     blob.label = label;

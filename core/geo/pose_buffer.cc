@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <deque>
+#include <optional>
 #include <stdexcept>
 #include <utility>
 
@@ -52,6 +54,105 @@ const PoseBufferOptions& Checked(const PoseBufferOptions& options) {
   return options;
 }
 
+// The states around a frame's time, as PoseBuffer::At uses them.
+struct Around {
+  enum class Case { kExact, kInterpolate, kExtrapolate };
+  Case kind = Case::kExact;
+  VehicleState s0;  // kExact: the state; kInterpolate: the one before; kExtrapolate: unused
+  VehicleState s1;  // kInterpolate: the one after; kExtrapolate: the newest
+  std::optional<std::pair<VehicleState, VehicleState>> rate_pair;  // for the angular rate
+};
+
+// The states of `states` (strictly increasing t_ns) around t_ns into `around`; the refusal when
+// there is no pose for t_ns (none yet, too old, too far ahead, across a gap), else nullopt.
+std::optional<PoseLookup> FindAround(const std::deque<VehicleState>& states,
+                                     const PoseBufferOptions& options, int64_t t_ns,
+                                     Around& around) {
+  using Case = Around::Case;
+  if (states.empty()) return PoseLookup{GeoStatus::kNoPose, "no pose yet", std::nullopt};
+  const VehicleState& newest = states.back();
+  const std::size_t n = states.size();
+  if (t_ns > newest.t_ns) {
+    const double ahead_s = SecondsBetween(t_ns, newest.t_ns);
+    if (ahead_s > options.max_extrapolation_s) {
+      return Refused(GeoStatus::kPoseTooOld, "pose too old (%.2f s)", ahead_s);
+    }
+    around.kind = Case::kExtrapolate;
+    around.s1 = newest;
+    if (n >= 2) around.rate_pair.emplace(states[n - 2], newest);
+    return std::nullopt;
+  }
+  const double behind_s = SecondsBetween(newest.t_ns, t_ns);
+  if (behind_s > options.max_age_s) {
+    return Refused(GeoStatus::kFrameTooOld, "frame too old (%.2f s before the newest pose)",
+                   behind_s);
+  }
+  if (t_ns < states.front().t_ns) {
+    return Refused(GeoStatus::kFrameTooOld, "frame before the oldest pose (%.2f s)",
+                   SecondsBetween(states.front().t_ns, t_ns));
+  }
+  // The first state after t_ns (there is one unless t_ns is the newest's time).
+  const auto after = std::upper_bound(states.begin(), states.end(), t_ns,
+                                      [](int64_t t, const VehicleState& s) { return t < s.t_ns; });
+  const std::size_t i = static_cast<std::size_t>(after - states.begin());  // >= 1
+  around.s0 = states[i - 1];
+  if (around.s0.t_ns == t_ns) {
+    around.kind = Case::kExact;
+    if (i < n) {
+      around.rate_pair.emplace(around.s0, states[i]);
+    } else if (i >= 2) {
+      around.rate_pair.emplace(states[i - 2], around.s0);
+    }
+    return std::nullopt;
+  }
+  around.kind = Case::kInterpolate;
+  around.s1 = states[i];
+  const double gap_s = SecondsBetween(around.s1.t_ns, around.s0.t_ns);
+  if (gap_s > options.max_gap_s) {
+    return Refused(GeoStatus::kPoseGap, "pose gap (%.2f s) at the frame", gap_s);
+  }
+  around.rate_pair.emplace(around.s0, around.s1);
+  return std::nullopt;
+}
+
+// The state at t_ns between s0 and s1: the position linear in the local tangent plane at s0, the
+// attitude by slerp, the velocity and the sigmas linear.
+VehicleState Interpolate(const VehicleState& s0, const VehicleState& s1, int64_t t_ns) {
+  const double w = SecondsBetween(t_ns, s0.t_ns) / SecondsBetween(s1.t_ns, s0.t_ns);
+  VehicleState s = s0;
+  s.t_ns = t_ns;
+  // Position: linear in the local tangent plane at s0 (east, north, up).
+  const GeographicLib::LocalCartesian local(s0.lat_deg, s0.lon_deg, s0.alt_m);
+  double e = 0, n = 0, u = 0;
+  local.Forward(s1.lat_deg, s1.lon_deg, s1.alt_m, e, n, u);
+  local.Reverse(w * e, w * n, w * u, s.lat_deg, s.lon_deg, s.alt_m);
+  SetAttitude(s, NedFromBody(s0).slerp(w, NedFromBody(s1)));
+  s.velocity_ned_mps = s0.velocity_ned_mps + (s1.velocity_ned_mps - s0.velocity_ned_mps) * w;
+  s.sigma.horizontal_m = Lerp(s0.sigma.horizontal_m, s1.sigma.horizontal_m, w);
+  s.sigma.vertical_m = Lerp(s0.sigma.vertical_m, s1.sigma.vertical_m, w);
+  s.sigma.tilt_deg = Lerp(s0.sigma.tilt_deg, s1.sigma.tilt_deg, w);
+  s.sigma.yaw_deg = Lerp(s0.sigma.yaw_deg, s1.sigma.yaw_deg, w);
+  return s;
+}
+
+// The state at t_ns after the newest state s1: the position moved by s1's NED velocity in the
+// tangent plane at s1, the attitude turned by the body angular rate.
+VehicleState Extrapolate(const VehicleState& s1, int64_t t_ns,
+                         const Eigen::Vector3d& angular_rate_body_rps) {
+  const double dt = SecondsBetween(t_ns, s1.t_ns);
+  VehicleState s = s1;
+  s.t_ns = t_ns;
+  const Eigen::Vector3d d_ned = s1.velocity_ned_mps * dt;
+  const GeographicLib::LocalCartesian local(s1.lat_deg, s1.lon_deg, s1.alt_m);
+  local.Reverse(d_ned.y(), d_ned.x(), -d_ned.z(), s.lat_deg, s.lon_deg, s.alt_m);
+  const Eigen::Vector3d turn = angular_rate_body_rps * dt;
+  const double angle = turn.norm();
+  Eigen::Quaterniond q = NedFromBody(s1);
+  if (angle > 0) q = q * Eigen::Quaterniond(Eigen::AngleAxisd(angle, turn / angle));
+  SetAttitude(s, q);
+  return s;
+}
+
 }  // namespace
 
 std::string_view GeoStatusName(GeoStatus status) {
@@ -91,101 +192,28 @@ Status PoseBuffer::Add(const VehicleState& state) {
 }
 
 PoseLookup PoseBuffer::At(int64_t t_ns) const {
-  enum class Case { kExact, kInterpolate, kExtrapolate };
-  Case kind = Case::kExact;
-  VehicleState s0;  // kExact: the state; kInterpolate: the one before; kExtrapolate: unused
-  VehicleState s1;  // kInterpolate: the one after; kExtrapolate: the newest
-  std::optional<std::pair<VehicleState, VehicleState>> rate_pair;  // for the angular rate
+  Around around;
   {
     std::lock_guard lock(mutex_);
-    if (states_.empty()) return PoseLookup{GeoStatus::kNoPose, "no pose yet", std::nullopt};
-    const VehicleState& newest = states_.back();
-    const std::size_t n = states_.size();
-    if (t_ns > newest.t_ns) {
-      const double ahead_s = SecondsBetween(t_ns, newest.t_ns);
-      if (ahead_s > options_.max_extrapolation_s) {
-        return Refused(GeoStatus::kPoseTooOld, "pose too old (%.2f s)", ahead_s);
-      }
-      kind = Case::kExtrapolate;
-      s1 = newest;
-      if (n >= 2) rate_pair.emplace(states_[n - 2], newest);
-    } else {
-      const double behind_s = SecondsBetween(newest.t_ns, t_ns);
-      if (behind_s > options_.max_age_s) {
-        return Refused(GeoStatus::kFrameTooOld, "frame too old (%.2f s before the newest pose)",
-                       behind_s);
-      }
-      if (t_ns < states_.front().t_ns) {
-        return Refused(GeoStatus::kFrameTooOld, "frame before the oldest pose (%.2f s)",
-                       SecondsBetween(states_.front().t_ns, t_ns));
-      }
-      // The first state after t_ns (there is one unless t_ns is the newest's time).
-      const auto after =
-          std::upper_bound(states_.begin(), states_.end(), t_ns,
-                           [](int64_t t, const VehicleState& s) { return t < s.t_ns; });
-      const std::size_t i = static_cast<std::size_t>(after - states_.begin());  // >= 1
-      s0 = states_[i - 1];
-      if (s0.t_ns == t_ns) {
-        kind = Case::kExact;
-        if (i < n) {
-          rate_pair.emplace(s0, states_[i]);
-        } else if (i >= 2) {
-          rate_pair.emplace(states_[i - 2], s0);
-        }
-      } else {
-        kind = Case::kInterpolate;
-        s1 = states_[i];
-        const double gap_s = SecondsBetween(s1.t_ns, s0.t_ns);
-        if (gap_s > options_.max_gap_s) {
-          return Refused(GeoStatus::kPoseGap, "pose gap (%.2f s) at the frame", gap_s);
-        }
-        rate_pair.emplace(s0, s1);
-      }
+    if (std::optional<PoseLookup> refused = FindAround(states_, options_, t_ns, around)) {
+      return std::move(*refused);
     }
   }
 
   VehiclePose pose;
+  const auto& rate_pair = around.rate_pair;
   if (rate_pair &&
       SecondsBetween(rate_pair->second.t_ns, rate_pair->first.t_ns) <= options_.max_gap_s) {
     pose.angular_rate_body_rps = AngularRate(rate_pair->first, rate_pair->second);
   }
 
-  switch (kind) {
-    case Case::kExact: pose.state = s0; break;
-    case Case::kInterpolate: {
-      const double w = SecondsBetween(t_ns, s0.t_ns) / SecondsBetween(s1.t_ns, s0.t_ns);
-      VehicleState& s = pose.state;
-      s = s0;
-      s.t_ns = t_ns;
-      // Position: linear in the local tangent plane at s0 (east, north, up).
-      const GeographicLib::LocalCartesian local(s0.lat_deg, s0.lon_deg, s0.alt_m);
-      double e = 0, n = 0, u = 0;
-      local.Forward(s1.lat_deg, s1.lon_deg, s1.alt_m, e, n, u);
-      local.Reverse(w * e, w * n, w * u, s.lat_deg, s.lon_deg, s.alt_m);
-      SetAttitude(s, NedFromBody(s0).slerp(w, NedFromBody(s1)));
-      s.velocity_ned_mps = s0.velocity_ned_mps + (s1.velocity_ned_mps - s0.velocity_ned_mps) * w;
-      s.sigma.horizontal_m = Lerp(s0.sigma.horizontal_m, s1.sigma.horizontal_m, w);
-      s.sigma.vertical_m = Lerp(s0.sigma.vertical_m, s1.sigma.vertical_m, w);
-      s.sigma.tilt_deg = Lerp(s0.sigma.tilt_deg, s1.sigma.tilt_deg, w);
-      s.sigma.yaw_deg = Lerp(s0.sigma.yaw_deg, s1.sigma.yaw_deg, w);
-      break;
-    }
-    case Case::kExtrapolate: {
-      const double dt = SecondsBetween(t_ns, s1.t_ns);
-      VehicleState& s = pose.state;
-      s = s1;
-      s.t_ns = t_ns;
-      const Eigen::Vector3d d_ned = s1.velocity_ned_mps * dt;
-      const GeographicLib::LocalCartesian local(s1.lat_deg, s1.lon_deg, s1.alt_m);
-      local.Reverse(d_ned.y(), d_ned.x(), -d_ned.z(), s.lat_deg, s.lon_deg, s.alt_m);
-      const Eigen::Vector3d turn = pose.angular_rate_body_rps * dt;
-      const double angle = turn.norm();
-      Eigen::Quaterniond q = NedFromBody(s1);
-      if (angle > 0) q = q * Eigen::Quaterniond(Eigen::AngleAxisd(angle, turn / angle));
-      SetAttitude(s, q);
+  switch (around.kind) {
+    case Around::Case::kExact: pose.state = around.s0; break;
+    case Around::Case::kInterpolate: pose.state = Interpolate(around.s0, around.s1, t_ns); break;
+    case Around::Case::kExtrapolate:
+      pose.state = Extrapolate(around.s1, t_ns, pose.angular_rate_body_rps);
       pose.extrapolated = true;
       break;
-    }
   }
   return PoseLookup{GeoStatus::kOk, "ok", std::move(pose)};
 }

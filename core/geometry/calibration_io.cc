@@ -60,6 +60,68 @@ cv::FileNode Lookup(const cv::FileNode& root, const std::string& key) {
   }
 }
 
+// Key `key`'s node as a plain list of numbers, row-major, for the first of `shapes` with that many
+// elements; nullopt (with a problem appended) when it is not one.
+std::optional<cv::Mat> ReadNumberList(const cv::FileNode& node, const std::string& key,
+                                      const std::vector<cv::Size>& shapes,
+                                      const std::string& expected,
+                                      std::vector<std::string>& problems) {
+  std::vector<double> values;
+  for (const cv::FileNode& element : node) {
+    if (!element.isInt() && !element.isReal()) {
+      problems.push_back(key + ": expected " + expected + ", got a list with a non-number");
+      return std::nullopt;
+    }
+    values.push_back(static_cast<double>(element));
+  }
+  for (const cv::Size& s : shapes) {
+    if (static_cast<int>(values.size()) == s.area()) {
+      return cv::Mat(values, true).reshape(1, s.height);
+    }
+  }
+  problems.push_back(key + ": expected " + expected + ", got a list of " +
+                     std::to_string(values.size()) + " numbers");
+  return std::nullopt;
+}
+
+// Key `key`'s node as an !!opencv-matrix of one of `shapes`; nullopt (with a problem appended) when
+// it is not one. OpenCV allocates rows x cols (whatever it makes of them) before it compares the
+// data's length with them, so a file announcing a huge matrix would allocate gigabytes: only a map
+// announcing an accepted shape is handed over.
+std::optional<cv::Mat> ReadOpenCvMatrix(const cv::FileNode& node, const std::string& key,
+                                        const std::vector<cv::Size>& shapes,
+                                        const std::string& expected,
+                                        std::vector<std::string>& problems) {
+  const cv::FileNode rows = Lookup(node, "rows");
+  const cv::FileNode cols = Lookup(node, "cols");
+  if (!rows.isInt() || !cols.isInt()) {
+    problems.push_back(key + ": expected " + expected +
+                       " (an !!opencv-matrix with rows, cols, dt and data, or a list of numbers)");
+    return std::nullopt;
+  }
+  const int r = static_cast<int>(rows);
+  const int c = static_cast<int>(cols);
+  const bool accepted = std::any_of(shapes.begin(), shapes.end(), [&](const cv::Size& s) {
+    return s.height == r && s.width == c;
+  });
+  if (!accepted) {
+    problems.push_back(key + ": expected " + expected + ", got " + ShapeText(r, c));
+    return std::nullopt;
+  }
+  cv::Mat m;
+  try {
+    node >> m;
+  } catch (const cv::Exception&) {
+    m = cv::Mat();
+  }
+  if (m.empty()) {
+    problems.push_back(key + ": expected " + expected +
+                       " (an !!opencv-matrix with rows, cols, dt and data, or a list of numbers)");
+    return std::nullopt;
+  }
+  return m;
+}
+
 // Reads one key as a matrix; nullopt (with a problem appended) when missing or malformed.
 // `shapes` lists the accepted (rows, cols) pairs; `expected` describes them for the message.
 std::optional<cv::Mat> ReadMatrix(const cv::FileNode& root, const std::string& key, bool required,
@@ -70,64 +132,17 @@ std::optional<cv::Mat> ReadMatrix(const cv::FileNode& root, const std::string& k
     if (required) problems.push_back(key + ": missing (expected " + expected + ")");
     return std::nullopt;
   }
-  cv::Mat m;
+  std::optional<cv::Mat> read;
   if (node.isSeq()) {
-    // A plain list of numbers, row-major, for the first accepted shape of that many elements.
-    std::vector<double> values;
-    for (const cv::FileNode& element : node) {
-      if (!element.isInt() && !element.isReal()) {
-        problems.push_back(key + ": expected " + expected + ", got a list with a non-number");
-        return std::nullopt;
-      }
-      values.push_back(static_cast<double>(element));
-    }
-    for (const cv::Size& s : shapes) {
-      if (static_cast<int>(values.size()) == s.area()) {
-        m = cv::Mat(values, true).reshape(1, s.height);
-        break;
-      }
-    }
-    if (m.empty()) {
-      problems.push_back(key + ": expected " + expected + ", got a list of " +
-                         std::to_string(values.size()) + " numbers");
-      return std::nullopt;
-    }
+    read = ReadNumberList(node, key, shapes, expected, problems);
   } else if (node.isMap()) {
-    // OpenCV allocates rows x cols (whatever it makes of them) before it compares the data's
-    // length with them, so a file announcing a huge matrix would allocate gigabytes: only a map
-    // announcing an accepted shape is handed over.
-    const cv::FileNode rows = Lookup(node, "rows");
-    const cv::FileNode cols = Lookup(node, "cols");
-    if (!rows.isInt() || !cols.isInt()) {
-      problems.push_back(
-          key + ": expected " + expected +
-          " (an !!opencv-matrix with rows, cols, dt and data, or a list of numbers)");
-      return std::nullopt;
-    }
-    const int r = static_cast<int>(rows);
-    const int c = static_cast<int>(cols);
-    const bool accepted = std::any_of(shapes.begin(), shapes.end(), [&](const cv::Size& s) {
-      return s.height == r && s.width == c;
-    });
-    if (!accepted) {
-      problems.push_back(key + ": expected " + expected + ", got " + ShapeText(r, c));
-      return std::nullopt;
-    }
-    try {
-      node >> m;
-    } catch (const cv::Exception&) {
-      m = cv::Mat();
-    }
-    if (m.empty()) {
-      problems.push_back(
-          key + ": expected " + expected +
-          " (an !!opencv-matrix with rows, cols, dt and data, or a list of numbers)");
-      return std::nullopt;
-    }
+    read = ReadOpenCvMatrix(node, key, shapes, expected, problems);
   } else {
     problems.push_back(key + ": expected " + expected + ", got a single value");
     return std::nullopt;
   }
+  if (!read) return std::nullopt;
+  const cv::Mat& m = *read;
   if (m.channels() != 1) {
     problems.push_back(key + ": expected " + expected + ", got " + std::to_string(m.channels()) +
                        " channels");

@@ -69,7 +69,8 @@ struct PipelineConfig {
   template <class Self, class V>
   static void Fields(Self& s, V& v) {
     using fields::Field;
-    v.Choice(s.algorithm, Field("algorithm", "", "which detector runs"), kAlgorithmNames);
+    v.Choice(s.algorithm, Field("algorithm", "", "which detector runs").Flag("algorithm", "NAME"),
+             kAlgorithmNames);
     v.Number(s.max_width_px, Field("max_width_px", "pixels", "wider frames are binned")
                                  .In(64, 16384)
                                  .Or(0, "never bin"));

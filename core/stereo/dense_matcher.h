@@ -93,7 +93,7 @@ struct DenseConfidenceInputs {
 };
 inline constexpr int kDenseConfidenceFeatures = 15;
 // The fitted model speaks alone where DenseCues::structure is at least this; below it a prior
-// lowers the confidence to 0 at 1.1 (dense_matcher.cc).
+// lowers the confidence to 0 at 1.1 (dense_confidence.cc).
 inline constexpr double kDenseStructureFull = 1.5;
 inline constexpr int kDenseAgreementMax = 24;
 using DenseConfidenceVector = std::array<double, kDenseConfidenceFeatures>;

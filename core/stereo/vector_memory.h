@@ -1,5 +1,6 @@
-// Unaligned loads and stores of GCC vector types, shared by the SIMD matchers (block_matcher.cc,
-// dense_matcher.cc). Vector arguments by reference: no ABI questions without AVX.
+// Unaligned loads and stores of GCC vector types, shared by the SIMD matchers
+// (block_matcher_kernels.cc, dense_matcher.cc, dense_confidence.cc). Vector arguments by
+// reference: no ABI questions without AVX.
 #pragma once
 
 #include <cstring>

@@ -16,10 +16,35 @@ void AssignmentSolver::Solve(const Eigen::Ref<const Eigen::MatrixXd>& cost,
   if (rows == 0 || cols == 0) return;
 
   // The algorithm augments once per row and needs n <= m: solve the transpose when there are more
-  // rows than columns. The copy is row-major so that the inner loop over columns is contiguous.
+  // rows than columns.
   const bool transposed = rows > cols;
   const int n = transposed ? cols : rows;
   const int m = transposed ? rows : cols;
+  LoadProblem(cost, transposed, n, m);
+
+  // Index 0 is a virtual column (and row) that roots each augmenting path.
+  u_.assign(n + 1, 0.0);
+  v_.assign(m + 1, 0.0);
+  row_of_col_.assign(m + 1, 0);
+  way_.assign(m + 1, 0);
+  min_slack_.resize(m + 1);
+  used_.resize(m + 1);
+  for (int i = 1; i <= n; ++i) Augment(i, m);
+
+  for (int j = 1; j <= m; ++j) {
+    const int i = row_of_col_[j];
+    if (i == 0) continue;
+    if (transposed) {
+      row_to_col[j - 1] = i - 1;
+    } else {
+      row_to_col[i - 1] = j - 1;
+    }
+  }
+}
+
+void AssignmentSolver::LoadProblem(const Eigen::Ref<const Eigen::MatrixXd>& cost, bool transposed,
+                                   int n, int m) {
+  // Row-major, so that the inner loop over columns is contiguous.
   a_.resize(static_cast<size_t>(n) * m);
   for (int i = 0; i < n; ++i) {
     for (int j = 0; j < m; ++j) {
@@ -31,71 +56,54 @@ void AssignmentSolver::Solve(const Eigen::Ref<const Eigen::MatrixXd>& cost,
       a_[static_cast<size_t>(i) * m + j] = c;
     }
   }
+}
 
-  // Index 0 is a virtual column (and row) that roots each augmenting path.
+void AssignmentSolver::Augment(int i, int m) {
   constexpr double kInf = std::numeric_limits<double>::infinity();
-  u_.assign(n + 1, 0.0);
-  v_.assign(m + 1, 0.0);
-  row_of_col_.assign(m + 1, 0);
-  way_.assign(m + 1, 0);
-  min_slack_.resize(m + 1);
-  used_.resize(m + 1);
-  for (int i = 1; i <= n; ++i) {
-    // Grow a shortest-path tree (reduced costs a - u - v >= 0 are the edge lengths) from row i
-    // until it reaches a free column, then flip the path. Each step adds the column of least slack
-    // and shifts the potentials by that slack, which keeps every reduced cost non-negative and
-    // every tree edge tight.
-    row_of_col_[0] = i;
-    int j0 = 0;
-    std::fill(min_slack_.begin(), min_slack_.end(), kInf);
-    std::fill(used_.begin(), used_.end(), char{0});
-    do {
-      used_[j0] = 1;
-      const int i0 = row_of_col_[j0];
-      const double* a_row = &a_[static_cast<size_t>(i0 - 1) * m];
-      const double u_i0 = u_[i0];
-      double delta = kInf;
-      int j1 = 0;
-      for (int j = 1; j <= m; ++j) {
-        if (used_[j]) continue;
-        const double reduced = a_row[j - 1] - u_i0 - v_[j];
-        if (reduced < min_slack_[j]) {
-          min_slack_[j] = reduced;
-          way_[j] = j0;
-        }
-        if (min_slack_[j] < delta) {
-          delta = min_slack_[j];
-          j1 = j;
-        }
+  // Grow a shortest-path tree (reduced costs a - u - v >= 0 are the edge lengths) from row i
+  // until it reaches a free column, then flip the path. Each step adds the column of least slack
+  // and shifts the potentials by that slack, which keeps every reduced cost non-negative and
+  // every tree edge tight.
+  row_of_col_[0] = i;
+  int j0 = 0;
+  std::fill(min_slack_.begin(), min_slack_.end(), kInf);
+  std::fill(used_.begin(), used_.end(), char{0});
+  do {
+    used_[j0] = 1;
+    const int i0 = row_of_col_[j0];
+    const double* a_row = &a_[static_cast<size_t>(i0 - 1) * m];
+    const double u_i0 = u_[i0];
+    double delta = kInf;
+    int j1 = 0;
+    for (int j = 1; j <= m; ++j) {
+      if (used_[j]) continue;
+      const double reduced = a_row[j - 1] - u_i0 - v_[j];
+      if (reduced < min_slack_[j]) {
+        min_slack_[j] = reduced;
+        way_[j] = j0;
       }
-      // n <= m, so an unused column always exists and j1 is set.
-      for (int j = 0; j <= m; ++j) {
-        if (used_[j]) {
-          u_[row_of_col_[j]] += delta;
-          v_[j] -= delta;
-        } else {
-          min_slack_[j] -= delta;
-        }
+      if (min_slack_[j] < delta) {
+        delta = min_slack_[j];
+        j1 = j;
       }
-      j0 = j1;
-    } while (row_of_col_[j0] != 0);
-    // Augment: walk the path back to the root, shifting each matched row one column along.
-    do {
-      const int j1 = way_[j0];
-      row_of_col_[j0] = row_of_col_[j1];
-      j0 = j1;
-    } while (j0 != 0);
-  }
-
-  for (int j = 1; j <= m; ++j) {
-    const int i = row_of_col_[j];
-    if (i == 0) continue;
-    if (transposed) {
-      row_to_col[j - 1] = i - 1;
-    } else {
-      row_to_col[i - 1] = j - 1;
     }
-  }
+    // n <= m, so an unused column always exists and j1 is set.
+    for (int j = 0; j <= m; ++j) {
+      if (used_[j]) {
+        u_[row_of_col_[j]] += delta;
+        v_[j] -= delta;
+      } else {
+        min_slack_[j] -= delta;
+      }
+    }
+    j0 = j1;
+  } while (row_of_col_[j0] != 0);
+  // Augment: walk the path back to the root, shifting each matched row one column along.
+  do {
+    const int j1 = way_[j0];
+    row_of_col_[j0] = row_of_col_[j1];
+    j0 = j1;
+  } while (j0 != 0);
 }
 
 int AssignmentSolver::Find(int node) {

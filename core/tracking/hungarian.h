@@ -48,6 +48,12 @@ class AssignmentSolver {
                    std::vector<int>& row_to_col);
 
  private:
+  // Solve's steps: the cost matrix (transposed when it has more rows than columns) into a_, n x m
+  // with n <= m, forbidden pairs at kForbiddenCost (std::invalid_argument for a cost that is NaN or
+  // -infinity); then one shortest augmenting path from row i (1-based) over the m columns, which
+  // updates the potentials and the matching.
+  void LoadProblem(const Eigen::Ref<const Eigen::MatrixXd>& cost, bool transposed, int n, int m);
+  void Augment(int i, int m);
   int Find(int node);
 
   // SolveSparse, over nodes (the rows, then the columns): union-find parents; the group of each

@@ -54,7 +54,8 @@ std::vector<std::string> AravisOptions::Validate() const {
     problems.push_back("right_id: must name a camera (id, serial or address)");
   }
   if (!left_id.empty() && left_id == right_id) {
-    problems.push_back("right_id: must differ from left_id (both are '" + left_id + "')");
+    problems.push_back("right_id: must be another camera than the left one (both are '" + left_id +
+                       "')");
   }
   if (!pixel_format.empty()) {
     const std::optional<PixelFormat> format = ParsePixelFormat(pixel_format);
@@ -130,7 +131,25 @@ struct AravisStereoSource::Impl {
   Slot& slot(Side side) { return slots[side == Side::kLeft ? 0 : 1]; }
   const Slot& slot(Side side) const { return slots[side == Side::kLeft ? 0 : 1]; }
 
+  // What a slot's acquisition thread (Run) keeps between its steps: the software trigger's next
+  // instant, the last sign of life of the camera, and the reopening's back-off.
+  struct RunState {
+    Clock::time_point next_trigger;
+    Clock::time_point last_buffer;
+    uint64_t incomplete_seen = 0;  // the camera's incomplete count at the last poll
+    Clock::duration backoff{};
+    Clock::time_point next_attempt;
+    bool refresh_list = false;  // rediscover the devices before the next reopening
+  };
+
   void Run(Slot& s);
+  // Run's steps. Reopen: waits for the next attempt, then opens and starts the slot's camera;
+  // false when the source stops meanwhile. Poll: one round with an open camera (a software
+  // trigger when it is due, a frame popped and paired, a loss detected).
+  bool Reopen(Slot& s, RunState& r);
+  void Poll(Slot& s, RunState& r);
+  // The next software trigger instant after `t`, on the time grid shared by both cameras.
+  Clock::time_point NextGridPoint(Clock::time_point t) const;
   void Lose(Slot& s, const std::string& reason);
   void PublishStats(Slot& s, const CameraStats& current);
   std::string LostMessage(const Slot& s) const;
@@ -185,20 +204,18 @@ std::string AravisStereoSource::Impl::LostMessage(const Slot& s) const {
   return message;
 }
 
-void AravisStereoSource::Impl::Run(Slot& s) {
-  const bool software = options.trigger.mode == TriggerMode::kSoftware;
+Clock::time_point AravisStereoSource::Impl::NextGridPoint(Clock::time_point t) const {
   const auto period = std::chrono::nanoseconds(options.FramePeriodNs());
-  // The next trigger instant on the grid shared by both cameras, after `t`.
-  const auto next_grid_point = [&](Clock::time_point t) {
-    const auto k = (t - trigger_epoch) / period + 1;
-    return trigger_epoch + k * period;
-  };
-  auto next_trigger = next_grid_point(Clock::now());
-  auto last_buffer = Clock::now();
-  uint64_t incomplete_seen = 0;
-  auto backoff = std::chrono::duration_cast<Clock::duration>(kReconnectFirst);
-  auto next_attempt = Clock::now() + backoff;
-  bool refresh_list = false;
+  const auto k = (t - trigger_epoch) / period + 1;
+  return trigger_epoch + k * period;
+}
+
+void AravisStereoSource::Impl::Run(Slot& s) {
+  RunState r;
+  r.next_trigger = NextGridPoint(Clock::now());
+  r.last_buffer = Clock::now();
+  r.backoff = std::chrono::duration_cast<Clock::duration>(kReconnectFirst);
+  r.next_attempt = Clock::now() + r.backoff;
 
   while (true) {
     {
@@ -209,100 +226,107 @@ void AravisStereoSource::Impl::Run(Slot& s) {
     std::erase_if(s.releases, [](std::future<void>& f) {
       return f.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
     });
-
     if (!s.camera) {
-      {
-        std::unique_lock lock(mu);
-        if (cv.wait_until(lock, next_attempt, [&] { return stop; })) break;
-      }
-      Result<std::unique_ptr<AravisCamera>> opened = AravisCamera::Open(s.settings, refresh_list);
-      Status started = opened.ok() ? opened.value()->StartAcquisition() : Status::Ok();
-      if (!opened.ok() || !started.ok()) {
-        const Error& error = opened.ok() ? started.error() : opened.error();
-        {
-          std::lock_guard lock(mu);
-          s.reconnect_error = error.message;
-          ++s.reconnect_attempts;
-        }
-        // Rediscover next time: the camera may come back at another address.
-        refresh_list = true;
-        backoff = std::min<Clock::duration>(backoff * 2, kReconnectMax);
-        next_attempt = Clock::now() + backoff;
-        cv.notify_all();
-        continue;
-      }
-      s.camera = std::move(opened.value());
-      refresh_list = false;
-      backoff = std::chrono::duration_cast<Clock::duration>(kReconnectFirst);
-      last_buffer = Clock::now();
-      incomplete_seen = 0;
-      next_trigger = next_grid_point(Clock::now());
-      {
-        std::lock_guard lock(mu);
-        // A reopened camera may have restarted its clock: pair only its new frames.
-        pairer.ResetSide(s.side);
-        s.lost = false;
-        s.lost_reported = false;
-        s.name = s.camera->id();
-        s.info = s.camera->info();
-        ++reconnects;
-      }
-      cv.notify_all();
+      if (!Reopen(s, r)) break;
       continue;
     }
-
-    auto wait = std::chrono::duration_cast<Clock::duration>(kPollSlice);
-    if (software) {
-      const auto now = Clock::now();
-      if (now >= next_trigger) {
-        if (Status triggered = s.camera->SoftwareTrigger(); !triggered.ok()) {
-          Lose(s, triggered.error().message);
-          next_attempt = Clock::now() + backoff;
-          continue;
-        }
-        next_trigger = next_grid_point(now);
-      }
-      wait = std::min<Clock::duration>(wait, next_trigger - Clock::now());
-    }
-    Result<std::optional<MonoFrame>> popped =
-        s.camera->Pop(std::chrono::duration_cast<std::chrono::microseconds>(wait));
-    if (!popped.ok()) {
-      Lose(s, popped.error().message);
-      next_attempt = Clock::now() + backoff;
-      continue;
-    }
-    const CameraStats stats = s.camera->Stats();
-    if (popped.value() || stats.incomplete != incomplete_seen) last_buffer = Clock::now();
-    incomplete_seen = stats.incomplete;
-    PublishStats(s, stats);
-    if (std::optional<MonoFrame>& frame = popped.value()) {
-      bool paired = false;
-      {
-        std::lock_guard lock(mu);
-        ++s.frames;
-        s.last_t_ns = frame->t_ns;
-        if (std::optional<StereoFrame> pair = pairer.Add(s.side, std::move(*frame))) {
-          latest = std::move(pair);
-          paired = true;
-        }
-      }
-      if (paired) cv.notify_all();
-      continue;
-    }
-    if (Clock::now() - last_buffer > lost_after) {
-      // An idle hardware trigger is no fault: ask the camera whether it is still there.
-      if (options.trigger.mode == TriggerMode::kHardware && s.camera->Ping().ok()) {
-        last_buffer = Clock::now();
-        continue;
-      }
-      Lose(s, "no frame for " + Seconds(Clock::now() - last_buffer));
-      next_attempt = Clock::now() + backoff;
-    }
+    Poll(s, r);
   }
   // Stopping: release the camera here (its AcquisitionStop is sent unless it was lost) and wait
   // for the releases still running.
   s.camera.reset();
   s.releases.clear();
+}
+
+bool AravisStereoSource::Impl::Reopen(Slot& s, RunState& r) {
+  {
+    std::unique_lock lock(mu);
+    if (cv.wait_until(lock, r.next_attempt, [&] { return stop; })) return false;
+  }
+  Result<std::unique_ptr<AravisCamera>> opened = AravisCamera::Open(s.settings, r.refresh_list);
+  Status started = opened.ok() ? opened.value()->StartAcquisition() : Status::Ok();
+  if (!opened.ok() || !started.ok()) {
+    const Error& error = opened.ok() ? started.error() : opened.error();
+    {
+      std::lock_guard lock(mu);
+      s.reconnect_error = error.message;
+      ++s.reconnect_attempts;
+    }
+    // Rediscover next time: the camera may come back at another address.
+    r.refresh_list = true;
+    r.backoff = std::min<Clock::duration>(r.backoff * 2, kReconnectMax);
+    r.next_attempt = Clock::now() + r.backoff;
+    cv.notify_all();
+    return true;
+  }
+  s.camera = std::move(opened.value());
+  r.refresh_list = false;
+  r.backoff = std::chrono::duration_cast<Clock::duration>(kReconnectFirst);
+  r.last_buffer = Clock::now();
+  r.incomplete_seen = 0;
+  r.next_trigger = NextGridPoint(Clock::now());
+  {
+    std::lock_guard lock(mu);
+    // A reopened camera may have restarted its clock: pair only its new frames.
+    pairer.ResetSide(s.side);
+    s.lost = false;
+    s.lost_reported = false;
+    s.name = s.camera->id();
+    s.info = s.camera->info();
+    ++reconnects;
+  }
+  cv.notify_all();
+  return true;
+}
+
+void AravisStereoSource::Impl::Poll(Slot& s, RunState& r) {
+  auto wait = std::chrono::duration_cast<Clock::duration>(kPollSlice);
+  if (options.trigger.mode == TriggerMode::kSoftware) {
+    const auto now = Clock::now();
+    if (now >= r.next_trigger) {
+      if (Status triggered = s.camera->SoftwareTrigger(); !triggered.ok()) {
+        Lose(s, triggered.error().message);
+        r.next_attempt = Clock::now() + r.backoff;
+        return;
+      }
+      r.next_trigger = NextGridPoint(now);
+    }
+    wait = std::min<Clock::duration>(wait, r.next_trigger - Clock::now());
+  }
+  Result<std::optional<MonoFrame>> popped =
+      s.camera->Pop(std::chrono::duration_cast<std::chrono::microseconds>(wait));
+  if (!popped.ok()) {
+    Lose(s, popped.error().message);
+    r.next_attempt = Clock::now() + r.backoff;
+    return;
+  }
+  const CameraStats stats = s.camera->Stats();
+  if (popped.value() || stats.incomplete != r.incomplete_seen) r.last_buffer = Clock::now();
+  r.incomplete_seen = stats.incomplete;
+  PublishStats(s, stats);
+  if (std::optional<MonoFrame>& frame = popped.value()) {
+    bool paired = false;
+    {
+      std::lock_guard lock(mu);
+      ++s.frames;
+      s.last_t_ns = frame->t_ns;
+      if (std::optional<StereoFrame> pair = pairer.Add(s.side, std::move(*frame))) {
+        latest = std::move(pair);
+        paired = true;
+      }
+    }
+    if (paired) cv.notify_all();
+    return;
+  }
+  if (Clock::now() - r.last_buffer > lost_after) {
+    // An idle hardware trigger is no fault: ask the camera whether it is still there.
+    if (options.trigger.mode == TriggerMode::kHardware && s.camera->Ping().ok()) {
+      r.last_buffer = Clock::now();
+      return;
+    }
+    Lose(s, "no frame for " + Seconds(Clock::now() - r.last_buffer));
+    r.next_attempt = Clock::now() + r.backoff;
+  }
 }
 
 AravisStereoSource::AravisStereoSource(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}

@@ -69,16 +69,24 @@ struct AravisOptions {
   template <class Self, class V>
   static void Fields(Self& s, V& v) {
     using fields::Field;
-    v.Number(s.roi_width,
-             Field("width", "pixels", "region of interest, centred").In(kMinRoiPx, kMaxRoiPx));
-    v.Number(s.roi_height,
-             Field("height", "pixels", "region of interest, centred").In(kMinRoiPx, kMaxRoiPx));
+    v.Number(s.roi_width, Field("width", "pixels", "region of interest, centred")
+                              .In(kMinRoiPx, kMaxRoiPx)
+                              .Flag("roi", "WxH"));
+    v.Number(s.roi_height, Field("height", "pixels", "region of interest, centred")
+                               .In(kMinRoiPx, kMaxRoiPx)
+                               .Flag("roi", "WxH"));
     v.Number(s.frame_rate_hz, Field("frame_rate_hz", "Hz", "both cameras").Above(0).AtMost(1000));
-    v.Number(s.exposure_us,
-             Field("exposure_us", "us", "fixed exposure; 0 = automatic").AtLeast(0).Below(1e8));
-    v.Number(s.gain_db, Field("gain_db", "dB", "fixed gain; negative = automatic"));
-    v.Choice(s.trigger.mode, Field("trigger", "", "what starts an exposure"), kTriggerNames);
-    v.Text(s.trigger.line, Field("trigger_line", "", "the hardware trigger's line, e.g. Line0"));
+    v.Number(s.exposure_us, Field("exposure_us", "us", "fixed exposure; 0 = automatic")
+                                .AtLeast(0)
+                                .Below(1e8)
+                                .Flag("exposure-us", "US"));
+    v.Number(s.gain_db,
+             Field("gain_db", "dB", "fixed gain; negative = automatic").Flag("gain-db", "DB"));
+    v.Choice(s.trigger.mode,
+             Field("trigger", "", "what starts an exposure").Flag("trigger", "MODE"),
+             kTriggerNames);
+    v.Text(s.trigger.line,
+           Field("trigger_line", "", "the hardware trigger's line, e.g. Line0").Flag("trigger"));
     v.Number(s.pair_tolerance_ms, Field("pair_tolerance_ms", "ms",
                                         "largest capture-time difference of a pair; 0 = "
                                         "half the frame period")
@@ -86,7 +94,7 @@ struct AravisOptions {
                                       .AtMost(1000));
     v.Number(s.buffers, Field("buffers", "", "stream buffers per camera").In(2, 64));
     v.Text(s.pixel_format, Field("pixel_format", "", "Mono8 or Bayer*8; empty = automatic"));
-    v.Choice(s.timestamps, Field("timestamps", "", "which clock pairs the frames"),
+    v.Choice(s.timestamps, Field("timestamps", "", "which clock pairs the frames").Flag(),
              kTimestampNames);
   }
 };

@@ -77,17 +77,24 @@ struct GstOptions {
   template <class Self, class V>
   static void Fields(Self& s, V& v) {
     using fields::Field;
-    v.Choice(s.layout, Field("layout", "", "how the views come out of the pipelines"),
+    v.Choice(s.layout,
+             Field("layout", "", "how the views come out of the pipelines").Flag("layout", "L"),
              kLayoutNames);
-    v.Text(s.pipeline, Field("pipeline", "", "side_by_side, top_bottom: the gst-launch pipeline"));
-    v.Text(s.left_pipeline, Field("left_pipeline", "", "two: the left view's pipeline"));
-    v.Text(s.right_pipeline, Field("right_pipeline", "", "two: the right view's pipeline"));
+    v.Text(s.pipeline, Field("pipeline", "", "side_by_side, top_bottom: the gst-launch pipeline")
+                           .Flag("pipeline", "P"));
+    v.Text(s.left_pipeline,
+           Field("left_pipeline", "", "two: the left view's pipeline").Flag("left-pipeline", "P"));
+    v.Text(
+        s.right_pipeline,
+        Field("right_pipeline", "", "two: the right view's pipeline").Flag("right-pipeline", "P"));
     v.Number(s.width, Field("width", "pixels", "one view; 0 = as the stream comes")
                           .In(16, 16384)
-                          .Or(0, "as the stream comes"));
+                          .Or(0, "as the stream comes")
+                          .Flag("size", "WxH"));
     v.Number(s.height, Field("height", "pixels", "one view; 0 = as the stream comes")
                            .In(16, 16384)
-                           .Or(0, "as the stream comes"));
+                           .Or(0, "as the stream comes")
+                           .Flag("size", "WxH"));
     v.Number(s.fps, Field("fps", "Hz", "expected frame rate").Above(0).AtMost(1000));
     v.Number(s.pair_tolerance_ms, Field("pair_tolerance_ms", "ms",
                                         "two: largest capture-time difference of a pair; 0 = "

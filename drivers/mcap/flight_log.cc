@@ -56,12 +56,9 @@ bool ValidRigName(const std::string& rig) {
 }  // namespace
 
 std::vector<std::string> FlightLogOptions::Validate() const {
-  std::vector<std::string> problems;
+  std::vector<std::string> problems = fields::Check(*this);
   if (!ValidRigName(rig)) {
     problems.push_back("rig: 1..64 of [A-Za-z0-9_-], a topic's first part (got '" + rig + "')");
-  }
-  if (!std::isfinite(image_hz) || image_hz < 0 || image_hz > 30) {
-    problems.push_back("image_hz: must be in [0, 30] (0 = no images)" + Got(image_hz));
   }
   AppendPrefixed(problems, "mcap.", mcap.Validate());
   return problems;

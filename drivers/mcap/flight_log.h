@@ -12,6 +12,7 @@
 #include <google/protobuf/message.h>
 
 #include "core/common/error.h"
+#include "core/common/fields.h"
 #include "drivers/mcap/mcap_writer.h"
 #include "stevi/v1/geo.pb.h"
 #include "stevi/v1/obstacle_service.pb.h"
@@ -26,6 +27,19 @@ struct FlightLogOptions {
   mcap::WriterOptions mcap;
 
   std::vector<std::string> Validate() const;
+
+  // The fields of stevi.v1.McapRecordConfig (its file, compression and chunk span are the
+  // server's).
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Text(s.rig, Field("rig", "", "the topics' first part"));
+    v.Number(s.image_hz, Field("image_hz", "Hz",
+                               "left and disparity images per second of each kind in the MCAP "
+                               "file, on capture time; 0 = none")
+                             .In(0, 30)
+                             .Flag("mcap-image-hz", "N"));
+  }
 };
 
 // The counts of what was written, for status and the closing message.

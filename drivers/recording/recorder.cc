@@ -269,40 +269,52 @@ void Recorder::WriterLoop() {
   }
 }
 
+namespace {
+
+// `frame` as a record's frame, both images as PNGs; false (with `why`, an OpenCV message or
+// empty) when they cannot be encoded, and then `entry` is left as it was.
+bool EncodeFrame(const StereoFrame& frame, int png_compression, v1::RecordEntry& entry,
+                 std::string& why) {
+  std::vector<uchar> left_png, right_png;
+  const std::vector<int> params = {cv::IMWRITE_PNG_COMPRESSION, png_compression};
+  bool encoded = false;
+  try {
+    encoded = cv::imencode(".png", frame.left, left_png, params) &&
+              cv::imencode(".png", frame.right, right_png, params);
+  } catch (const cv::Exception& e) {
+    why = std::string(" (") + e.what() + ")";
+  }
+  if (!encoded) return false;
+  v1::RecordedFrame* out = entry.mutable_frame();
+  out->set_index(frame.index);
+  out->set_t_ns(frame.t_ns);
+  out->set_unix_time_ns(frame.unix_time_ns);
+  out->set_pair_skew_ns(frame.pair_skew_ns);
+  out->set_rectified(frame.rectified);
+  for (auto [image, png, side] : {std::tuple{&frame.left, &left_png, out->mutable_left()},
+                                  std::tuple{&frame.right, &right_png, out->mutable_right()}}) {
+    side->set_width(image->cols);
+    side->set_height(image->rows);
+    side->set_channels(image->channels());
+    side->set_data(png->data(), png->size());
+  }
+  return true;
+}
+
+}  // namespace
+
 std::optional<Recorder::Outcome> Recorder::Write(const Item& item) {
   v1::RecordEntry entry;
   const StereoFrame* frame = std::get_if<StereoFrame>(&item.entry);
   if (frame != nullptr) {
-    std::vector<uchar> left_png, right_png;
-    const std::vector<int> params = {cv::IMWRITE_PNG_COMPRESSION, options_.png_compression};
-    bool encoded = false;
     std::string why;
-    try {
-      encoded = cv::imencode(".png", frame->left, left_png, params) &&
-                cv::imencode(".png", frame->right, right_png, params);
-    } catch (const cv::Exception& e) {
-      why = std::string(" (") + e.what() + ")";
-    }
-    if (!encoded) {
+    if (!EncodeFrame(*frame, options_.png_compression, entry, why)) {
       // AddFrame checked the images, so this is a library failure: stop rather than lose frames
       // silently one by one.
       return Outcome{"cannot encode frame " + std::to_string(frame->index) + " as PNG" + why,
                      "recording " + dir_ + ": cannot encode frame " + std::to_string(frame->index) +
                          " as PNG" + why,
                      ErrorCode::kInternal};
-    }
-    v1::RecordedFrame* out = entry.mutable_frame();
-    out->set_index(frame->index);
-    out->set_t_ns(frame->t_ns);
-    out->set_unix_time_ns(frame->unix_time_ns);
-    out->set_pair_skew_ns(frame->pair_skew_ns);
-    out->set_rectified(frame->rectified);
-    for (auto [image, png, side] : {std::tuple{&frame->left, &left_png, out->mutable_left()},
-                                    std::tuple{&frame->right, &right_png, out->mutable_right()}}) {
-      side->set_width(image->cols);
-      side->set_height(image->rows);
-      side->set_channels(image->channels());
-      side->set_data(png->data(), png->size());
     }
   } else if (const auto* state = std::get_if<geo::VehicleState>(&item.entry)) {
     *entry.mutable_vehicle_state() = VehicleStateToProto(*state);

@@ -46,7 +46,8 @@ struct RecorderOptions {
                               .AtLeast(static_cast<double>(kMinMaxBytes)));
     v.Number(s.queue_frames,
              Field("queue_frames", "frames", "frames waiting to be written").In(1, 1024));
-    v.Number(s.png_compression, Field("png_compression", "", "zlib level of the PNGs").In(0, 9));
+    v.Number(s.png_compression,
+             Field("png_compression", "", "zlib level of the PNGs").In(0, 9).NoProto());
   }
 
   // Every problem, as "field: problem (got X)".

@@ -363,6 +363,78 @@ Result<cv::Mat> RecordingReader::DecodeImage(const v1::RecordedImage& image,
   return decoded;
 }
 
+std::optional<std::string> RecordingReader::ReadRecordBytes(uint64_t start,
+                                                            const std::string& where) {
+  // The varint32 length prefix of util::SerializeDelimitedToOstream: at most 5 bytes.
+  uint64_t size = 0;
+  int prefix_bytes = 0;
+  while (true) {
+    if (start + prefix_bytes >= file_size_) {
+      return "truncated record" + where + " (the length prefix is cut)";
+    }
+    const int c = records_.get();
+    if (c == std::char_traits<char>::eof()) {
+      return "truncated record" + where + " (the file ended early)";
+    }
+    size |= static_cast<uint64_t>(c & 0x7f) << (7 * prefix_bytes);
+    ++prefix_bytes;
+    if ((c & 0x80) == 0) break;
+    if (prefix_bytes == 5) return "corrupt record" + where + " (bad length prefix)";
+  }
+  // Bound the size before allocating anything for it.
+  if (size > kMaxRecordBytes) {
+    return "corrupt record" + where + " (it announces " + std::to_string(size) +
+           " bytes, more than the " + FormatBytes(kMaxRecordBytes) + " limit)";
+  }
+  const uint64_t left = file_size_ - start - static_cast<uint64_t>(prefix_bytes);
+  if (size > left) {
+    return "truncated record" + where + " (" + std::to_string(size) + " bytes announced, " +
+           std::to_string(left) + " left)";
+  }
+  buffer_.resize(size);
+  records_.read(buffer_.data(), static_cast<std::streamsize>(size));
+  if (static_cast<uint64_t>(records_.gcount()) != size) {
+    return "truncated record" + where + " (the file ended early)";
+  }
+  offset_ = start + static_cast<uint64_t>(prefix_bytes) + size;
+  return std::nullopt;
+}
+
+std::optional<std::string> RecordingReader::ReadFrame(const v1::RecordedFrame& f,
+                                                      bool decode_images, const std::string& where,
+                                                      StereoFrame& frame) const {
+  if (!f.has_left() || !f.has_right()) {
+    return "corrupt record" + where + " (a frame without both images)";
+  }
+  if (std::string problem = ImageProblem(f.left()); !problem.empty()) {
+    return "corrupt record" + where + " (left image " + problem + ")";
+  }
+  if (std::string problem = ImageProblem(f.right()); !problem.empty()) {
+    return "corrupt record" + where + " (right image " + problem + ")";
+  }
+  if (f.left().width() != f.right().width() || f.left().height() != f.right().height()) {
+    return "corrupt record" + where + " (left and right differ in size)";
+  }
+  frame.index = f.index();
+  frame.t_ns = f.t_ns();
+  frame.unix_time_ns = f.unix_time_ns();
+  frame.pair_skew_ns = f.pair_skew_ns();
+  frame.rectified = f.rectified();
+  if (decode_images) {
+    Result<cv::Mat> left_image = DecodeImage(f.left(), "left");
+    if (!left_image.ok()) {
+      return "corrupt record" + where + " (" + left_image.error().message + ")";
+    }
+    Result<cv::Mat> right_image = DecodeImage(f.right(), "right");
+    if (!right_image.ok()) {
+      return "corrupt record" + where + " (" + right_image.error().message + ")";
+    }
+    frame.left = std::move(left_image.value());
+    frame.right = std::move(right_image.value());
+  }
+  return std::nullopt;
+}
+
 std::optional<RecordingRecord> RecordingReader::Next(bool decode_images) {
   while (!ended_) {
     if (offset_ >= file_size_) {
@@ -372,40 +444,9 @@ std::optional<RecordingRecord> RecordingReader::Next(bool decode_images) {
     const uint64_t start = offset_;
     const std::string where =
         " after " + std::to_string(frames_read_) + " frames at byte " + std::to_string(start);
-
-    // The varint32 length prefix of util::SerializeDelimitedToOstream: at most 5 bytes.
-    uint64_t size = 0;
-    int prefix_bytes = 0;
-    while (true) {
-      if (start + prefix_bytes >= file_size_) {
-        return EndWith("truncated record" + where + " (the length prefix is cut)");
-      }
-      const int c = records_.get();
-      if (c == std::char_traits<char>::eof()) {
-        return EndWith("truncated record" + where + " (the file ended early)");
-      }
-      size |= static_cast<uint64_t>(c & 0x7f) << (7 * prefix_bytes);
-      ++prefix_bytes;
-      if ((c & 0x80) == 0) break;
-      if (prefix_bytes == 5) return EndWith("corrupt record" + where + " (bad length prefix)");
+    if (std::optional<std::string> problem = ReadRecordBytes(start, where)) {
+      return EndWith(*problem);
     }
-    // Bound the size before allocating anything for it.
-    if (size > kMaxRecordBytes) {
-      return EndWith("corrupt record" + where + " (it announces " + std::to_string(size) +
-                     " bytes, more than the " + FormatBytes(kMaxRecordBytes) + " limit)");
-    }
-    const uint64_t left = file_size_ - start - static_cast<uint64_t>(prefix_bytes);
-    if (size > left) {
-      return EndWith("truncated record" + where + " (" + std::to_string(size) +
-                     " bytes announced, " + std::to_string(left) + " left)");
-    }
-    buffer_.resize(size);
-    records_.read(buffer_.data(), static_cast<std::streamsize>(size));
-    if (static_cast<uint64_t>(records_.gcount()) != size) {
-      return EndWith("truncated record" + where + " (the file ended early)");
-    }
-    offset_ = start + static_cast<uint64_t>(prefix_bytes) + size;
-
     v1::RecordEntry entry;
     if (!entry.ParseFromString(buffer_)) {
       return EndWith("corrupt record" + where + " (not a RecordEntry)");
@@ -413,42 +454,14 @@ std::optional<RecordingRecord> RecordingReader::Next(bool decode_images) {
     RecordingRecord record;
     record.offset = start;
     switch (entry.entry_case()) {
-      case v1::RecordEntry::kFrame: {
-        const v1::RecordedFrame& f = entry.frame();
-        if (!f.has_left() || !f.has_right()) {
-          return EndWith("corrupt record" + where + " (a frame without both images)");
-        }
-        if (std::string problem = ImageProblem(f.left()); !problem.empty()) {
-          return EndWith("corrupt record" + where + " (left image " + problem + ")");
-        }
-        if (std::string problem = ImageProblem(f.right()); !problem.empty()) {
-          return EndWith("corrupt record" + where + " (right image " + problem + ")");
-        }
-        if (f.left().width() != f.right().width() || f.left().height() != f.right().height()) {
-          return EndWith("corrupt record" + where + " (left and right differ in size)");
+      case v1::RecordEntry::kFrame:
+        if (std::optional<std::string> problem =
+                ReadFrame(entry.frame(), decode_images, where, record.frame)) {
+          return EndWith(*problem);
         }
         record.kind = RecordingRecord::Kind::kFrame;
-        StereoFrame& frame = record.frame;
-        frame.index = f.index();
-        frame.t_ns = f.t_ns();
-        frame.unix_time_ns = f.unix_time_ns();
-        frame.pair_skew_ns = f.pair_skew_ns();
-        frame.rectified = f.rectified();
-        if (decode_images) {
-          Result<cv::Mat> left_image = DecodeImage(f.left(), "left");
-          if (!left_image.ok()) {
-            return EndWith("corrupt record" + where + " (" + left_image.error().message + ")");
-          }
-          Result<cv::Mat> right_image = DecodeImage(f.right(), "right");
-          if (!right_image.ok()) {
-            return EndWith("corrupt record" + where + " (" + right_image.error().message + ")");
-          }
-          frame.left = std::move(left_image.value());
-          frame.right = std::move(right_image.value());
-        }
         ++frames_read_;
         return record;
-      }
       case v1::RecordEntry::kVehicleState:
         record.kind = RecordingRecord::Kind::kVehicleState;
         record.vehicle_state = VehicleStateFromProto(entry.vehicle_state());

@@ -107,6 +107,13 @@ class RecordingReader {
   std::nullopt_t EndWith(const std::string& problem);
   // Decodes one image and checks it against its stored size and channels.
   Result<cv::Mat> DecodeImage(const v1::RecordedImage& image, const char* side) const;
+  // Next's steps, each returning the problem that ends the iteration (nullopt when all is well;
+  // `where` places the record in messages). ReadRecordBytes: the record at `start` (its varint32
+  // length prefix, then its bytes into buffer_), offset_ moved past it. ReadFrame: a frame
+  // record's checks, and `frame` filled (with its images decoded when `decode_images`).
+  std::optional<std::string> ReadRecordBytes(uint64_t start, const std::string& where);
+  std::optional<std::string> ReadFrame(const v1::RecordedFrame& f, bool decode_images,
+                                       const std::string& where, StereoFrame& frame) const;
 
   std::string dir_;
   std::string records_path_;

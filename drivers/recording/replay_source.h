@@ -35,7 +35,10 @@ struct ReplayOptions {
     v.Number(s.rate, Field("rate", "",
                            "speed against the recording; 0 = as fast as the pipeline "
                            "takes frames")
-                         .In(0, 1000));
+                         .Above(0)
+                         .AtMost(1000)
+                         .Or(0, "max")
+                         .Flag("rate", "R|max"));
     v.Flag(s.loop, Field("loop", "", "start again at the end"));
   }
 };

@@ -80,30 +80,10 @@ cv::Vec3d Scene::RigOffsetAt(double t_s) const {
   return rig_velocity_mps * t;
 }
 
-std::vector<std::string> Scene::Validate() const {
-  std::vector<std::string> problems;
-  const bool moving = rig_velocity_mps != cv::Vec3d(0.0, 0.0, 0.0);
-  Check(!std::isfinite(rig_velocity_mps[0]) || !std::isfinite(rig_velocity_mps[2]) ||
-            rig_velocity_mps[1] != 0.0,
-        "rig_velocity_mps", "must be finite and level (y = 0)", problems);
-  Check(!(rig_period_s >= 0.0) || !std::isfinite(rig_period_s), "rig_period_s", "must be >= 0",
-        problems);
-  Check(moving && (!hills.empty() || !marks.empty() || !dashed_lines.empty()), "rig_velocity_mps",
-        "a moving rig supports no hills, marks or dashed lines", problems);
-  Check(!(camera_height_m > 0.0) || !std::isfinite(camera_height_m), "camera_height_m",
-        "must be > 0", problems);
-  Check(!InUnit(ground_albedo), "ground_albedo", "must be in 0..1", problems);
-  Check(!InUnit(ground_contrast), "ground_contrast", "must be in 0..1", problems);
-  Check(!(ground_texture_cell_m > 0.0) || !std::isfinite(ground_texture_cell_m),
-        "ground_texture_cell_m", "must be > 0", problems);
-  Check(!InUnit(sky_top), "sky_top", "must be in 0..1", problems);
-  Check(!InUnit(sky_horizon), "sky_horizon", "must be in 0..1", problems);
-  Check(!(std::abs(camera_pitch_deg) <= 45.0), "camera_pitch_deg", "must be in -45..45", problems);
-  Check(!InUnit(cloud_cover), "cloud_cover", "must be in 0..1", problems);
-  Check(!(std::abs(cloud_grey) <= 1.0), "cloud_grey", "must be in -1..1", problems);
-  Check(!(cloud_scale > 0.0) || !std::isfinite(cloud_scale), "cloud_scale", "must be > 0",
-        problems);
+namespace {
 
+// Scene::Validate's steps: the problems of each list of the scene, appended.
+void ValidateObstacles(const std::vector<Obstacle>& obstacles, std::vector<std::string>& problems) {
   std::map<int, size_t> first_with_id;
   for (size_t i = 0; i < obstacles.size(); ++i) {
     const Obstacle& o = obstacles[i];
@@ -132,7 +112,10 @@ std::vector<std::string> Scene::Validate() const {
           "must be > 0", problems);
     ValidatePath(o.path, prefix + "path.", problems);
   }
+}
 
+void ValidateHills(const std::vector<Hill>& hills, double camera_height_m,
+                   std::vector<std::string>& problems) {
   for (size_t i = 0; i < hills.size(); ++i) {
     const Hill& hill = hills[i];
     const std::string prefix = "hills[" + std::to_string(i) + "].";
@@ -155,7 +138,9 @@ std::vector<std::string> Scene::Validate() const {
     Check(!(hill.texture_cell_m > 0.0) || !std::isfinite(hill.texture_cell_m),
           prefix + "texture_cell_m", "must be > 0", problems);
   }
+}
 
+void ValidateMarks(const std::vector<GroundMark>& marks, std::vector<std::string>& problems) {
   for (size_t i = 0; i < marks.size(); ++i) {
     const GroundMark& m = marks[i];
     const std::string prefix = "marks[" + std::to_string(i) + "].";
@@ -166,7 +151,10 @@ std::vector<std::string> Scene::Validate() const {
     Check(!InUnit(m.albedo), prefix + "albedo", "must be in 0..1", problems);
     Check(!InUnit(m.contrast), prefix + "contrast", "must be in 0..1", problems);
   }
+}
 
+void ValidateDashedLines(const std::vector<DashedLine>& dashed_lines,
+                         std::vector<std::string>& problems) {
   for (size_t i = 0; i < dashed_lines.size(); ++i) {
     const DashedLine& l = dashed_lines[i];
     const std::string prefix = "dashed_lines[" + std::to_string(i) + "].";
@@ -182,6 +170,38 @@ std::vector<std::string> Scene::Validate() const {
     Check(!InUnit(l.albedo), prefix + "albedo", "must be in 0..1", problems);
     Check(!InUnit(l.contrast), prefix + "contrast", "must be in 0..1", problems);
   }
+}
+
+}  // namespace
+
+std::vector<std::string> Scene::Validate() const {
+  std::vector<std::string> problems;
+  const bool moving = rig_velocity_mps != cv::Vec3d(0.0, 0.0, 0.0);
+  Check(!std::isfinite(rig_velocity_mps[0]) || !std::isfinite(rig_velocity_mps[2]) ||
+            rig_velocity_mps[1] != 0.0,
+        "rig_velocity_mps", "must be finite and level (y = 0)", problems);
+  Check(!(rig_period_s >= 0.0) || !std::isfinite(rig_period_s), "rig_period_s", "must be >= 0",
+        problems);
+  Check(moving && (!hills.empty() || !marks.empty() || !dashed_lines.empty()), "rig_velocity_mps",
+        "a moving rig supports no hills, marks or dashed lines", problems);
+  Check(!(camera_height_m > 0.0) || !std::isfinite(camera_height_m), "camera_height_m",
+        "must be > 0", problems);
+  Check(!InUnit(ground_albedo), "ground_albedo", "must be in 0..1", problems);
+  Check(!InUnit(ground_contrast), "ground_contrast", "must be in 0..1", problems);
+  Check(!(ground_texture_cell_m > 0.0) || !std::isfinite(ground_texture_cell_m),
+        "ground_texture_cell_m", "must be > 0", problems);
+  Check(!InUnit(sky_top), "sky_top", "must be in 0..1", problems);
+  Check(!InUnit(sky_horizon), "sky_horizon", "must be in 0..1", problems);
+  Check(!(std::abs(camera_pitch_deg) <= 45.0), "camera_pitch_deg", "must be in -45..45", problems);
+  Check(!InUnit(cloud_cover), "cloud_cover", "must be in 0..1", problems);
+  Check(!(std::abs(cloud_grey) <= 1.0), "cloud_grey", "must be in -1..1", problems);
+  Check(!(cloud_scale > 0.0) || !std::isfinite(cloud_scale), "cloud_scale", "must be > 0",
+        problems);
+
+  ValidateObstacles(obstacles, problems);
+  ValidateHills(hills, camera_height_m, problems);
+  ValidateMarks(marks, problems);
+  ValidateDashedLines(dashed_lines, problems);
   return problems;
 }
 

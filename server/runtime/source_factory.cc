@@ -63,22 +63,26 @@ Result<std::unique_ptr<drivers::StereoSource>> OpenImages(const SourceSpec& spec
   return drivers::OpenImageSource(spec.images);
 }
 
+// The cameras' options: the spec's aravis options with its left and right ids.
+drivers::AravisOptions AravisOf(const SourceSpec& spec) {
+  drivers::AravisOptions options = spec.aravis;
+  options.left_id = spec.left;
+  options.right_id = spec.right;
+  return options;
+}
+
+// The driver's own checks (drivers/aravis), each named by its config path: the cameras' ids are
+// source.left and source.right, the rest source.aravis.FIELD.
 std::vector<std::string> CheckAravis(const SourceSpec& spec) {
   std::vector<std::string> problems;
-  const std::string ids = " required for the aravis source (device id, serial or address)";
-  if (spec.left.empty()) problems.push_back("source.left:" + ids);
-  if (spec.right.empty()) problems.push_back("source.right:" + ids);
-  if (!spec.left.empty() && spec.left == spec.right) {
-    problems.push_back("source.right: must be another camera than source.left (both '" + spec.left +
-                       "')");
-  }
-  // The driver's own checks of each field (their ranges live in drivers/aravis), and the trigger
-  // line a hardware trigger needs; the rest (exposure against the frame period, the pixel format)
-  // is checked when the cameras open.
-  AppendPrefixed(problems, "source.aravis.", fields::Check(spec.aravis));
-  if (spec.aravis.trigger.mode == drivers::TriggerMode::kHardware &&
-      spec.aravis.trigger.line.empty()) {
-    problems.push_back("source.aravis.trigger_line: required with a hardware trigger (e.g. Line0)");
+  for (const std::string& problem : AravisOf(spec).Validate()) {
+    if (problem.rfind("left_id:", 0) == 0) {
+      problems.push_back("source.left:" + problem.substr(8));
+    } else if (problem.rfind("right_id:", 0) == 0) {
+      problems.push_back("source.right:" + problem.substr(9));
+    } else {
+      problems.push_back("source.aravis." + problem);
+    }
   }
   return problems;
 }
@@ -95,7 +99,7 @@ Result<std::shared_ptr<const geometry::StereoRig>> OptionalRig(const SourceSpec&
 Result<std::unique_ptr<drivers::StereoSource>> OpenAravis(const SourceSpec& spec) {
   Result<std::shared_ptr<const geometry::StereoRig>> rig = OptionalRig(spec);
   if (!rig.ok()) return rig.error();
-  return Opened(drivers::AravisStereoSource::Open(spec.aravis, std::move(rig).value()),
+  return Opened(drivers::AravisStereoSource::Open(AravisOf(spec), std::move(rig).value()),
                 "source.aravis: ");
 }
 
@@ -159,16 +163,16 @@ Result<drivers::GstOptions> GstOptionsOf(const SourceSpec& spec) {
     const int h =
         spec.gst.layout == drivers::GstLayout::kTopBottom ? 2 * spec.gst.height : spec.gst.height;
     const int fps = static_cast<int>(std::lround(spec.gst.fps));
-    return WithPipelines(spec, spec.gst_device, [&](const std::string& device) {
+    return WithPipelines(spec, spec.gst_inputs.device, [&](const std::string& device) {
       return drivers::UvcPipeline(device, w, h, fps);
     });
   }
   if (spec.kind == "rtsp") {
-    return WithPipelines(spec, spec.gst_url, [&](const std::string& url) {
-      return drivers::RtspPipeline(url, spec.gst_latency_ms);
+    return WithPipelines(spec, spec.gst_inputs.url, [&](const std::string& url) {
+      return drivers::RtspPipeline(url, spec.gst_inputs.latency_ms);
     });
   }
-  return WithPipelines(spec, spec.gst_file,
+  return WithPipelines(spec, spec.gst_inputs.file,
                        [](const std::string& file) { return drivers::VideoFilePipeline(file); });
 }
 
@@ -184,9 +188,7 @@ std::vector<std::string> CheckGst(const SourceSpec& spec) {
     problems.push_back("source.left, source.right: only with the layout two (one " +
                        std::string(ShorthandOf(spec.kind).noun) + " per view)");
   }
-  if (spec.gst_latency_ms < 0 || spec.gst_latency_ms > 5000) {
-    problems.push_back("source.gst.latency_ms: must be 0..5000" + Got(spec.gst_latency_ms));
-  }
+  AppendPrefixed(problems, "source.gst.", spec.gst_inputs.Validate());
   Result<drivers::GstOptions> options = GstOptionsOf(spec);
   if (!options.ok()) {
     problems.push_back(options.error().message);

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/common/error.h"
+#include "core/common/fields.h"
 #include "drivers/aravis/aravis_source.h"
 #include "drivers/files/image_source.h"
 #include "drivers/gstreamer/gst_source.h"
@@ -23,6 +24,30 @@ namespace stevi::server {
 // What the configuration says about the source, as the drivers take it. The options of every
 // kind are filled (the server maps them from a stevi.v1.SourceConfig by name); the kind's entry
 // uses its own. Problems are named by the configuration's paths ("source.left").
+// What the GStreamer kinds' pipelines are built from (stevi.v1.GstConfig's fields besides the
+// driver's own, drivers::GstOptions).
+struct GstInputs {
+  std::string device = "/dev/video0";
+  std::string url;
+  std::string file;
+  int latency_ms = 100;
+
+  std::vector<std::string> Validate() const { return fields::Check(*this); }
+
+  template <class Self, class V>
+  static void Fields(Self& s, V& v) {
+    using fields::Field;
+    v.Text(s.device, Field("device", "", "uvc: the V4L2 device").Flag("device", "DEV"));
+    v.Text(s.url, Field("url", "", "rtsp: rtsp://host[:port]/path").Flag("url", "URL"));
+    v.Text(s.file, Field("file", "",
+                         "video: a video file GStreamer decodes (MJPEG AVI or MKV with Debian's "
+                         "base and good plugins)")
+                       .Flag("file", "FILE"));
+    v.Number(s.latency_ms,
+             Field("latency_ms", "ms", "rtsp: the jitter buffer").In(0, 5000).Flag("latency-ms"));
+  }
+};
+
 struct SourceSpec {
   std::string kind = "synthetic";  // a SourceKinds() name
   // images: the two files or patterns and the calibration; aravis: the cameras' ids and an
@@ -39,10 +64,7 @@ struct SourceSpec {
   // fields below, or given whole for gst); left and right above name the two devices, URLs or
   // files of the layout "two".
   drivers::GstOptions gst;
-  std::string gst_device = "/dev/video0";  // uvc
-  std::string gst_url;                     // rtsp
-  std::string gst_file;                    // video
-  int gst_latency_ms = 100;                // rtsp
+  GstInputs gst_inputs;  // uvc's device, rtsp's URL and latency, video's file
 };
 
 struct SourceKind {

@@ -1,14 +1,17 @@
 // The flags the evaluation tools (stevi-eval, stevi-eval-tracking) share.
 #pragma once
 
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
-#include <exception>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "core/common/flags.h"
 #include "core/pipeline/config.h"
+#include "tests/bench/bench_flags.h"
 
 namespace stevi::bench {
 
@@ -37,6 +40,7 @@ struct EvalFlags {
   // --set path=value (repeatable): pipeline settings applied over each algorithm's own
   // configuration (pipeline::ApplySettings), to measure an option without a rebuild.
   std::vector<std::string> settings;
+  bool help = false;  // --help: the tool prints its usage and exits 0
 };
 
 // Applies flags.settings to `config`; prints the problems and exits with 2 when any.
@@ -47,114 +51,75 @@ inline void ApplySettingFlags(const EvalFlags& flags, pipeline::PipelineConfig& 
   std::exit(2);
 }
 
-// Parses a whole number >= `min` into `out`; the problem when it is not one.
-inline std::optional<std::string> ParseWholeFlag(const std::string& flag, const std::string& value,
-                                                 int min, int& out) {
-  size_t used = 0;
-  int parsed = 0;
-  try {
-    parsed = std::stoi(value, &used);
-  } catch (const std::exception&) {
-    used = 0;
+// The ranges of the numeric flags.
+inline constexpr flags::WholeRange kAtLeastOne{.lo = 1};   // --frames, --scene-frames, ...
+inline constexpr flags::WholeRange kAtLeastZero{.lo = 0};  // --max-width, --dump-scenes
+inline constexpr flags::WholeRange kSizeSide{.lo = 64, .hi = 4096};  // --size, each side
+
+// --size WxH into out.width and out.height.
+inline std::string TakeSize(const std::string& value, EvalFlags& out) {
+  const flags::Parsed<std::pair<std::int64_t, std::int64_t>> size =
+      flags::ParseNumberPair(value, 'x', kSizeSide);
+  if (!size.ok()) {
+    return flags::Expected("", "--size", "WxH, each side " + flags::Describe(kSizeSide), value);
   }
-  if (used != value.size() || value.empty() || parsed < min) {
-    return flag + ": expected a whole number >= " + std::to_string(min) + ", got '" + value + "'";
-  }
-  out = parsed;
-  return std::nullopt;
+  out.width = static_cast<int>(size.value.first);
+  out.height = static_cast<int>(size.value.second);
+  return "";
 }
 
-// Parses argv into `flags`; returns the problem ("--frames: expected ...", "unknown flag --x")
-// when there is one.
+// Parses argv into `out` (--help sets out.help and ends the walk); returns the problem
+// ("--frames: expected a whole number >= 1, got 'x'", "unexpected argument '--x'") when there is
+// one. --trace only where allow_trace, --size and --max-width where allow_size, and --family,
+// --seeds, --json, --dump, --dump-scenes, --scene-frames, --confirm-window where allow_family.
 inline std::optional<std::string> ParseEvalFlags(int argc, char** argv, bool allow_trace,
-                                                 bool allow_size, EvalFlags& flags,
+                                                 bool allow_size, EvalFlags& out,
                                                  bool allow_family = false) {
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    if (flag == "--set") {
-      if (i + 1 >= argc) return flag + " needs a value";
-      flags.settings.push_back(argv[++i]);
-      continue;
-    }
-    if (allow_trace && flag == "--trace") {
-      flags.trace = true;
-      continue;
-    }
-    if (allow_family &&
-        (flag == "--family" || flag == "--seeds" || flag == "--json" || flag == "--dump" ||
-         flag == "--dump-scenes" || flag == "--scene-frames" || flag == "--confirm-window")) {
-      if (i + 1 >= argc) return flag + " needs a value";
-      const std::string value = argv[++i];
-      if (flag == "--scene-frames" || flag == "--confirm-window") {
-        std::optional<std::string> problem =
-            flag == "--scene-frames" ? ParseWholeFlag(flag, value, 1, flags.scene_frames)
-                                     : ParseWholeFlag(flag, value, 1, flags.confirm_window);
-        if (problem) return problem;
-      } else if (flag == "--family") {
-        flags.family = value;
-      } else if (flag == "--seeds") {
-        flags.seeds = value;
-      } else if (flag == "--json") {
-        flags.json = value;
-      } else if (flag == "--dump") {
-        flags.dump = value;
-      } else {
-        size_t used = 0;
-        try {
-          flags.dump_scenes = std::stoi(value, &used);
-        } catch (const std::exception&) {
-          used = 0;
-        }
-        if (used != value.size() || flags.dump_scenes < 0) {
-          return "--dump-scenes: expected a whole number >= 0, got '" + value + "'";
-        }
-      }
-      continue;
-    }
-    if (flag != "--frames" && flag != "--scenario" && flag != "--algorithm" &&
-        ((flag != "--size" && flag != "--max-width") || !allow_size)) {
-      return "unknown flag " + flag;
-    }
-    if (i + 1 >= argc) return flag + " needs a value";
-    const std::string value = argv[++i];
-    if (flag == "--frames") {
-      size_t used = 0;
-      try {
-        flags.max_frames = std::stoi(value, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used != value.size() || flags.max_frames < 1) {
-        return "--frames: expected a whole number >= 1, got '" + value + "'";
-      }
-    } else if (flag == "--size") {
-      int w = 0, h = 0;
-      char end = 0;
-      if (std::sscanf(value.c_str(), "%dx%d%c", &w, &h, &end) != 2 || w < 64 || h < 64 ||
-          w > 4096 || h > 4096) {
-        return "--size: expected WxH with each side in 64..4096, got '" + value + "'";
-      }
-      flags.width = w;
-      flags.height = h;
-    } else if (flag == "--max-width") {
-      size_t used = 0;
-      int max_width = -1;
-      try {
-        max_width = std::stoi(value, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (used != value.size() || max_width < 0) {
-        return "--max-width: expected a whole number >= 0, got '" + value + "'";
-      }
-      flags.max_width_px = max_width;
-    } else if (flag == "--scenario") {
-      flags.scenario = value;
-    } else {
-      flags.algorithm = value;
-    }
+  flags::FlagSet set("");
+  set.Value("--set",
+            [&out](const std::string& setting) {
+              out.settings.push_back(setting);
+              return std::string();
+            })
+      .Text("--scenario", &out.scenario)
+      .Text("--algorithm", &out.algorithm)
+      .Stop("--help", &out.help);
+  WholeInt(set, "--frames", kAtLeastOne, &out.max_frames);
+  if (allow_trace) set.Switch("--trace", &out.trace);
+  if (allow_size) {
+    set.Value("--size", [&out](const std::string& value) { return TakeSize(value, out); });
+    WholeInt(set, "--max-width", kAtLeastZero, [&out](int width) { out.max_width_px = width; });
   }
-  return std::nullopt;
+  if (allow_family) {
+    set.Text("--family", &out.family)
+        .Text("--seeds", &out.seeds)
+        .Text("--json", &out.json)
+        .Text("--dump", &out.dump);
+    WholeInt(set, "--dump-scenes", kAtLeastZero, &out.dump_scenes);
+    WholeInt(set, "--scene-frames", kAtLeastOne, &out.scene_frames);
+    WholeInt(set, "--confirm-window", kAtLeastOne, &out.confirm_window);
+  }
+  std::string problem = ParseArgs(set, argc, argv);
+  if (problem.empty()) return std::nullopt;
+  return problem;
+}
+
+// ParseEvalFlags for a tool's main: after --help prints `usage` on stdout and exits 0; on a
+// problem prints "TOOL: PROBLEM" and the usage on stderr and exits 2.
+inline EvalFlags ParseEvalFlagsOrExit(const char* tool, const char* usage, int argc, char** argv,
+                                      bool allow_trace, bool allow_size,
+                                      bool allow_family = false) {
+  EvalFlags out;
+  if (const std::optional<std::string> problem =
+          ParseEvalFlags(argc, argv, allow_trace, allow_size, out, allow_family)) {
+    std::fprintf(stderr, "%s: %s\n%s", tool, problem->c_str(), usage);
+    std::exit(2);
+  }
+  if (out.help) {
+    std::fputs(usage, stdout);
+    std::exit(0);
+  }
+  return out;
 }
 
 }  // namespace stevi::bench

@@ -580,23 +580,19 @@ std::optional<std::string> RunOdometryEval(const std::string& data_dir,
   return JsonOdometry(*seq, runs, figures, planes);
 }
 
+constexpr char kUsage[] =
+    "usage: stevi-eval-real [--algorithm canonical|stevie|stevis|stixels|all] [--max-width N] "
+    "[--scenario PAIR] [--json FILE] [--dump DIR]\n";
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const auto usage = [](const std::string& problem) {
-    std::fprintf(
-        stderr,
-        "stevi-eval-real: %s\nusage: stevi-eval-real [--algorithm "
-        "canonical|stevie|stevis|stixels|all] [--max-width N] [--scenario PAIR] [--json FILE] "
-        "[--dump DIR]\n",
-        problem.c_str());
+    std::fprintf(stderr, "stevi-eval-real: %s\n%s", problem.c_str(), kUsage);
     return 2;
   };
-  bench::EvalFlags flags;
-  if (std::optional<std::string> problem =
-          bench::ParseEvalFlags(argc, argv, false, true, flags, true)) {
-    return usage(*problem);
-  }
+  const bench::EvalFlags flags =
+      bench::ParseEvalFlagsOrExit("stevi-eval-real", kUsage, argc, argv, false, true, true);
   if (!flags.family.empty() || !flags.seeds.empty() || flags.max_frames > 0 || flags.width > 0) {
     return usage("--family, --seeds, --frames and --size do not apply to real pairs");
   }

@@ -144,30 +144,27 @@ std::vector<Variant> Variants() {
   return v;
 }
 
+constexpr char kUsage[] =
+    "usage: stevi-eval [--frames N] [--scenario NAME] "
+    "[--algorithm canonical|stevie|stevis|stevis-graph|stixels] [--size WxH] [--max-width N]\n"
+    "       stevi-eval --family sky|airfield|long_range|close|all --seeds A-B "
+    "[--frames N] [--algorithm NAME] [--max-width N] [--json FILE] [--dump DIR] "
+    "[--dump-scenes N] [--scene-frames N] [--confirm-window N]\n"
+    "  --set path=value (repeatable): a pipeline setting over each algorithm's own\n"
+    "  seeds 1-999: the tuning split; seeds 1001 and up: the TEST split, never to be "
+    "tuned on\n";
+
 }  // namespace
 
 int main(int argc, char** argv) {
   int max_frames = 0;
   std::string only_scenario, only_algorithm;
   const auto usage = [](const std::string& problem) {
-    std::fprintf(
-        stderr,
-        "stevi-eval: %s\nusage: stevi-eval [--frames N] [--scenario NAME] "
-        "[--algorithm canonical|stevie|stevis|stevis-graph|stixels] [--size WxH] [--max-width N]\n"
-        "       stevi-eval --family sky|airfield|long_range|close|all --seeds A-B "
-        "[--frames N] [--algorithm NAME] [--max-width N] [--json FILE] [--dump DIR] "
-        "[--dump-scenes N] [--scene-frames N] [--confirm-window N]\n"
-        "  --set path=value (repeatable): a pipeline setting over each algorithm's own\n"
-        "  seeds 1-999: the tuning split; seeds 1001 and up: the TEST split, never to be "
-        "tuned on\n",
-        problem.c_str());
+    std::fprintf(stderr, "stevi-eval: %s\n%s", problem.c_str(), kUsage);
     return 2;
   };
-  bench::EvalFlags flags;
-  if (std::optional<std::string> problem =
-          bench::ParseEvalFlags(argc, argv, false, true, flags, true)) {
-    return usage(*problem);
-  }
+  bench::EvalFlags flags =
+      bench::ParseEvalFlagsOrExit("stevi-eval", kUsage, argc, argv, false, true, true);
   if (!flags.family.empty() || !flags.seeds.empty()) {
     bench::FamilyEvalOptions fo;
     const std::vector<std::string>& families = drivers::RandomSceneFamilies();

@@ -171,26 +171,22 @@ void PrintTrace(const std::string& scenario, const testing::TrackingRun& run,
   }
 }
 
+constexpr char kUsage[] =
+    "usage: stevi-eval-tracking [--scenario NAME] [--algorithm canonical|stevie|stevis|stixels] "
+    "[--frames N] [--trace]\n";
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  int max_frames = 0;
-  std::string only_scenario, only_algorithm;
   const auto usage = [](const std::string& problem) {
-    std::fprintf(stderr,
-                 "stevi-eval-tracking: %s\nusage: stevi-eval-tracking [--scenario NAME] "
-                 "[--algorithm canonical|stevie|stevis|stixels] [--frames N] [--trace]\n",
-                 problem.c_str());
+    std::fprintf(stderr, "stevi-eval-tracking: %s\n%s", problem.c_str(), kUsage);
     return 2;
   };
-  bench::EvalFlags flags;
-  if (std::optional<std::string> problem = bench::ParseEvalFlags(argc, argv, true, false, flags)) {
-    return usage(*problem);
-  }
-  max_frames = flags.max_frames;
-  only_scenario = flags.scenario;
-  only_algorithm = flags.algorithm;
-  const bool trace = flags.trace;
+  const bench::EvalFlags flags =
+      bench::ParseEvalFlagsOrExit("stevi-eval-tracking", kUsage, argc, argv, true, false);
+  const int max_frames = flags.max_frames;
+  const std::string& only_scenario = flags.scenario;
+  const std::string& only_algorithm = flags.algorithm;
 
   const std::vector<drivers::Scenario> scenarios = drivers::TrackingScenarios();
   if (!only_scenario.empty() &&
@@ -235,7 +231,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "%s\n", run.error().message.c_str());
         return 1;
       }
-      if (trace) {
+      if (flags.trace) {
         PrintTrace(scenario.name, *run, *rendered.rig, 1.0 / scenario.options.fps,
                    config.tracking.gates);
       }

@@ -30,11 +30,13 @@
 #include <thread>
 #include <vector>
 
-#include "client/client.h"
+#include "client/lib/client.h"
 #include "client/mavlink/codec.h"
 #include "client/mavlink/messages.h"
+#include "core/common/flags.h"
 #include "core/geometry/calibration_io.h"
 #include "drivers/synthetic/scenarios.h"
+#include "tests/bench/bench_flags.h"
 #include "tests/bench/soak_process.h"
 #include "tests/bench/soak_report.h"
 #include "tests/testing/test_autopilot.h"
@@ -111,71 +113,47 @@ constexpr char kUsage[] = R"(usage: stevi-soak [flags]  (inside tests/drivers/fa
   --fake-camera PATH      arv-fake-gv-camera-0.8
 )";
 
+// The ranges of the numeric flags.
+constexpr flags::RealRange kMinutesRange{
+    .lo = 0, .hi = bench::kNoUpperBound, .unit = "minutes", .lo_open = true};
+constexpr flags::RealRange kSecondsRange{
+    .lo = 0, .hi = bench::kNoUpperBound, .unit = "seconds", .lo_open = true};
+constexpr flags::RealRange kFpsRange{
+    .lo = 0, .hi = bench::kNoUpperBound, .unit = "frames per second", .lo_open = true};
+constexpr flags::WholeRange kClientsRange{.lo = 1, .hi = 64, .what = "a whole number of clients"};
+constexpr flags::WholeRange kMoreClientsRange{
+    .lo = 0, .hi = 64, .what = "a whole number of clients"};
+constexpr flags::WholeRange kExportPointsRange{
+    .lo = 1, .hi = 10'000'000, .what = "a whole number of points"};
+
+// The flags into `o`; false with the problem in `error`, or with "" after --help.
 bool ParseOptions(int argc, char** argv, Options& o, std::string& error) {
-  const std::map<std::string, double*> reals = {{"--minutes", &o.minutes},
-                                                {"--warmup-minutes", &o.warmup_minutes},
-                                                {"--compare-minutes", &o.compare_minutes},
-                                                {"--restart-every", &o.restart_every_min},
-                                                {"--camera-loss-every", &o.camera_loss_every_min},
-                                                {"--camera-down-seconds", &o.camera_down_s},
-                                                {"--sample-every", &o.sample_every_s},
-                                                {"--outage-margin", &o.outage_margin_s},
-                                                {"--fps", &o.fps},
-                                                {"--camera-fps", &o.camera_fps}};
-  const std::map<std::string, int*> ints = {
-      {"--clients", &o.clients}, {"--clients-b", &o.clients_b}, {"--ws-clients", &o.ws_clients}};
-  const std::map<std::string, std::string*> texts = {
-      {"--out", &o.out}, {"--bin", &o.bin}, {"--fake-camera", &o.fake_camera}};
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    if (flag == "--no-cameras") {
-      o.cameras = false;
-      continue;
-    }
-    if (flag == "--help" || flag == "-h") {
-      error = "";
-      return false;
-    }
-    if (i + 1 >= argc) {
-      error = flag + " needs a value";
-      return false;
-    }
-    const std::string value = argv[++i];
-    char* end = nullptr;
-    if (const auto r = reals.find(flag); r != reals.end()) {
-      const double v = std::strtod(value.c_str(), &end);
-      if (end == value.c_str() || *end != '\0' || !std::isfinite(v) || v <= 0) {
-        error = flag + ": a number > 0, got '" + value + "'";
-        return false;
-      }
-      *r->second = v;
-    } else if (const auto n = ints.find(flag); n != ints.end()) {
-      const long v = std::strtol(value.c_str(), &end, 10);
-      if (end == value.c_str() || *end != '\0' || v < 0 || v > 64) {
-        error = flag + ": a whole number in [0, 64], got '" + value + "'";
-        return false;
-      }
-      *n->second = static_cast<int>(v);
-    } else if (flag == "--export-points") {
-      const long long v = std::strtoll(value.c_str(), &end, 10);
-      if (end == value.c_str() || *end != '\0' || v < 1 || v > 10'000'000) {
-        error = flag + ": a whole number in [1, 10000000], got '" + value + "'";
-        return false;
-      }
-      o.export_points = v;
-    } else if (const auto t = texts.find(flag); t != texts.end()) {
-      *t->second = value;
-    } else {
-      error = "unknown flag " + flag;
-      return false;
-    }
-  }
+  bool help = false;
+  flags::FlagSet set("");
+  set.Switch("--no-cameras", [&o] { o.cameras = false; })
+      .Whole("--export-points", kExportPointsRange, [&o](int64_t n) { o.export_points = n; })
+      .Text("--out", &o.out)
+      .Text("--bin", &o.bin)
+      .Text("--fake-camera", &o.fake_camera)
+      .Stop("--help", &help)
+      .Stop("-h", &help);
+  bench::Real(set, "--minutes", kMinutesRange, &o.minutes);
+  bench::Real(set, "--warmup-minutes", kMinutesRange, &o.warmup_minutes);
+  bench::Real(set, "--compare-minutes", kMinutesRange, &o.compare_minutes);
+  bench::Real(set, "--restart-every", kMinutesRange, &o.restart_every_min);
+  bench::Real(set, "--camera-loss-every", kMinutesRange, &o.camera_loss_every_min);
+  bench::Real(set, "--camera-down-seconds", kSecondsRange, &o.camera_down_s);
+  bench::Real(set, "--sample-every", kSecondsRange, &o.sample_every_s);
+  bench::Real(set, "--outage-margin", kSecondsRange, &o.outage_margin_s);
+  bench::Real(set, "--fps", kFpsRange, &o.fps);
+  bench::Real(set, "--camera-fps", kFpsRange, &o.camera_fps);
+  bench::WholeInt(set, "--clients", kClientsRange, &o.clients);
+  bench::WholeInt(set, "--clients-b", kMoreClientsRange, &o.clients_b);
+  bench::WholeInt(set, "--ws-clients", kMoreClientsRange, &o.ws_clients);
+  error = bench::ParseArgs(set, argc, argv);
+  if (!error.empty() || help) return false;
   if (o.warmup_minutes + o.compare_minutes > o.minutes) {
     error = "--warmup-minutes + --compare-minutes must not exceed --minutes";
-    return false;
-  }
-  if (o.clients < 1) {
-    error = "--clients: at least 1";
     return false;
   }
   return true;

@@ -32,9 +32,11 @@
 #include <vector>
 
 #include "core/common/allocator.h"
+#include "core/common/flags.h"
 #include "core/geometry/calibration_io.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/server.h"
+#include "tests/bench/bench_flags.h"
 #include "tests/testing/data.h"
 #include "tests/testing/gst_testing.h"
 
@@ -194,57 +196,69 @@ bool RunAt(const Setup& setup, const std::vector<std::string>& variants, double 
   return true;
 }
 
+constexpr char kUsage[] =
+    "usage: stevi-bench-io [--seconds S] [--rounds N] [--camera-fps F] [--source-fps F] "
+    "[--only synthetic|video|raw|mcap]\n";
+
+constexpr flags::RealRange kSecondsRange{
+    .lo = 0, .hi = bench::kNoUpperBound, .unit = "seconds", .lo_open = true};
+constexpr flags::WholeRange kRoundsRange{.lo = 1, .what = "a whole number of rounds"};
+constexpr flags::RealRange kFpsRange{.lo = 1, .hi = 1000, .unit = "frames per second"};
+
+const std::vector<std::string> kVariants = {"synthetic", "video", "raw", "mcap"};
+
+struct Options {
+  double seconds = 10;
+  int rounds = 2;
+  double camera_fps = 60;
+  double source_fps = 0;                          // one rate only, when given
+  std::vector<std::string> variants = kVariants;  // --only: one alone (for a profiler)
+};
+
+// The flags; exits 0 after --help, 2 with the problem and the usage on stderr.
+Options ParseOptions(int argc, char** argv) {
+  Options o;
+  bool help = false;
+  flags::FlagSet set("");
+  set.Value("--only",
+            [&o](const std::string& variant) {
+              if (std::find(kVariants.begin(), kVariants.end(), variant) == kVariants.end()) {
+                return flags::Expected("", "--only", "synthetic, video, raw or mcap", variant);
+              }
+              o.variants = {variant};
+              return std::string();
+            })
+      .Stop("--help", &help);
+  bench::Real(set, "--seconds", kSecondsRange, &o.seconds);
+  bench::WholeInt(set, "--rounds", kRoundsRange, &o.rounds);
+  bench::Real(set, "--camera-fps", kFpsRange, &o.camera_fps);
+  bench::Real(set, "--source-fps", kFpsRange, &o.source_fps);
+  const std::string problem = bench::ParseArgs(set, argc, argv);
+  if (!problem.empty()) {
+    std::fprintf(stderr, "stevi-bench-io: %s\n%s", problem.c_str(), kUsage);
+    std::exit(2);
+  }
+  if (help) {
+    std::fputs(kUsage, stdout);
+    std::exit(0);
+  }
+  return o;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   stevi::KeepFrameMemory();  // first, as stevi-server does: before any thread starts
-  double seconds = 10;
-  int rounds = 2;
-  double camera_fps = 60;
-  double source_fps = 0;  // one rate only, when given
-  std::string only;       // one variant alone (for a profiler), without the ratios
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string flag = argv[i];
-    if (flag == "--seconds") {
-      seconds = std::atof(argv[i + 1]);
-    } else if (flag == "--rounds") {
-      rounds = std::atoi(argv[i + 1]);
-    } else if (flag == "--camera-fps") {
-      camera_fps = std::atof(argv[i + 1]);
-    } else if (flag == "--source-fps") {
-      source_fps = std::atof(argv[i + 1]);
-    } else if (flag == "--only") {
-      only = argv[i + 1];
-    } else {
-      std::fprintf(stderr,
-                   "usage: stevi-bench-io [--seconds S] [--rounds N] [--camera-fps F] "
-                   "[--source-fps F] [--only synthetic|video|raw|mcap]\n");
-      return 2;
-    }
-  }
-  const auto valid_fps = [](double f) { return f >= 1 && f <= 1000; };
-  if (!(seconds > 0) || rounds < 1 || !valid_fps(camera_fps) ||
-      (source_fps != 0 && !valid_fps(source_fps))) {
-    std::fprintf(stderr,
-                 "stevi-bench-io: --seconds must be > 0, --rounds >= 1, --camera-fps and "
-                 "--source-fps in [1, 1000]\n");
-    return 2;
-  }
-  std::vector<std::string> variants = {"synthetic", "video", "raw", "mcap"};
-  if (!only.empty()) {
-    if (std::find(variants.begin(), variants.end(), only) == variants.end()) {
-      std::fprintf(stderr, "stevi-bench-io: --only: unknown variant '%s'\n", only.c_str());
-      return 2;
-    }
-    variants = {only};
-  }
+  const Options o = ParseOptions(argc, argv);
   Setup setup;
   if (!Prepare(setup)) {
     std::fprintf(stderr, "stevi-bench-io: cannot prepare the video and calibration\n");
     return 1;
   }
-  if (source_fps != 0) return RunAt(setup, variants, source_fps, seconds, rounds, true) ? 0 : 1;
-  const bool ok = RunAt(setup, variants, camera_fps, seconds, rounds, /*held=*/true) &&
-                  RunAt(setup, variants, 1000, seconds, rounds, /*held=*/false);
+  if (o.source_fps != 0) {
+    return RunAt(setup, o.variants, o.source_fps, o.seconds, o.rounds, true) ? 0 : 1;
+  }
+  const bool ok = RunAt(setup, o.variants, o.camera_fps, o.seconds, o.rounds, /*held=*/true) &&
+                  RunAt(setup, o.variants, 1000, o.seconds, o.rounds, /*held=*/false);
   return ok ? 0 : 1;
 }

@@ -59,8 +59,9 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "client/client.h"
+#include "client/lib/client.h"
 #include "core/common/allocator.h"
+#include "core/common/flags.h"
 #include "core/extraction/saliency.h"
 #include "core/extraction/segmentation.h"
 #include "core/geometry/calibration_io.h"
@@ -70,6 +71,7 @@
 #include "core/tracking/tracker.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "server/server.h"
+#include "tests/bench/bench_flags.h"
 #include "tests/bench/naive_baseline.h"
 
 #ifndef STEVI_BUILD_TYPE
@@ -277,63 +279,52 @@ constexpr const char* kUsage =
     "  --source-fps F        source rate of the throughput runs (default 120, 0 < F <= 1000)\n"
     "  --preview-only        only the preview cost (table 8) and its target\n";
 
-std::optional<Flags> ParseFlags(int argc, char** argv) {
-  Flags flags;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    const auto value = [&]() -> std::optional<std::string> {
-      if (i + 1 >= argc) return std::nullopt;
-      return std::string(argv[++i]);
-    };
-    if (arg == "--quick") {
-      flags.quick = true;
-    } else if (arg == "--preview-only") {
-      flags.preview_only = true;
-    } else if (arg == "--seconds" || arg == "--json" || arg == "--latency-fps" ||
-               arg == "--latency-algorithm" || arg == "--source-fps") {
-      const std::optional<std::string> v = value();
-      if (!v) {
-        std::fprintf(stderr, "%s needs a value\n%s", arg.c_str(), kUsage);
-        return std::nullopt;
-      }
-      if (arg == "--json") {
-        flags.json = *v;
-      } else if (arg == "--latency-algorithm") {
-        flags.latency_algorithm = *v;
-      } else {
-        char* end = nullptr;
-        const double number = std::strtod(v->c_str(), &end);
-        if (end == v->c_str() || *end != '\0' || !(number > 0) || !std::isfinite(number)) {
-          std::fprintf(stderr, "%s: expected a positive number, got '%s'\n", arg.c_str(),
-                       v->c_str());
-          return std::nullopt;
-        }
-        if (arg == "--seconds") {
-          flags.seconds = number;
-          flags.seconds_given = true;
-        } else {
-          if (number > kMaxSourceFps) {
-            std::fprintf(stderr, "%s: at most %.0f\n", arg.c_str(), kMaxSourceFps);
-            return std::nullopt;
-          }
-          (arg == "--source-fps" ? flags.source_fps : flags.latency_fps) = number;
-        }
-      }
-    } else if (arg == "--help" || arg == "-h") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else {
-      std::fprintf(stderr, "unknown flag '%s'\n%s", arg.c_str(), kUsage);
-      return std::nullopt;
-    }
+// The ranges of the numeric flags.
+constexpr flags::RealRange kSecondsRange{
+    .lo = 0, .hi = bench::kNoUpperBound, .unit = "seconds", .lo_open = true};
+constexpr flags::RealRange kFpsRange{
+    .lo = 0, .hi = kMaxSourceFps, .unit = "frames per second", .lo_open = true};
+// --client-worker's CLIENTS (MeasureClients starts at most 32).
+constexpr flags::WholeRange kWorkerClientsRange{
+    .lo = 1, .hi = 1000, .what = "a whole number of clients"};
+
+// The flags; exits 0 after --help, 2 with the problem and the usage on stderr.
+Flags ParseFlags(int argc, char** argv) {
+  Flags parsed;
+  bool help = false;
+  flags::FlagSet set("");
+  set.Switch("--quick", &parsed.quick)
+      .Switch("--preview-only", &parsed.preview_only)
+      .Text("--json", &parsed.json)
+      .Value("--latency-algorithm",
+             [&parsed](const std::string& name) {
+               if (name != "canonical" && name != "stevie" && name != "stevis" &&
+                   name != "stevis-graph") {
+                 return flags::Expected("", "--latency-algorithm",
+                                        "canonical, stevie, stevis or stevis-graph", name);
+               }
+               parsed.latency_algorithm = name;
+               return std::string();
+             })
+      .Stop("--help", &help)
+      .Stop("-h", &help);
+  bench::Real(set, "--seconds", kSecondsRange, [&parsed](double seconds) {
+    parsed.seconds = seconds;
+    parsed.seconds_given = true;
+  });
+  bench::Real(set, "--latency-fps", kFpsRange, &parsed.latency_fps);
+  bench::Real(set, "--source-fps", kFpsRange, &parsed.source_fps);
+  const std::string problem = bench::ParseArgs(set, argc, argv);
+  if (!problem.empty()) {
+    std::fprintf(stderr, "%s\n%s", problem.c_str(), kUsage);
+    std::exit(2);
   }
-  if (flags.quick && !flags.seconds_given) flags.seconds = 1.0;
-  const std::string& a = flags.latency_algorithm;
-  if (a != "canonical" && a != "stevie" && a != "stevis" && a != "stevis-graph") {
-    std::fprintf(stderr, "--latency-algorithm: unknown '%s'\n%s", a.c_str(), kUsage);
-    return std::nullopt;
+  if (help) {
+    std::fputs(kUsage, stdout);
+    std::exit(0);
   }
-  return flags;
+  if (parsed.quick && !parsed.seconds_given) parsed.seconds = 1.0;
+  return parsed;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1523,15 +1514,18 @@ int main(int argc, char** argv) {
   stevi::KeepFrameMemory();  // first: before any thread starts
   g_opencv_threads_at_start = cv::getNumThreads();
   if (argc >= 2 && std::string(argv[1]) == "--client-worker") {
-    if (argc != 5) {
+    // Started by MeasureClients with its own arguments (positional: not a FlagSet's).
+    const flags::Parsed<std::int64_t> clients =
+        flags::ParseNumber(argc == 5 ? argv[3] : "", kWorkerClientsRange);
+    const flags::Parsed<double> seconds =
+        flags::ParseNumber(argc == 5 ? argv[4] : "", kSecondsRange);
+    if (!clients.ok() || !seconds.ok()) {
       std::fprintf(stderr, "usage: stevi-bench --client-worker ADDRESS CLIENTS SECONDS\n");
       return 2;
     }
-    return RunClientWorker(argv[2], std::atoi(argv[3]), std::strtod(argv[4], nullptr));
+    return RunClientWorker(argv[2], static_cast<int>(clients.value), seconds.value);
   }
-  const std::optional<Flags> parsed = ParseFlags(argc, argv);
-  if (!parsed) return 2;
-  const Flags flags = *parsed;
+  const Flags flags = ParseFlags(argc, argv);
   FILE* table = flags.json == "-" ? stderr : stdout;
   if (flags.preview_only) {
     const PreviewCostRun run = MeasurePreviewCost(flags.seconds, flags.source_fps);

@@ -23,6 +23,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/flags.h"
 #include "core/pipeline/config.h"
 #include "core/pipeline/pipeline.h"
 #include "drivers/synthetic/random_scenes.h"
@@ -197,54 +198,126 @@ int RunSynthetic(const std::string& family, uint64_t seed, const pipeline::Pipel
   return 0;
 }
 
-int Run(int argc, char** argv) {
+constexpr char kUsage[] =
+    "usage: stevi-stixel-view [--out DIR] [--set path=value]... [--jpeg] "
+    "[--synthetic FAMILY SEED]\n";
+
+// --synthetic's SEED: a random family's scene, or the frame of demo or a tracking scenario.
+constexpr flags::WholeRange kSeedRange{.lo = 0, .what = "a whole seed or frame"};
+
+struct Options {
   std::string out_dir = "/tmp/stixels";
-  pipeline::PipelineConfig config = pipeline::ConfigForAlgorithm(pipeline::Algorithm::kStixels);
-  std::vector<std::string> settings;
-  std::string synthetic_family;
+  std::vector<std::string> settings;  // --set, in order
+  std::string synthetic_family;       // --synthetic FAMILY SEED
   uint64_t synthetic_seed = 0;
-  bool jpeg = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--out" && i + 1 < argc) {
-      out_dir = argv[++i];
-    } else if (a == "--jpeg") {
-      jpeg = true;  // the KITTI pictures at 0.6 scale as JPEG (for the README)
-    } else if (a == "--synthetic" && i + 2 < argc) {
-      synthetic_family = argv[++i];
-      const std::string seed = argv[++i];
-      char* end = nullptr;
-      synthetic_seed = std::strtoull(seed.c_str(), &end, 10);
-      const auto& families = drivers::RandomSceneFamilies();
-      const std::vector<drivers::Scenario> tracking = drivers::TrackingScenarios();
-      if (seed.empty() || *end != '\0' || seed[0] == '-' ||
-          (synthetic_family != "demo" &&
-           std::find(families.begin(), families.end(), synthetic_family) == families.end() &&
-           std::none_of(tracking.begin(), tracking.end(),
-                        [&](const drivers::Scenario& t) { return t.name == synthetic_family; }))) {
-        std::fprintf(stderr,
-                     "--synthetic: expected FAMILY SEED (a random family, demo or a tracking "
-                     "scenario, then a whole seed or frame)\n");
-        return 2;
-      }
-    } else if (a == "--set" && i + 1 < argc) {
-      settings.push_back(argv[++i]);
+  bool jpeg = false;  // the KITTI pictures at 0.6 scale as JPEG (for the README)
+};
+
+// "" when `family` is one --synthetic takes (a random family, demo or a tracking scenario), else
+// the problem.
+std::string CheckFamily(const std::string& family) {
+  const auto& families = drivers::RandomSceneFamilies();
+  const std::vector<drivers::Scenario> tracking = drivers::TrackingScenarios();
+  if (family == "demo" || std::find(families.begin(), families.end(), family) != families.end() ||
+      std::any_of(tracking.begin(), tracking.end(),
+                  [&](const drivers::Scenario& t) { return t.name == family; })) {
+    return "";
+  }
+  return flags::Expected("", "--synthetic",
+                         "FAMILY SEED, FAMILY a random family, demo or a tracking scenario",
+                         family);
+}
+
+// The flags; exits 0 after --help, 2 with the problem and the usage on stderr.
+Options ParseOptions(int argc, char** argv) {
+  Options o;
+  bool help = false;
+  bool seed_due = false;  // --synthetic FAMILY was taken, its SEED not yet
+  flags::FlagSet set("");
+  set.Text("--out", &o.out_dir)
+      .Switch("--jpeg", &o.jpeg)
+      .Value("--set",
+             [&o](const std::string& setting) {
+               o.settings.push_back(setting);
+               return std::string();
+             })
+      .Value("--synthetic",
+             [&o, &seed_due](const std::string& family) {
+               o.synthetic_family = family;
+               seed_due = true;
+               return CheckFamily(family);
+             })
+      .Stop("--help", &help);
+  // --synthetic takes two values, a FlagSet's flag one: it takes FAMILY, and the walk stops at
+  // the SEED right after it (not a "--" flag), which is taken here before the walk goes on.
+  const std::vector<std::string> args(argv + 1, argv + argc);
+  std::string problem;
+  for (std::size_t next = 0; problem.empty() && !help && next < args.size(); ++next) {
+    problem = set.ParseLeading(args, next);
+    if (!problem.empty() || help || next >= args.size()) break;
+    if (!seed_due || next < 2 || args[next - 2] != "--synthetic" ||
+        args[next - 1] != o.synthetic_family) {
+      problem = "unexpected argument '" + args[next] + "'";
+    } else if (const flags::Parsed<std::int64_t> seed = flags::ParseNumber(args[next], kSeedRange);
+               !seed.ok()) {
+      problem = flags::Expected("", "--synthetic",
+                                "FAMILY SEED, SEED " + flags::Describe(kSeedRange), args[next]);
     } else {
-      std::fprintf(stderr,
-                   "usage: stevi-stixel-view [--out DIR] [--set path=value]... [--jpeg] "
-                   "[--synthetic FAMILY SEED]\n");
-      return 2;
+      o.synthetic_seed = static_cast<uint64_t>(seed.value);
+      seed_due = false;
     }
   }
+  if (problem.empty() && !help && seed_due) problem = "--synthetic: needs FAMILY SEED";
+  if (!problem.empty()) {
+    std::fprintf(stderr, "stevi-stixel-view: %s\n%s", problem.c_str(), kUsage);
+    std::exit(2);
+  }
+  if (help) {
+    std::fputs(kUsage, stdout);
+    std::exit(0);
+  }
+  return o;
+}
+
+// DIR/PAIR-stixels.png (or .jpg with --jpeg): the pair's left image, its stixels, the truth boxes
+// and the scored boxes with their depth.
+void WritePicture(const std::string& name, const testing::RealPair& pair,
+                  const pipeline::FrameResult& r, const testing::GtScene& scene,
+                  const std::vector<testing::ScoredBox>& scored,
+                  const testing::DetectionScore& score, const Options& opt) {
+  cv::Mat3b out;
+  cv::cvtColor(pair.left, out, cv::COLOR_GRAY2BGR);
+  DrawStixels(r, r.binning, out);
+  for (const testing::GtObstacle& o : scene.obstacles) cv::rectangle(out, o.bbox, {0, 255, 0}, 1);
+  for (size_t i = 0; i < scored.size(); ++i) {
+    const cv::Scalar c = VerdictColour(score.boxes[i]);
+    cv::rectangle(out, scored[i].bbox, c, 2);
+    char label[32];
+    std::snprintf(label, sizeof label, "%.1f", scored[i].depth_m);
+    cv::putText(out, label, scored[i].bbox.tl() + cv::Point(2, 12), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+                c, 1);
+  }
+  if (opt.jpeg) {
+    cv::Mat3b small;
+    cv::resize(out, small, cv::Size(), 0.6, 0.6, cv::INTER_AREA);
+    cv::imwrite(opt.out_dir + "/" + name + "-stixels.jpg", small, {cv::IMWRITE_JPEG_QUALITY, 80});
+  } else {
+    cv::imwrite(opt.out_dir + "/" + name + "-stixels.png", out);
+  }
+}
+
+int Run(int argc, char** argv) {
+  const Options opt = ParseOptions(argc, argv);
+  pipeline::PipelineConfig config = pipeline::ConfigForAlgorithm(pipeline::Algorithm::kStixels);
   // Each setting's own checks, then the whole's, naming every bad field.
-  if (const std::vector<std::string> problems = pipeline::ApplySettings(config, settings);
+  if (const std::vector<std::string> problems = pipeline::ApplySettings(config, opt.settings);
       !problems.empty()) {
     for (const std::string& p : problems)
       std::fprintf(stderr, "stevi-stixel-view: %s\n", p.c_str());
     return 2;
   }
-  if (!synthetic_family.empty()) {
-    return RunSynthetic(synthetic_family, synthetic_seed, config, out_dir);
+  if (!opt.synthetic_family.empty()) {
+    return RunSynthetic(opt.synthetic_family, opt.synthetic_seed, config, opt.out_dir);
   }
   const std::optional<std::string> dir = testing::DataDir();
   if (!dir) {
@@ -304,25 +377,7 @@ int Run(int argc, char** argv) {
         name.c_str(), r.ground ? "yes" : "no ", scored.size(), scene.obstacles.size(), score.found,
         w5, score.fragments, score.fp, score.fp_free, score.fp_structure, score.fp_wrong_depth,
         score.fp_no_truth, ms);
-    cv::Mat3b out;
-    cv::cvtColor(pair->left, out, cv::COLOR_GRAY2BGR);
-    DrawStixels(r, bin, out);
-    for (const testing::GtObstacle& o : scene.obstacles) cv::rectangle(out, o.bbox, {0, 255, 0}, 1);
-    for (size_t i = 0; i < scored.size(); ++i) {
-      const cv::Scalar c = VerdictColour(score.boxes[i]);
-      cv::rectangle(out, scored[i].bbox, c, 2);
-      char label[32];
-      std::snprintf(label, sizeof label, "%.1f", scored[i].depth_m);
-      cv::putText(out, label, scored[i].bbox.tl() + cv::Point(2, 12), cv::FONT_HERSHEY_SIMPLEX, 0.4,
-                  c, 1);
-    }
-    if (jpeg) {
-      cv::Mat3b small;
-      cv::resize(out, small, cv::Size(), 0.6, 0.6, cv::INTER_AREA);
-      cv::imwrite(out_dir + "/" + name + "-stixels.jpg", small, {cv::IMWRITE_JPEG_QUALITY, 80});
-    } else {
-      cv::imwrite(out_dir + "/" + name + "-stixels.png", out);
-    }
+    WritePicture(name, *pair, r, scene, scored, score, opt);
   }
   std::printf("all: boxes %d  truth %d  found %d (%.0f %%)  within 5 %% %d (%.0f %%)  FP %d\n",
               boxes, truth, found, 100.0 * found / std::max(1, truth), within5,

@@ -1,4 +1,4 @@
-#include "client/avoid.h"
+#include "client/advisory/avoid.h"
 
 #include <cmath>
 #include <limits>

@@ -1,4 +1,4 @@
-#include "client/config_edit.h"
+#include "client/lib/config_edit.h"
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>

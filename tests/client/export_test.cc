@@ -1,4 +1,4 @@
-#include "client/export.h"
+#include "client/advisory/export.h"
 
 #include <cctype>
 #include <cmath>

@@ -2,7 +2,7 @@
 // Geodesic::Direct at a known distance and azimuth, their true north-east-down coordinates from
 // LocalCartesian (east-north-up, rigorous on the WGS84 ellipsoid). The client does not link
 // GeographicLib; only this test does.
-#include "client/local_ned.h"
+#include "client/advisory/local_ned.h"
 
 #include <gtest/gtest.h>
 

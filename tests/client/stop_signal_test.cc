@@ -1,4 +1,4 @@
-// The `stevi` commands' stop signals (client/commands/common.h): a SIGTERM calls the command's
+// The `stevi` commands' stop signals (client/cli/stop_signals.h): a SIGTERM calls the command's
 // handler on the signal thread, and replacing the handler waits for a running one to return, so a
 // command can destroy what its handler refers to right after OnStopSignal(nullptr). `stevi
 // mavlink` crashed (SIGSEGV) at a SIGTERM when its Bridge was destroyed while Bridge::Stop() was
@@ -13,7 +13,7 @@
 #include <mutex>
 #include <thread>
 
-#include "client/commands/common.h"
+#include "client/cli/stop_signals.h"
 
 namespace stevi::client::commands {
 namespace {

@@ -1,4 +1,4 @@
-# Command-line flags: the stevi tool's FlagSet and number parser, the servers' ParseFlags and
-# ApplyFlags.
+# Command-line flags: the flag library's FlagSet and number parser, and the servers' command line
+# made from the settings' field lists.
 stevi_fuzz(flags SOURCES ${CMAKE_CURRENT_LIST_DIR}/flags_fuzz.cc
-  LIBS stevi_client_logic stevi_server_lib)
+  LIBS stevi_flags stevi_server_lib)

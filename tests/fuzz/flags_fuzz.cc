@@ -1,6 +1,6 @@
-// Fuzz target: command-line arguments, for both flag libraries: the `stevi` tool's FlagSet and
-// number parser (client/flags.h), and the servers' ParseFlags and ApplyFlags over a ServerConfig,
-// then its validation (server/app_config.h), with stevi-server's own flag names.
+// Fuzz target: command-line arguments, through the one flag library (core/common/flags.h): a
+// FlagSet and the number parser as the `stevi` tool uses them, and stevi-server's command line
+// (server/server_flags.h: every setting's flag) applied over a ServerConfig, then its validation.
 //
 // Input: byte 0 picks the library; the rest is the argument list, split at '\0' bytes.
 // Checked besides the sanitizers:
@@ -8,19 +8,19 @@
 //     value untouched (the handler was not called);
 //   - FormatNumber of an accepted real reads back as the same value;
 //   - a parse either succeeds or returns an error message that names the problem (non-empty);
-//   - ApplyFlags either succeeds or leaves the config exactly as it was.
+//   - applying the settings' flags either succeeds or leaves the config exactly as it was.
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
-#include <set>
 #include <string>
 #include <vector>
 
-#include "client/flags.h"
+#include "core/common/flags.h"
 #include "server/app_config.h"
+#include "server/server_flags.h"
 
-namespace flags = stevi::client::flags;
+namespace flags = stevi::flags;
 
 namespace {
 
@@ -105,24 +105,19 @@ void FuzzFlagSet(const std::vector<std::string>& args) {
 }
 
 void FuzzServerFlags(const std::vector<std::string>& args) {
-  const std::set<std::string> known = {
-      "listen",   "config",    "source",        "left",      "right",   "calibration",
-      "fps",      "algorithm", "data-dir",      "scene",     "replay",  "rate",
-      "record",   "roi",       "exposure-us",   "gain-db",   "trigger", "timestamps",
-      "tls-cert", "tls-key",   "tls-client-ca", "token-file"};
+  stevi::server::ServerCommandLine command_line(
+      "stevi-server", [](const stevi::server::SettingFlag&) { return true; });
   std::vector<const char*> argv;
   argv.reserve(args.size());
   for (const std::string& a : args) argv.push_back(a.c_str());
-  const auto parsed = stevi::server::ParseFlags(static_cast<int>(argv.size()), argv.data(), known,
-                                                {"help", "allow-insecure"});
-  if (!parsed.ok()) {
-    Require(!parsed.error().message.empty());
+  if (const std::string problem = command_line.Parse(static_cast<int>(argv.size()), argv.data());
+      !problem.empty()) {
     return;
   }
   stevi::v1::ServerConfig config;
   config.set_listen("127.0.0.1:50051");
   const std::string before = config.SerializeAsString();
-  const stevi::Status applied = stevi::server::ApplyFlags(*parsed, config);
+  const stevi::Status applied = command_line.ApplyTo(config);
   if (!applied.ok()) {
     Require(!applied.error().message.empty());
     Require(config.SerializeAsString() == before);

@@ -19,7 +19,7 @@
 #include <span>
 #include <vector>
 
-#include "client/mavlink/bridge.h"
+#include "client/mavlink/translate.h"
 #include "client/mavlink/codec.h"
 #include "client/mavlink/messages.h"
 

@@ -13,8 +13,8 @@
 //     the same records and the same end note;
 //   - nothing throws out.
 // The same folder then goes through `stevi export --format mcap`'s own reader of the format
-// (client/flight_export.h, protobuf alone), which must end with a result or a clear error; when
-// it succeeds, the MCAP file it wrote reads back whole.
+// (client/advisory/flight_export.h, protobuf alone), which must end with a result or a clear
+// error; when it succeeds, the MCAP file it wrote reads back whole.
 #include <unistd.h>
 
 #include <algorithm>
@@ -29,7 +29,7 @@
 #include <utility>
 #include <vector>
 
-#include "client/flight_export.h"
+#include "client/advisory/flight_export.h"
 #include "drivers/mcap/mcap_reader.h"
 #include "drivers/recording/recording_reader.h"
 

@@ -9,11 +9,13 @@
 #include <set>
 
 #include "server/field_mapping.h"
+#include "server/server_flags.h"
 #include "tests/server/proto_fields.h"
 #include "tests/testing/data.h"
 #include "tests/testing/status_matchers.h"
 
 using stevi::testing::IsError;
+using stevi::testing::IsOk;
 
 namespace stevi::server {
 namespace {
@@ -27,11 +29,15 @@ std::string WriteFile(const std::string& name, const std::string& text) {
   return path;
 }
 
-Result<Flags> Parse(std::vector<const char*> args) {
+// stevi-server's command line over `config`: its problem, a bad flag value's, or none.
+Status ApplyArgs(std::vector<const char*> args, v1::ServerConfig& config) {
   args.insert(args.begin(), "prog");
-  return ParseFlags(static_cast<int>(args.size()), args.data(),
-                    {"listen", "source", "left", "right", "calibration", "fps", "algorithm"},
-                    {"help"});
+  ServerCommandLine line("stevi-server", [](const SettingFlag&) { return true; });
+  if (std::string problem = line.Parse(static_cast<int>(args.size()), args.data());
+      !problem.empty()) {
+    return InvalidArgument(problem);
+  }
+  return line.ApplyTo(config);
 }
 
 TEST(LoadServerConfig, ReadsTextFormat) {
@@ -165,55 +171,57 @@ TEST(BuildPipelineConfig, NamesBadStevieAndStevisFields) {
   EXPECT_THAT(unknown.error().message, HasSubstr("pipeline.stevis.segmentation: unknown value 7"));
 }
 
-TEST(ParseFlags, AcceptsBothSpellingsAndRejectsTheUnknown) {
-  Result<Flags> flags = Parse({"--listen", "127.0.0.1:7", "--fps=12.5", "--help"});
-  ASSERT_TRUE(flags.ok()) << flags.error().message;
-  EXPECT_EQ(flags->values.at("listen"), "127.0.0.1:7");
-  EXPECT_EQ(flags->values.at("fps"), "12.5");
-  EXPECT_EQ(flags->values.at("help"), "true");
+TEST(ServerCommandLine, AcceptsBothSpellingsAndRejectsTheUnknown) {
+  v1::ServerConfig config;
+  ASSERT_THAT(ApplyArgs({"--listen", "127.0.0.1:7", "--fps=12.5"}, config), IsOk());
+  EXPECT_EQ(config.listen(), "127.0.0.1:7");
+  EXPECT_DOUBLE_EQ(config.source().fps(), 12.5);
+  ASSERT_THAT(ApplyArgs({"--fps", "1", "--fps", "2"}, config), IsOk());
+  EXPECT_DOUBLE_EQ(config.source().fps(), 2) << "a later repeat wins, as in every stevi tool";
 
-  EXPECT_THAT(Parse({"--bogus", "1"}).error().message, HasSubstr("--bogus"));
-  EXPECT_THAT(Parse({"--listen"}).error().message, HasSubstr("needs a value"));
-  EXPECT_THAT(Parse({"--fps", "1", "--fps", "2"}).error().message, HasSubstr("twice"));
+  EXPECT_THAT(ApplyArgs({"--bogus", "1"}, config),
+              IsError(ErrorCode::kInvalidArgument, HasSubstr("'--bogus'")));
+  EXPECT_THAT(ApplyArgs({"--listen"}, config),
+              IsError(ErrorCode::kInvalidArgument, HasSubstr("--listen: needs a value")));
+  EXPECT_THAT(ApplyArgs({"--allow-insecure=yes"}, config),
+              IsError(ErrorCode::kInvalidArgument, HasSubstr("--allow-insecure=yes")));
+  ServerCommandLine help("stevi-server", [](const SettingFlag&) { return true; });
+  const char* args[] = {"prog", "--help", "--bogus"};
+  EXPECT_EQ(help.Parse(3, args), "") << "--help ends the walk";
+  EXPECT_TRUE(help.help());
 }
 
-TEST(ApplyFlags, OverridesTheFileAndNamesBadValues) {
+TEST(ServerCommandLine, OverridesTheFileAndNamesBadValues) {
   v1::ServerConfig config;
   config.set_listen("127.0.0.1:1");
-  Result<Flags> flags =
-      Parse({"--listen", "127.0.0.1:2", "--algorithm", "CANONICAL", "--fps", "30"});
-  ASSERT_TRUE(flags.ok());
-  ASSERT_TRUE(ApplyFlags(*flags, config).ok());
+  ASSERT_THAT(
+      ApplyArgs({"--listen", "127.0.0.1:2", "--algorithm", "canonical", "--fps", "30"}, config),
+      IsOk());
   EXPECT_EQ(config.listen(), "127.0.0.1:2");
   EXPECT_EQ(config.pipeline().algorithm(), v1::ALGORITHM_CANONICAL);
   EXPECT_DOUBLE_EQ(config.source().fps(), 30);
 
   // Good flags beside bad ones: none is applied (tests/fuzz/flags found the good ones applied).
-  Result<Flags> bad = Parse({"--listen", "127.0.0.1:3", "--algorithm", "magic", "--fps", "-3",
-                             "--source", "camera", "--left", "cam7"});
-  ASSERT_TRUE(bad.ok());
   const std::string before = config.SerializeAsString();
-  const Status applied = ApplyFlags(*bad, config);
-  ASSERT_FALSE(applied.ok());
-  EXPECT_THAT(applied.error().message,
-              AllOf(HasSubstr("--algorithm"), HasSubstr("--fps"), HasSubstr("--source")));
+  const Status applied = ApplyArgs({"--listen", "127.0.0.1:3", "--algorithm", "magic", "--fps",
+                                    "-3", "--source", "camera", "--left", "cam7"},
+                                   config);
+  EXPECT_THAT(applied, IsError(ErrorCode::kInvalidArgument,
+                               AllOf(HasSubstr("--algorithm: must be one of canonical, stevie, "
+                                               "stevis, stixels (got 'magic')"),
+                                     HasSubstr("--fps: must be in (0, 1000] Hz (got '-3')"),
+                                     HasSubstr("--source: must be one of synthetic"))));
   EXPECT_EQ(config.listen(), "127.0.0.1:2") << "nothing applied from a bad set of flags";
   EXPECT_EQ(config.SerializeAsString(), before) << "nothing applied from a bad set of flags";
 }
 
-TEST(ApplyFlags, CamerasReplayAndRecording) {
-  const auto parse = [](std::vector<const char*> args) {
-    args.insert(args.begin(), "prog");
-    return ParseFlags(static_cast<int>(args.size()), args.data(),
-                      {"source", "left", "right", "roi", "exposure-us", "gain-db", "trigger",
-                       "replay", "rate", "record"});
-  };
+TEST(ServerCommandLine, CamerasReplayAndRecording) {
   v1::ServerConfig cameras;
-  Result<Flags> flags = parse({"--source", "aravis", "--left", "GV01", "--right", "10.0.0.2",
-                               "--roi", "800x600", "--exposure-us", "2500", "--gain-db", "0",
-                               "--trigger", "hardware:Line1", "--record", "/data/rec"});
-  ASSERT_TRUE(flags.ok());
-  ASSERT_TRUE(ApplyFlags(*flags, cameras).ok());
+  ASSERT_THAT(ApplyArgs({"--source", "aravis", "--left", "GV01", "--right", "10.0.0.2", "--roi",
+                         "800x600", "--exposure-us", "2500", "--gain-db", "0", "--trigger",
+                         "hardware:Line1", "--record", "/data/rec", "--timestamps", "host"},
+                        cameras),
+              IsOk());
   EXPECT_EQ(cameras.source().kind(), v1::SOURCE_KIND_ARAVIS);
   EXPECT_EQ(cameras.source().aravis().width(), 800u);
   EXPECT_EQ(cameras.source().aravis().height(), 600u);
@@ -221,25 +229,41 @@ TEST(ApplyFlags, CamerasReplayAndRecording) {
   EXPECT_TRUE(cameras.source().aravis().has_gain_db());
   EXPECT_EQ(cameras.source().aravis().trigger(), v1::TRIGGER_MODE_HARDWARE);
   EXPECT_EQ(cameras.source().aravis().trigger_line(), "Line1");
+  EXPECT_EQ(cameras.source().aravis().timestamps(), v1::TIMESTAMP_SOURCE_HOST);
   EXPECT_EQ(cameras.record().dir(), "/data/rec");
   EXPECT_TRUE(ValidateServerConfig(cameras).empty())
       << ::testing::PrintToString(ValidateServerConfig(cameras));
+  v1::ServerConfig free_run;
+  ASSERT_THAT(ApplyArgs({"--trigger", "free"}, free_run), IsOk()) << "a choice's first word";
+  EXPECT_EQ(free_run.source().aravis().trigger(), v1::TRIGGER_MODE_FREE_RUN);
 
   v1::ServerConfig replay;
-  ASSERT_TRUE(
-      ApplyFlags(*parse({"--source", "replay", "--replay", "r1", "--rate", "max"}), replay).ok());
+  ASSERT_THAT(ApplyArgs({"--source", "replay", "--replay", "r1", "--rate", "max"}, replay), IsOk());
   EXPECT_EQ(replay.source().kind(), v1::SOURCE_KIND_REPLAY);
   EXPECT_EQ(replay.source().replay().dir(), "r1");
   EXPECT_TRUE(replay.source().replay().has_rate());
   EXPECT_DOUBLE_EQ(replay.source().replay().rate(), 0);
 
-  const Status bad = ApplyFlags(*parse({"--roi", "640", "--exposure-us", "-1", "--trigger",
-                                        "hardware", "--rate", "fast", "--gain-db", "loud"}),
-                                replay);
-  ASSERT_FALSE(bad.ok());
-  EXPECT_THAT(bad.error().message,
-              AllOf(HasSubstr("--roi"), HasSubstr("--exposure-us"), HasSubstr("--trigger"),
-                    HasSubstr("--rate"), HasSubstr("--gain-db")));
+  v1::ServerConfig video;
+  ASSERT_THAT(ApplyArgs({"--source", "video", "--layout", "top-bottom", "--size", "640x480",
+                         "--latency-ms", "50"},
+                        video),
+              IsOk());
+  EXPECT_EQ(video.source().gst().layout(), v1::GST_LAYOUT_TOP_BOTTOM);
+  EXPECT_EQ(video.source().gst().width(), 640);
+  EXPECT_EQ(video.source().gst().height(), 480);
+  EXPECT_EQ(video.source().gst().latency_ms(), 50u);
+
+  const Status bad = ApplyArgs({"--roi", "640", "--exposure-us", "-1", "--trigger", "manual",
+                                "--rate", "fast", "--gain-db", "loud", "--latency-ms", "2.5"},
+                               replay);
+  EXPECT_THAT(bad, IsError(ErrorCode::kInvalidArgument,
+                           AllOf(HasSubstr("--roi: must be WIDTHxHEIGHT, each in [16, 16384] "
+                                           "pixels (got '640')"),
+                                 HasSubstr("--exposure-us"), HasSubstr("--trigger"),
+                                 HasSubstr("--rate"), HasSubstr("--gain-db"),
+                                 HasSubstr("--latency-ms: must be in [0, 5000] ms (a whole "
+                                           "number) (got '2.5')"))));
 
   // Cross-field: what each source needs, and ranges.
   v1::ServerConfig incomplete;
@@ -258,7 +282,7 @@ TEST(ApplyFlags, CamerasReplayAndRecording) {
   same.mutable_source()->set_left("GV01");
   same.mutable_source()->set_right("GV01");
   EXPECT_THAT(::testing::PrintToString(ValidateServerConfig(same)),
-              HasSubstr("must be another camera than source.left"));
+              HasSubstr("source.right: must be another camera than the left one"));
   v1::ServerConfig nothing;
   nothing.mutable_source()->set_kind(v1::SOURCE_KIND_REPLAY);
   nothing.mutable_source()->set_left("x.png");
@@ -281,11 +305,11 @@ TEST(ValidateServerConfig, ListsEveryCrossFieldProblem) {
                          HasSubstr("source.calibration"), HasSubstr("max_streams"),
                          HasSubstr("keepalive_time_s: must be in [1, 86400] s (got 0.1)"),
                          HasSubstr("keepalive_timeout_s"),
-                         HasSubstr("pipeline_workers: must be in 1..16 (got 0)"),
-                         HasSubstr("opencv_threads: must be in 1..64 (got 65)")));
+                         HasSubstr("pipeline_workers: must be in [1, 16] (got 0)"),
+                         HasSubstr("opencv_threads: must be in [1, 64] (got 65)")));
   config.set_pipeline_workers(17);
   EXPECT_THAT(::testing::PrintToString(ValidateServerConfig(config)),
-              HasSubstr("pipeline_workers: must be in 1..16 (got 17)"));
+              HasSubstr("pipeline_workers: must be in [1, 16] (got 17)"));
 
   v1::ServerConfig fine;
   fine.set_listen("127.0.0.1:0");

@@ -12,7 +12,7 @@
 #include <mutex>
 #include <condition_variable>
 
-#include "client/client.h"
+#include "client/lib/client.h"
 #include "core/calibration/chessboard_render.h"
 #include "core/geometry/calibration_io.h"
 #include "server/runtime/engine.h"

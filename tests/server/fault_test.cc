@@ -25,7 +25,7 @@
 #include <set>
 #include <thread>
 
-#include "client/client.h"
+#include "client/lib/client.h"
 #include "core/calibration/store.h"
 #include "core/geometry/calibration_io.h"
 #include "stevi/v1/obstacle_service.pb.h"

@@ -24,7 +24,7 @@
 #include <thread>
 #include <vector>
 
-#include "client/client.h"
+#include "client/lib/client.h"
 #include "stevi/v1/calibration_service.grpc.pb.h"
 #include "stevi/v1/obstacle_service.grpc.pb.h"
 

@@ -18,7 +18,7 @@
 #include <thread>
 #include <vector>
 
-#include "client/client.h"
+#include "client/lib/client.h"
 #include "tests/server/load_helpers.h"
 #include "tests/testing/sanitized.h"
 #include "tests/testing/data.h"

@@ -25,8 +25,8 @@
 #include <thread>
 #include <vector>
 
-#include "client/client.h"
-#include "client/mavlink/bridge.h"
+#include "client/lib/client.h"
+#include "client/mavlink/translate.h"
 #include "client/mavlink/codec.h"
 #include "client/mavlink/messages.h"
 #include "core/geo/georeferencer.h"

@@ -387,7 +387,8 @@ TEST(McapRecording, BadSettingsAreNamedBeforeAnythingStarts) {
   const Case cases[] = {
       {{"--record-mcap", dir + "/taken.mcap"}, "record_mcap.file: " + dir + "/taken.mcap exists"},
       {{"--record-mcap", dir + "/no/such/folder/f.mcap"}, "does not exist"},
-      {{"--record-mcap", dir + "/f.mcap", "--mcap-image-hz", "31"}, "image_hz"},
+      {{"--record-mcap", dir + "/f.mcap", "--mcap-image-hz", "31"},
+       "--mcap-image-hz: must be in [0, 30] Hz (got '31')"},
       {{"--record-mcap", dir + "/f.mcap", "--mcap-image-hz", "fast"}, "--mcap-image-hz"},
   };
   for (const Case& c : cases) {

@@ -17,7 +17,7 @@
 #include <thread>
 #include <vector>
 
-#include "client/client.h"
+#include "client/lib/client.h"
 #include "server/app_config.h"
 #include "server/auth.h"
 #include "server/server.h"

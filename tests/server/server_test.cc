@@ -18,7 +18,7 @@
 #include <thread>
 #include <tuple>
 
-#include "client/client.h"
+#include "client/lib/client.h"
 #include "core/geo/georeferencer.h"
 #include "server/runtime/pose_source.h"
 #include "server/service.h"

@@ -6,7 +6,8 @@ stevi_test(client/station/foxglove_server_test SOURCES client/station/foxglove_s
 
 # The ground station's page in headless Chromium against a real stevi-server and `stevi station`.
 stevi_test(client/station/station_browser_test SOURCES client/station/station_browser_test.cc
-  LIBS stevi_client stevi_testing_process stevi_testing_browser Threads::Threads TIMEOUT 300)
+  LIBS stevi_client stevi_calibration stevi_testing_process stevi_testing_browser Threads::Threads
+  TIMEOUT 300)
 add_dependencies(client_station_station_browser_test stevi-server stevi)
 
 # The station in process against a real stevi-server: its channels, previews on demand, the

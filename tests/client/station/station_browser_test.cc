@@ -1,7 +1,8 @@
 // The ground station's page in a real browser (Debian's headless Chromium) against a real
 // stevi-server on the synthetic rig and a real `stevi station`: the video changes, the table shows
-// the tracks the server streams, the controls reach the server and show its errors, and a server
-// restart shows as down and then up again. Skips when Chromium is absent.
+// the tracks the server streams, the controls reach the server and show its errors, a stored
+// calibration can be activated when none is active, the page's modules are served as JavaScript,
+// and a server restart shows as down and then up again. Skips when Chromium is absent.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -11,9 +12,12 @@
 #include <map>
 #include <mutex>
 #include <regex>
+#include <set>
 #include <thread>
 
-#include "client/client.h"
+#include "client/lib/client.h"
+#include "core/calibration/store.h"
+#include "core/geometry/calibration_io.h"
 #include "tests/server/server_process.h"
 #include "tests/testing/chromium.h"
 #include "tests/testing/data.h"
@@ -31,6 +35,26 @@ using testing::Subprocess;
 
 constexpr char kToken[] = "operator-token-for-the-browser-test";
 constexpr auto kWait = 60s;
+
+// A calibration store in `dir` (created) with calibrations but none active, as after `stevi
+// calibrate` stored them and nobody activated one: cal-000001 passed its gates (the synthetic
+// rig's own numbers: 640x480, f 700 px, baseline 0.6 m), cal-000002 failed them.
+void WriteStoreWithoutActive(const std::string& dir) {
+  Result<calibration::OpenedStore> opened = calibration::CalibrationStore::Open(dir);
+  ASSERT_TRUE(opened.ok()) << opened.error().message;
+  for (const bool passed : {true, false}) {
+    calibration::CalibrationReport report;
+    report.image_size = cv::Size(640, 480);
+    report.pairs_given = 20;
+    report.rms_px = passed ? 0.1 : 3.5;
+    report.baseline_m = 0.6;
+    report.passed = passed;
+    const Result<calibration::CalibrationId> id = opened->store->Add(
+        geometry::IdealCalibration(cv::Size(640, 480), 700, 0.6, 320, 240), report);
+    ASSERT_TRUE(id.ok()) << id.error().message;
+  }
+  ASSERT_FALSE(opened->store->ActiveId().has_value());
+}
 
 // What the test itself receives from the server: the frames by id (the reference the page's
 // table is checked against).
@@ -67,9 +91,13 @@ class StationBrowser : public ::testing::Test {
     server_ = new ServerProcess();
     server_->Start({"--token-file", token_dir_ + "/token", "--allow-insecure"});
     if (::testing::Test::HasFatalFailure()) return;
-    // A second rig, without a token, on another scene: the page has a panel per rig.
+    // A second rig, without a token, on another scene: the page has a panel per rig. Its data
+    // directory holds calibrations, none of them active.
+    const std::string second_data = token_dir_ + "/rig2-data";
+    WriteStoreWithoutActive(second_data);
+    if (::testing::Test::HasFatalFailure()) return;
     second_ = new ServerProcess();
-    second_->Start({"--scene", "head_on"});
+    second_->Start({"--scene", "head_on", "--data-dir", second_data}, false);
     if (::testing::Test::HasFatalFailure()) return;
     // A site overlay: the outline of Pisa's runway 04R/22L around the synthetic rig's hover.
     std::ofstream(token_dir_ + "/site.geojson") << R"({"type": "FeatureCollection", "features": [
@@ -334,6 +362,39 @@ TEST_F(StationBrowser, ASnapshotAndTheCalibrationsComeFromTheServer) {
   EXPECT_GT(png["size"].get<int>(), 1000);
 }
 
+// With calibrations stored and none active (rig2's), a stored calibration that passed can be
+// activated from the page: only the active calibration's button is disabled.
+TEST_F(StationBrowser, WithNoActiveCalibrationOneCanBeActivated) {
+  client::ClientOptions options;
+  options.address = second_->address();
+  client::Client rig2_client(options);
+  v1::ListCalibrationsResponse list;
+  ASSERT_TRUE(rig2_client.ListCalibrations(&list).ok());
+  ASSERT_EQ(list.calibrations_size(), 2);
+  ASSERT_EQ(list.active_id(), "") << "the seeded store should have no active calibration";
+
+  const std::string rig2 = "section.rig[data-rig=\"rig2\"] ";
+  const std::string button =
+      "document.querySelector('" + rig2 +
+      "div.calibrations button.activate-calibration[data-id=\"cal-000001\"]')";
+  ASSERT_TRUE(browser_->WaitFor("!!" + button, kWait)) << "rig2's calibrations are not listed";
+  const nlohmann::json shown =
+      Eval("({disabled: " + button + ".disabled, text: " + button + ".textContent})");
+  ASSERT_EQ(shown["disabled"], false)
+      << "no calibration is active, yet cal-000001 cannot be activated: " << shown.dump();
+  EXPECT_EQ(shown["text"], "activate") << shown.dump();
+
+  // And activating it works: the server has it active, the page shows it so.
+  Eval(button + ".click()");
+  ASSERT_TRUE(
+      browser_->WaitFor("(() => { const b = " + button +
+                            "; return !!b && b.disabled && b.textContent === 'active'; })()",
+                        kWait))
+      << "the page does not show cal-000001 as active";
+  ASSERT_TRUE(rig2_client.ListCalibrations(&list).ok());
+  EXPECT_EQ(list.active_id(), "cal-000001");
+}
+
 // The map draws the --site overlay (in the local metres around the vehicle) and the tracks'
 // geodetic positions.
 TEST_F(StationBrowser, TheMapDrawsTheSiteAndTheTracks) {
@@ -366,6 +427,27 @@ TEST_F(StationBrowser, EachRigHasItsOwnPanel) {
   if (const char* shot = std::getenv("STEVI_STATION_SCREENSHOT")) {
     EXPECT_TRUE(browser_->Screenshot(shot));
   }
+}
+
+// The page's scripts are ES modules (app.js imports the others), which a browser runs only when
+// they are served as JavaScript: each script the page loaded answers as text/javascript.
+TEST_F(StationBrowser, TheScriptsAreServedAsJavaScript) {
+  const nlohmann::json scripts = Eval(R"(Promise.all(performance.getEntriesByType('resource')
+      .map(e => new URL(e.name)).filter(u => u.pathname.endsWith('.js') &&
+                                             !u.pathname.startsWith('/leaflet/'))
+      .map(u => fetch(u).then(r => ({path: u.pathname, status: r.status,
+                                     type: r.headers.get('content-type')})))))");
+  ASSERT_TRUE(scripts.is_array()) << scripts.dump();
+  std::set<std::string> paths;
+  for (const auto& script : scripts) {
+    const std::string path = script["path"].get<std::string>();
+    paths.insert(path);
+    EXPECT_EQ(script["status"], 200) << path;
+    EXPECT_THAT(script["type"].get<std::string>(), ::testing::StartsWith("text/javascript"))
+        << path;
+  }
+  EXPECT_TRUE(paths.count("/app.js") && paths.count("/protobuf.js")) << scripts.dump();
+  EXPECT_GT(paths.size(), 2u) << "app.js imported no module: " << scripts.dump();
 }
 
 // Last: the restart.

@@ -516,10 +516,9 @@ TEST(CalibrateStereo, ClearErrorsForUnusableInput) {
   invalid.max_image_size = {0, 0};
   e = error_of(three, invalid);
   EXPECT_EQ(e.code, ErrorCode::kInvalidArgument);
-  EXPECT_THAT(e.message, HasSubstr("board.inner_cols: must be in [3, 100] (got 1)"));
+  EXPECT_THAT(e.message, HasSubstr("board.columns: must be in [3, 100] (got 1)"));
   EXPECT_THAT(e.message, HasSubstr("gates.max_rms_px: must be > 0 pixels (got 0)"));
-  EXPECT_THAT(e.message,
-              HasSubstr("rectify_alpha: must be in [0, 1], or -1 for OpenCV's choice (got 2)"));
+  EXPECT_THAT(e.message, HasSubstr("alpha: must be -1 (OpenCV's choice) or in [0, 1] (got 2)"));
   EXPECT_THAT(e.message,
               HasSubstr("max_image_size: each side must be in [16, 65535] pixels (got 0x0)"));
 

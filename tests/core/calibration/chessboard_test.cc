@@ -189,11 +189,11 @@ TEST(BoardSpec, ValidatesAndListsObjectPoints) {
   EXPECT_NEAR(points.back().y, 0.15, 1e-6);
 
   const std::vector<std::string> problems = BoardSpec{6, 6, -0.01}.Validate();
-  EXPECT_THAT(problems, ::testing::Contains(HasSubstr("inner_cols, inner_rows: must differ")));
-  EXPECT_THAT(problems, ::testing::Contains(
-                            HasSubstr("square_size_m: must be in (0, 10] metres (got -0.01)")));
+  EXPECT_THAT(problems, ::testing::Contains(HasSubstr("columns, rows: must differ")));
+  EXPECT_THAT(problems,
+              ::testing::Contains(HasSubstr("square_m: must be in (0, 10] metres (got -0.01)")));
   EXPECT_THAT((BoardSpec{2, 6, 0.02}.Validate()),
-              ::testing::Contains(HasSubstr("inner_cols: must be in [3, 100] (got 2)")));
+              ::testing::Contains(HasSubstr("columns: must be in [3, 100] (got 2)")));
 }
 
 // Largest distance between detected corners and the truth, index by index.
@@ -312,7 +312,7 @@ TEST(ChessboardRenderer, AntiAliasesAndAppliesTheLens) {
   const Result<RenderedPair> bad =
       RenderChessboardPair(rig, BoardSpec{9, 6, 0}, pose, {0, 10}, {.supersampling = 0});
   ASSERT_FALSE(bad.ok());
-  EXPECT_THAT(bad.error().message, HasSubstr("board.square_size_m"));
+  EXPECT_THAT(bad.error().message, HasSubstr("board.square_m"));
   EXPECT_THAT(bad.error().message, HasSubstr("image_size"));
   EXPECT_THAT(bad.error().message, HasSubstr("options.supersampling"));
 }

@@ -179,7 +179,7 @@ TEST(AravisOptions, ValidateListsEveryProblem) {
       "exposure_us: must be in [0, 100000000) us (got -5)",
       "pair_tolerance_ms: must be in [0, 1000] ms (got -1)",
       "buffers: must be in [2, 64] (got 1)",
-      "right_id: must differ from left_id (both are 'GV01')",
+      "right_id: must be another camera than the left one (both are 'GV01')",
       "pixel_format: RGB8 is not supported (supported: Mono8, BayerRG8, BayerGR8, BayerGB8, "
       "BayerBG8, or empty for automatic)",
       "trigger_line: a hardware trigger needs the camera's line (e.g. Line0)",

@@ -109,7 +109,7 @@ TEST(ReplayOptions, ValidateListsEveryProblem) {
   EXPECT_TRUE(o.Validate().empty());
   o.rate = -1;
   ASSERT_EQ(o.Validate().size(), 1u);
-  EXPECT_EQ(o.Validate()[0], "rate: must be in [0, 1000] (got -1)");
+  EXPECT_EQ(o.Validate()[0], "rate: must be 0 (max) or in (0, 1000] (got -1)");
   o.rate = std::nan("");
   EXPECT_EQ(o.Validate().size(), 1u);
 

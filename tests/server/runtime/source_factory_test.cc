@@ -54,13 +54,15 @@ TEST(CheckSource, NamesWhatEachKindNeeds) {
   const std::vector<std::string> aravis = CheckSource(spec);
   EXPECT_THAT(aravis, Contains(HasSubstr("source.right: must be another camera")));
   EXPECT_THAT(aravis, Contains("source.aravis.buffers: must be in [2, 64] (got 1)"));
-  EXPECT_THAT(aravis, Contains(HasSubstr("source.aravis.trigger_line: required")));
+  EXPECT_THAT(aravis,
+              Contains(HasSubstr(
+                  "source.aravis.trigger_line: a hardware trigger needs the camera's line")));
 
   // The GStreamer kinds: each names what it needs, and its pipelines are built safely.
   spec = SourceSpec{};
   spec.kind = "video";
   EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.gst.file: required")));
-  spec.gst_file = "flight.avi";
+  spec.gst_inputs.file = "flight.avi";
   EXPECT_THAT(CheckSource(spec), IsEmpty());
   spec.left = "a.avi";
   EXPECT_THAT(CheckSource(spec),
@@ -75,11 +77,12 @@ TEST(CheckSource, NamesWhatEachKindNeeds) {
   EXPECT_THAT(CheckSource(spec), IsEmpty());
   spec = SourceSpec{};
   spec.kind = "rtsp";
-  spec.gst_url = "rtsp://camera/stream\" quoted";
+  spec.gst_inputs.url = "rtsp://camera/stream\" quoted";
   EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.gst.url")));
-  spec.gst_url = "rtsp://camera/stream";
-  spec.gst_latency_ms = 9000;
-  EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.gst.latency_ms: must be 0..5000")));
+  spec.gst_inputs.url = "rtsp://camera/stream";
+  spec.gst_inputs.latency_ms = 9000;
+  EXPECT_THAT(CheckSource(spec),
+              Contains(HasSubstr("source.gst.latency_ms: must be in [0, 5000] ms (got 9000)")));
   spec = SourceSpec{};
   spec.kind = "gst";
   EXPECT_THAT(CheckSource(spec), Contains(HasSubstr("source.gst.pipeline")));
@@ -89,8 +92,9 @@ TEST(CheckSource, NamesWhatEachKindNeeds) {
   spec = SourceSpec{};
   spec.kind = "replay";
   spec.replay.rate = -1;
-  EXPECT_THAT(CheckSource(spec), ElementsAre(HasSubstr("source.replay.dir: required"),
-                                             "source.replay.rate: must be in [0, 1000] (got -1)"));
+  EXPECT_THAT(CheckSource(spec),
+              ElementsAre(HasSubstr("source.replay.dir: required"),
+                          "source.replay.rate: must be 0 (max) or in (0, 1000] (got -1)"));
 
   spec = SourceSpec{};
   spec.scene = "airfeld";
