@@ -25,10 +25,6 @@
 
 namespace stevi::server {
 
-// How long a stop waits for calls in progress (a Calibrate, a snapshot download) before
-// cancelling them; with the other steps a SIGTERM ends well within 5 s.
-inline constexpr std::chrono::milliseconds kShutdownGrace{2000};
-
 // Reads a config file: JSON when it starts with '{', else protobuf text format. Errors name the
 // file, the line and the problem. Files over 1 MiB are refused.
 Result<v1::ServerConfig> LoadServerConfig(const std::string& path);

@@ -222,7 +222,7 @@ void Server::Shutdown() {
   if (health_thread_.joinable()) health_thread_.join();
   // The order of a graceful stop, each step logged (a SIGTERM must end within 5 s):
   // 1. Stop accepting: gRPC refuses new connections and calls from the moment its Shutdown()
-  //    begins, and then waits for the calls in progress (cancelling them after kShutdownGrace).
+  //    begins, and then waits for the calls in progress (cancelling them after shutdown_grace_s).
   const auto started = std::chrono::steady_clock::now();
   const auto elapsed_ms = [&] {
     return std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(
@@ -234,7 +234,9 @@ void Server::Shutdown() {
   if (grpc_server_) {
     stop_accepting = std::thread([this] {
       NameThisThread("stevi-shutdown");
-      grpc_server_->Shutdown(std::chrono::system_clock::now() + kShutdownGrace);
+      grpc_server_->Shutdown(std::chrono::system_clock::now() +
+                             std::chrono::duration_cast<std::chrono::system_clock::duration>(
+                                 std::chrono::duration<double>(options_.shutdown_grace_s)));
     });
   }
   // 2. End the streams, each with a final status (UNAVAILABLE "server shutting down": a client

@@ -179,6 +179,7 @@ struct ServerOptions {
   double min_client_ping_interval_s = 10;
   std::optional<int> pipeline_workers;  // unset: one per core, at most 4
   std::optional<int> opencv_threads;    // unset: 1 with several workers, else one per core
+  double shutdown_grace_s = 2;
   SourceOptions source;
   TlsOptions tls;
   AuthOptions auth;
@@ -236,6 +237,11 @@ struct ServerOptions {
                    "threads one OpenCV call may use; unset: 1 with several workers, else one "
                    "per core")
                  .In(1, 64)
+                 .Flag());
+    v.Number(s.shutdown_grace_s,
+             Field("shutdown_grace_s", "s",
+                   "a stop waits this long for calls in progress before cancelling them")
+                 .In(0, 4)
                  .Flag());
     v.Nested(s.source, Field("source"));
     v.Nested(s.tls, Field("tls"));

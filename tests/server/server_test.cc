@@ -593,7 +593,7 @@ TEST(ServerPublish, PublishedVehicleStatesGeoreferenceTheTracks) {
 
 // A PublishVehicleState stream whose client sends no more states is ended by the shutdown
 // itself (UNAVAILABLE "server shutting down", as the track streams are), not left to gRPC's
-// grace, which would cancel it and hold the stop for kShutdownGrace.
+// grace, which would cancel it and hold the stop for shutdown_grace_s.
 TEST(ServerShutdown, EndsAnOpenVehicleStateStreamWithTheShutdownStatus) {
   v1::ServerConfig config = TestConfig();
   config.mutable_geo()->set_max_age_s(30);
