@@ -51,6 +51,7 @@ class Collector {
     if (pair != nullptr) {  // the second number of "WxH"
       pair->kind = Kind::kPair;
       pair->paths.push_back(prefix_ + std::string(f.name()));
+      pair->second = f;
       pair->default_value += "x" + shown;
       return;
     }
@@ -205,13 +206,23 @@ std::string SetNumberAt(v1::ServerConfig& config, const std::string& path, doubl
   return "";
 }
 
+// What the flag accepts, in words: "in (0, 1000] Hz", "one of camera, host".
+std::string Valid(const SettingFlag& flag) {
+  if (flag.kind == Kind::kNumber || flag.kind == Kind::kPair) return flag.field.Describe(true);
+  if (flag.kind != Kind::kChoice && flag.kind != Kind::kChoiceAndText) return "";
+  std::string valid = "one of ";
+  for (const std::string& c : flag.choices) valid += (c == flag.choices.front() ? "" : ", ") + c;
+  if (flag.kind == Kind::kChoiceAndText) valid += "; CHOICE:TEXT also sets " + flag.paths.at(1);
+  return valid;
+}
+
 std::string ApplyPair(const SettingFlag& flag, const std::string& text, v1::ServerConfig& config) {
   const size_t x = text.find('x');
   const std::string expected = "WIDTHxHEIGHT, each " + flag.field.Describe(true);
   if (x == std::string::npos) return Problem(flag, expected, text);
   double w = 0, h = 0;
   if (!ParseFieldNumber(flag, flag.field, text.substr(0, x), w).empty() ||
-      !ParseFieldNumber(flag, flag.field, text.substr(x + 1), h).empty()) {
+      !ParseFieldNumber(flag, flag.second, text.substr(x + 1), h).empty()) {
     return Problem(flag, expected, text);
   }
   std::string problem = SetNumberAt(config, flag.paths.at(0), w);
@@ -224,11 +235,8 @@ std::string ApplyChoice(const SettingFlag& flag, const std::string& text,
   const size_t colon = flag.kind == Kind::kChoiceAndText ? text.find(':') : std::string::npos;
   const std::string word = text.substr(0, colon);
   const std::optional<std::string> choice = FindChoice(flag, word);
-  std::string expected = "one of ";
-  for (const std::string& c : flag.choices) expected += (c == flag.choices.front() ? "" : ", ") + c;
-  if (flag.kind == Kind::kChoiceAndText) expected += " (with :TEXT after it where needed)";
   if (!choice || (colon != std::string::npos && colon + 1 == text.size())) {
-    return Problem(flag, expected, text);
+    return Problem(flag, Valid(flag), text);
   }
   auto [m, d] = Resolve(config, flag.paths.front());
   if (m == nullptr) return "no config field " + flag.paths.front();
@@ -324,16 +332,6 @@ std::string FormatUsageLine(const std::string& head, const std::string& help) {
   return out + "\n";
 }
 
-// What the flag accepts, in words: "in (0, 1000] Hz", "one of camera, host".
-std::string Valid(const SettingFlag& flag) {
-  if (flag.kind == Kind::kNumber || flag.kind == Kind::kPair) return flag.field.Describe(true);
-  if (flag.kind != Kind::kChoice && flag.kind != Kind::kChoiceAndText) return "";
-  std::string valid = "one of ";
-  for (const std::string& c : flag.choices) valid += (c == flag.choices.front() ? "" : ", ") + c;
-  if (flag.kind == Kind::kChoiceAndText) valid += "; CHOICE:TEXT also sets " + flag.paths.at(1);
-  return valid;
-}
-
 std::string UsageLine(const SettingFlag& flag) {
   std::string help(flag.field.doc());
   std::string notes = Valid(flag);
@@ -422,15 +420,28 @@ std::string ServerCommandLine::Usage(const std::string& about) const {
   return out;
 }
 
+namespace {
+
+// `text` in a Markdown table's cell: its '|' escaped, or the cell would end there.
+std::string Cell(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    if (c == '|') out += '\\';
+    out += c;
+  }
+  return out;
+}
+
+}  // namespace
+
 std::string FlagTableMarkdown() {
   std::string out = "| flag | config field | default | valid | meaning |\n|---|---|---|---|---|\n";
   for (const SettingFlag& flag : SettingFlags()) {
-    const std::string valid = Valid(flag);
     std::string paths;
     for (const std::string& p : flag.paths) paths += (paths.empty() ? "" : ", ") + ("`" + p + "`");
-    out += "| `--" + flag.flag + (flag.metavar.empty() ? "" : " " + flag.metavar) + "` | " + paths +
-           " | " + flag.default_value + " | " + valid + " | " + std::string(flag.field.doc()) +
-           " |\n";
+    const std::string head = flag.flag + (flag.metavar.empty() ? "" : " " + flag.metavar);
+    out += "| `--" + Cell(head) + "` | " + paths + " | " + flag.default_value + " | " +
+           Cell(Valid(flag)) + " | " + Cell(std::string(flag.field.doc())) + " |\n";
   }
   return out;
 }

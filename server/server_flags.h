@@ -32,9 +32,10 @@ struct SettingFlag {
   std::string flag;                // "exposure-us" (no dashes in front)
   std::vector<std::string> paths;  // "source.aravis.exposure_us"; two for kPair, kChoiceAndText
   Kind kind = Kind::kText;
-  bool whole = false;       // kNumber, kPair: an integer field
-  std::string metavar;      // "N", "FILE", "WxH"
-  fields::Field field{""};  // the (first) field: bounds, unit, meaning
+  bool whole = false;        // kNumber, kPair: an integer field
+  std::string metavar;       // "N", "FILE", "WxH"
+  fields::Field field{""};   // the (first) field: bounds, unit, meaning
+  fields::Field second{""};  // kPair: the second number's field (its own bounds)
   std::vector<std::string> choices;
   std::string default_value;  // as the usage shows it; empty when there is none
 };

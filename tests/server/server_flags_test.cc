@@ -179,6 +179,18 @@ TEST(ServerSettings, UsageNamesEveryFlagAndTheReadmeHasItsTable) {
     EXPECT_THAT(usage, HasSubstr("  --" + flag.flag + " ")) << "the usage lacks --" << flag.flag;
   }
   EXPECT_THAT(usage, HasSubstr("--config FILE"));
+  // Every row of the README's table has its five cells: a '|' inside one ("camera|host") is
+  // escaped, or Markdown would split the row there.
+  const std::string table = FlagTableMarkdown();
+  size_t start = 0;
+  while (start < table.size()) {
+    const size_t end = table.find('\n', start);
+    const std::string row = table.substr(start, end - start);
+    int bars = 0;
+    for (size_t i = 0; i < row.size(); ++i) bars += row[i] == '|' && (i == 0 || row[i - 1] != '\\');
+    EXPECT_EQ(bars, 6) << row;
+    start = end + 1;
+  }
   stevi::testing::CheckReadmeSection("<!-- flags table: generated from the field lists -->\n",
                                      "<!-- end of the flags table -->\n", FlagTableMarkdown());
 }
