@@ -109,7 +109,7 @@ TEST_F(AravisServerTest, StreamsPairedFramesWithSkewAndCountersInStatus) {
   EXPECT_EQ(status.source_state(), v1::SOURCE_STATE_RUNNING);
   EXPECT_THAT(status.source(), HasSubstr("aravis Aravis-Fake-GV01 + Aravis-Fake-GV02 640x480"));
   EXPECT_GE(status.pairing().pairs(), 40u);
-  // The >= 25 fps acquisition is asserted at the driver (drivers/aravis/aravis_source_test);
+  // The pairing of what the cameras deliver is asserted at the driver (aravis_source_test);
   // through the whole server, on two cores shared with other tests, the bound is looser (30 alone,
   // 17 seen under a 32-client load test running beside it).
   EXPECT_GE(status.fps_in(), 12.0) << "two cameras at 30 fps";
