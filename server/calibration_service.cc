@@ -12,12 +12,6 @@
 namespace stevi::server {
 namespace {
 
-grpc::ServerUnaryReactor* Reply(grpc::CallbackServerContext* context, const grpc::Status& status) {
-  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
-  reactor->Finish(status);
-  return reactor;
-}
-
 // Calibrate: reads the settings and the pairs, then calibrates on the manager's worker.
 // Lifetime: deleted in OnDone(); the worker job finishes the call and touches nothing after.
 class CalibrateReactor final : public grpc::ServerReadReactor<v1::CalibrationUpload> {

@@ -3,6 +3,8 @@
 #include <string>
 #include <utility>
 
+#include <grpcpp/server_context.h>
+
 namespace stevi::server {
 namespace {
 constexpr size_t kMaxMessageBytes = 2048;
@@ -33,6 +35,12 @@ grpc::Status ToGrpcStatus(const Error& error) {
 
 grpc::Status ToGrpcStatus(const Status& status) {
   return status.ok() ? grpc::Status::OK : ToGrpcStatus(status.error());
+}
+
+grpc::ServerUnaryReactor* Reply(grpc::CallbackServerContext* context, const grpc::Status& status) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  reactor->Finish(status);
+  return reactor;
 }
 
 }  // namespace stevi::server

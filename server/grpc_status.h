@@ -1,6 +1,7 @@
 // The one place where core errors become gRPC statuses.
 #pragma once
 
+#include <grpcpp/support/server_callback.h>
 #include <grpcpp/support/status.h>
 
 #include "core/common/error.h"
@@ -13,5 +14,9 @@ namespace stevi::server {
 // here.
 grpc::Status ToGrpcStatus(const Error& error);
 grpc::Status ToGrpcStatus(const Status& status);
+
+// A unary RPC's answer: the call's default reactor, finished with `status` (the response message
+// filled in before).
+grpc::ServerUnaryReactor* Reply(grpc::CallbackServerContext* context, const grpc::Status& status);
 
 }  // namespace stevi::server

@@ -189,16 +189,6 @@ class VehicleStateReactor final : public grpc::ServerReadReactor<v1::VehicleStat
   v1::VehicleState state_;
 };
 
-namespace {
-
-grpc::ServerUnaryReactor* Reply(grpc::CallbackServerContext* context, const grpc::Status& status) {
-  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
-  reactor->Finish(status);
-  return reactor;
-}
-
-}  // namespace
-
 grpc::Status ValidateStreamTracksRequest(const v1::StreamTracksRequest& request) {
   const double s = request.min_score();
   if (!(s >= 0.0 && s <= 1.0)) {

@@ -69,8 +69,7 @@ grpc::Status Client::Calibrate(const v1::CalibrationSettings& settings,
                                v1::CalibrationReport* report,
                                std::chrono::milliseconds calibrate_timeout) {
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + calibrate_timeout);
-  AddCredentials(context);
+  Prepare(context, calibrate_timeout);
   std::unique_ptr<grpc::ClientWriter<v1::CalibrationUpload>> writer =
       calibration_stub_->Calibrate(&context, report);
   v1::CalibrationUpload upload;
@@ -90,8 +89,7 @@ grpc::Status Client::CaptureCalibration(
     const std::function<void(const v1::CaptureProgress&)>& on_progress,
     std::chrono::milliseconds capture_timeout) {
   grpc::ClientContext context;
-  context.set_deadline(std::chrono::system_clock::now() + capture_timeout);
-  AddCredentials(context);
+  Prepare(context, capture_timeout);
   std::unique_ptr<grpc::ClientReader<v1::CaptureProgress>> reader =
       calibration_stub_->CaptureCalibration(&context, request);
   v1::CaptureProgress progress;
@@ -133,26 +131,32 @@ grpc::Status VehicleStatePublisher::Finish(v1::PublishVehicleStateResponse* resp
   return status;
 }
 
-grpc::Status Client::ListCalibrations(v1::ListCalibrationsResponse* response) {
+template <class Stub, class Request, class Response>
+grpc::Status Client::Unary(Stub& stub,
+                           grpc::Status (Stub::*method)(grpc::ClientContext*, const Request&,
+                                                        Response*),
+                           const Request& request, Response* response) const {
   grpc::ClientContext context;
   Prepare(context);
-  return calibration_stub_->ListCalibrations(&context, v1::ListCalibrationsRequest(), response);
+  return (stub.*method)(&context, request, response);
+}
+
+grpc::Status Client::ListCalibrations(v1::ListCalibrationsResponse* response) {
+  return Unary(*calibration_stub_, &v1::CalibrationService::Stub::ListCalibrations,
+               v1::ListCalibrationsRequest(), response);
 }
 
 grpc::Status Client::GetCalibration(const std::string& id, v1::CalibrationRecord* record) {
-  grpc::ClientContext context;
-  Prepare(context);
   v1::GetCalibrationRequest request;
   request.set_calibration_id(id);
-  return calibration_stub_->GetCalibration(&context, request, record);
+  return Unary(*calibration_stub_, &v1::CalibrationService::Stub::GetCalibration, request, record);
 }
 
 grpc::Status Client::ActivateCalibration(const std::string& id, v1::CalibrationRecord* record) {
-  grpc::ClientContext context;
-  Prepare(context);
   v1::ActivateCalibrationRequest request;
   request.set_calibration_id(id);
-  return calibration_stub_->ActivateCalibration(&context, request, record);
+  return Unary(*calibration_stub_, &v1::CalibrationService::Stub::ActivateCalibration, request,
+               record);
 }
 
 bool IsPrintableAscii(const std::string& text) {
@@ -167,51 +171,41 @@ void Client::AddCredentials(grpc::ClientContext& context) const {
   }
 }
 
-void Client::Prepare(grpc::ClientContext& context) const {
-  context.set_deadline(std::chrono::system_clock::now() + options_.timeout);
+void Client::Prepare(grpc::ClientContext& context, std::chrono::milliseconds timeout) const {
+  context.set_deadline(std::chrono::system_clock::now() + timeout);
   AddCredentials(context);
 }
 
 grpc::Status Client::GetStatus(v1::GetStatusResponse* response) {
-  grpc::ClientContext context;
-  Prepare(context);
-  return stub_->GetStatus(&context, v1::GetStatusRequest(), response);
+  return Unary(*stub_, &v1::ObstacleService::Stub::GetStatus, v1::GetStatusRequest(), response);
 }
 
 grpc::Status Client::StartRecording(const v1::StartRecordingRequest& request,
                                     v1::RecordingStatus* status) {
-  grpc::ClientContext context;
-  Prepare(context);
-  return stub_->StartRecording(&context, request, status);
+  return Unary(*stub_, &v1::ObstacleService::Stub::StartRecording, request, status);
 }
 
 grpc::Status Client::StopRecording(v1::RecordingStatus* status) {
-  grpc::ClientContext context;
-  Prepare(context);
-  return stub_->StopRecording(&context, v1::StopRecordingRequest(), status);
+  return Unary(*stub_, &v1::ObstacleService::Stub::StopRecording, v1::StopRecordingRequest(),
+               status);
 }
 
 grpc::Status Client::GetPipelineConfig(v1::PipelineConfig* response) {
-  grpc::ClientContext context;
-  Prepare(context);
-  return stub_->GetPipelineConfig(&context, v1::GetPipelineConfigRequest(), response);
+  return Unary(*stub_, &v1::ObstacleService::Stub::GetPipelineConfig,
+               v1::GetPipelineConfigRequest(), response);
 }
 
 grpc::Status Client::SetPipelineConfig(const v1::PipelineConfig& update,
                                        v1::PipelineConfig* active) {
-  grpc::ClientContext context;
-  Prepare(context);
   v1::SetPipelineConfigRequest request;
   *request.mutable_config() = update;
-  return stub_->SetPipelineConfig(&context, request, active);
+  return Unary(*stub_, &v1::ObstacleService::Stub::SetPipelineConfig, request, active);
 }
 
 grpc::Status Client::GetDisparitySnapshot(v1::DisparitySnapshot* response, bool annotated) {
-  grpc::ClientContext context;
-  Prepare(context);
   v1::GetDisparitySnapshotRequest request;
   request.set_annotated(annotated);
-  return stub_->GetDisparitySnapshot(&context, request, response);
+  return Unary(*stub_, &v1::ObstacleService::Stub::GetDisparitySnapshot, request, response);
 }
 
 bool IsTransientStreamEnd(const grpc::Status& status) {

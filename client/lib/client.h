@@ -163,10 +163,17 @@ class Client {
   const ClientOptions& options() const { return options_; }
 
  private:
-  // The unary deadline and the credentials metadata.
-  void Prepare(grpc::ClientContext& context) const;
+  // A deadline `timeout` from now and the credentials metadata.
+  void Prepare(grpc::ClientContext& context, std::chrono::milliseconds timeout) const;
+  // The unary deadline (options_.timeout) and the credentials metadata.
+  void Prepare(grpc::ClientContext& context) const { Prepare(context, options_.timeout); }
   // The credentials metadata alone (streams set their own deadlines).
   void AddCredentials(grpc::ClientContext& context) const;
+  // A unary call of `stub` with Prepare's deadline and credentials.
+  template <class Stub, class Request, class Response>
+  grpc::Status Unary(Stub& stub,
+                     grpc::Status (Stub::*method)(grpc::ClientContext*, const Request&, Response*),
+                     const Request& request, Response* response) const;
 
   ClientOptions options_;
   std::shared_ptr<grpc::Channel> channel_;

@@ -366,6 +366,21 @@ class PollingLink : public Link {
     return Wake::kReadable;
   }
 
+  // The start of a Receive into `buffer` from `fd`: nullopt once there is something to read, else
+  // what Receive returns: -1 with `error` for an empty buffer or a failed wait, 0 when the wait
+  // timed out or was interrupted.
+  std::optional<int> AwaitReceive(int fd, std::span<uint8_t> buffer, milliseconds timeout,
+                                  std::string& error) {
+    if (buffer.empty()) {
+      error = "Receive: empty buffer";
+      return -1;
+    }
+    const Wake wake = WaitReadable(fd, timeout, error);
+    if (wake == Wake::kFailed) return -1;
+    if (wake != Wake::kReadable) return 0;
+    return std::nullopt;
+  }
+
  private:
   Fd wake_;
 };
@@ -414,13 +429,9 @@ class UdpLink final : public PollingLink {
   }
 
   int Receive(std::span<uint8_t> buffer, milliseconds timeout, std::string& error) override {
-    if (buffer.empty()) {
-      error = "Receive: empty buffer";
-      return -1;
+    if (const std::optional<int> early = AwaitReceive(socket_.get(), buffer, timeout, error)) {
+      return *early;
     }
-    const Wake wake = WaitReadable(socket_.get(), timeout, error);
-    if (wake == Wake::kFailed) return -1;
-    if (wake != Wake::kReadable) return 0;
     SocketAddress from;
     from.length = sizeof(from.storage);
     const ssize_t n = ::recvfrom(socket_.get(), buffer.data(), buffer.size(), MSG_DONTWAIT,
@@ -556,13 +567,9 @@ class SerialLink final : public PollingLink {
   }
 
   int Receive(std::span<uint8_t> buffer, milliseconds timeout, std::string& error) override {
-    if (buffer.empty()) {
-      error = "Receive: empty buffer";
-      return -1;
+    if (const std::optional<int> early = AwaitReceive(device_.get(), buffer, timeout, error)) {
+      return *early;
     }
-    const Wake wake = WaitReadable(device_.get(), timeout, error);
-    if (wake == Wake::kFailed) return -1;
-    if (wake != Wake::kReadable) return 0;
     // VMIN 1 with O_NONBLOCK: no data reads as EAGAIN, so 0 is end of file, a hung-up tty.
     const ssize_t n = ::read(device_.get(), buffer.data(), buffer.size());
     if (n > 0) return static_cast<int>(n);

@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <iterator>
 #include <optional>
+#include <string>
+#include <string_view>
 #include <utility>
 
 namespace stevi::station::internal {
@@ -61,35 +63,40 @@ SubscriptionItem ParseSubscription(const Json& item) {
   return parsed;
 }
 
-ClientMessage ParseSubscribe(const Json& message) {
-  const auto list = message.find("subscriptions");
-  if (list == message.end() || !list->is_array()) {
-    return Warning("subscribe: \"subscriptions\" must be an array");
+// One entry of an unsubscribe's "subscriptionIds".
+SubscriptionItem ParseUnsubscription(const Json& item) {
+  SubscriptionItem parsed;
+  const std::optional<uint32_t> id = U32(item);
+  if (!id) {
+    parsed.problem = "subscription ids must be integers 0..2^32-1";
+  } else {
+    parsed.id = *id;
   }
-  ClientMessage parsed;
-  parsed.op = ClientMessage::Op::kSubscribe;
-  for (const Json& item : *list) parsed.items.push_back(ParseSubscription(item));
   return parsed;
 }
 
-ClientMessage ParseUnsubscribe(const Json& message) {
-  const auto list = message.find("subscriptionIds");
+// A subscribe or an unsubscribe (`op`, named `op_name`): its `key` must be an array, each entry of
+// which parse_item reads.
+ClientMessage ParseItems(const Json& message, ClientMessage::Op op, std::string_view op_name,
+                         const std::string& key, SubscriptionItem (*parse_item)(const Json&)) {
+  const auto list = message.find(key);
   if (list == message.end() || !list->is_array()) {
-    return Warning("unsubscribe: \"subscriptionIds\" must be an array");
+    return Warning(std::string(op_name) + ": \"" + key + "\" must be an array");
   }
   ClientMessage parsed;
-  parsed.op = ClientMessage::Op::kUnsubscribe;
-  for (const Json& item : *list) {
-    SubscriptionItem entry;
-    const std::optional<uint32_t> id = U32(item);
-    if (!id) {
-      entry.problem = "subscription ids must be integers 0..2^32-1";
-    } else {
-      entry.id = *id;
-    }
-    parsed.items.push_back(std::move(entry));
-  }
+  parsed.op = op;
+  for (const Json& item : *list) parsed.items.push_back(parse_item(item));
   return parsed;
+}
+
+ClientMessage ParseSubscribe(const Json& message) {
+  return ParseItems(message, ClientMessage::Op::kSubscribe, "subscribe", "subscriptions",
+                    ParseSubscription);
+}
+
+ClientMessage ParseUnsubscribe(const Json& message) {
+  return ParseItems(message, ClientMessage::Op::kUnsubscribe, "unsubscribe", "subscriptionIds",
+                    ParseUnsubscription);
 }
 
 }  // namespace

@@ -55,6 +55,16 @@ grpc::Status CheckOperatorToken(const std::string& token) {
                       "operator_token: must be printable ASCII");
 }
 
+// `call` on a client of its own that carries the operator's token (checked first) instead of the
+// station's.
+template <class Call>
+grpc::Status AsOperator(const client::ClientOptions& options, const std::string& operator_token,
+                        Call call) {
+  if (grpc::Status bad = CheckOperatorToken(operator_token); !bad.ok()) return bad;
+  client::Client c(WithToken(options, operator_token));
+  return call(c);
+}
+
 }  // namespace
 
 RigLink::RigLink(std::string name, client::ClientOptions options, PreviewSettings previews,
@@ -311,9 +321,8 @@ grpc::Status RigLink::GetConfig(v1::PipelineConfig* config) {
 
 grpc::Status RigLink::SetConfig(const v1::PipelineConfig& update, const std::string& operator_token,
                                 v1::PipelineConfig* active) {
-  if (grpc::Status bad = CheckOperatorToken(operator_token); !bad.ok()) return bad;
-  client::Client c(WithToken(options_, operator_token));
-  return c.SetPipelineConfig(update, active);
+  return AsOperator(options_, operator_token,
+                    [&](client::Client& c) { return c.SetPipelineConfig(update, active); });
 }
 
 grpc::Status RigLink::Snapshot(bool annotated, v1::DisparitySnapshot* snapshot) {
@@ -326,9 +335,8 @@ grpc::Status RigLink::ListCalibrations(v1::ListCalibrationsResponse* response) {
 
 grpc::Status RigLink::ActivateCalibration(const std::string& id, const std::string& operator_token,
                                           v1::CalibrationRecord* record) {
-  if (grpc::Status bad = CheckOperatorToken(operator_token); !bad.ok()) return bad;
-  client::Client c(WithToken(options_, operator_token));
-  return c.ActivateCalibration(id, record);
+  return AsOperator(options_, operator_token,
+                    [&](client::Client& c) { return c.ActivateCalibration(id, record); });
 }
 
 std::vector<client::TrackPoint> RigLink::TrackPoints() const {

@@ -676,4 +676,17 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
   return out;
 }
 
+std::vector<Detection> RangeAppearance(const cv::Mat1b& appearance, std::string_view extractor,
+                                       const stereo::DisparityMap& disparity,
+                                       const geometry::StereoRig& rig,
+                                       const geometry::RangeOptions& range,
+                                       const GroundOptions& ground_options,
+                                       const StereoBlobOptions& options,
+                                       const FullResolutionPair* full) {
+  const std::optional<GroundModel> ground =
+      ground_options.enabled ? FitGround(disparity, ground_options) : std::nullopt;
+  const cv::Mat1b classes = ClassifyPixels(disparity, rig, range, ground, ground_options);
+  return RangeRegions(appearance, classes, disparity, rig, range, options, extractor, ground, full);
+}
+
 }  // namespace stevi::detection

@@ -52,6 +52,17 @@ std::vector<Detection> RangeRegions(const cv::Mat1b& appearance, const cv::Mat1b
                                     const std::optional<GroundModel>& ground,
                                     const FullResolutionPair* full);
 
+// The stereo half of an appearance detector (SteViE's edges, SteViS's saliency): fits the ground
+// when ground_options.enabled, classifies the pixels, and ranges the regions of `appearance` as
+// RangeRegions does. `extractor` names the detector in each detection.
+std::vector<Detection> RangeAppearance(const cv::Mat1b& appearance, std::string_view extractor,
+                                       const stereo::DisparityMap& disparity,
+                                       const geometry::StereoRig& rig,
+                                       const geometry::RangeOptions& range,
+                                       const GroundOptions& ground_options,
+                                       const StereoBlobOptions& options,
+                                       const FullResolutionPair* full);
+
 // The disparity of one region measured on the full-resolution pair: the shift (and a vertical
 // residual, a gain and an offset) that best maps the right image onto the left over the region's
 // pixels, by robust Gauss-Newton from `initial_px` (camera pixels). The 1-sigma comes from the

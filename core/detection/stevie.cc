@@ -28,11 +28,8 @@ std::vector<Detection> DetectSteViE(const cv::Mat1b& left, const stereo::Dispari
   edges.canny_high *= noise_scale;
   const cv::Mat1b regions =
       extraction::CloseFillOpen(extraction::DetectEdges(left, edges), morphology);
-  const std::optional<GroundModel> ground =
-      options.ground.enabled ? FitGround(disparity, options.ground) : std::nullopt;
-  const cv::Mat1b classes = ClassifyPixels(disparity, rig, range, ground, options.ground);
-  return RangeRegions(regions, classes, disparity, rig, range, options.blobs, "stevie", ground,
-                      full);
+  return RangeAppearance(regions, "stevie", disparity, rig, range, options.ground, options.blobs,
+                         full);
 }
 
 }  // namespace stevi::detection

@@ -62,11 +62,8 @@ std::vector<Detection> DetectSteViS(const cv::Mat1b& left, const stereo::Dispari
                                     const SteViSOptions& options, const FullResolutionPair* full) {
   if (left.empty() || disparity.empty() || left.size() != disparity.fixed.size()) return {};
   const cv::Mat1b salient = SalientRegions(left, options);
-  const std::optional<GroundModel> ground =
-      options.ground.enabled ? FitGround(disparity, options.ground) : std::nullopt;
-  const cv::Mat1b classes = ClassifyPixels(disparity, rig, range, ground, options.ground);
-  return RangeRegions(salient, classes, disparity, rig, range, options.blobs, "stevis", ground,
-                      full);
+  return RangeAppearance(salient, "stevis", disparity, rig, range, options.ground, options.blobs,
+                         full);
 }
 
 }  // namespace stevi::detection

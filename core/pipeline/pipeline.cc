@@ -33,6 +33,21 @@ bool ToGrey(const cv::Mat& in, cv::Mat& out) {
   }
 }
 
+// `in` as grey into `out`: `in` itself when it is grey and may be read in place (`in_place`),
+// else converted into `buffer`. `name` says which image an error is about.
+Status GreyOf(const cv::Mat& in, bool in_place, const char* name, cv::Mat& buffer, cv::Mat& out) {
+  if (in_place && in.type() == CV_8UC1) {
+    out = in;  // only read: no copy needed
+    return Status::Ok();
+  }
+  if (!ToGrey(in, buffer)) {
+    return InvalidArgument(std::string(name) + ": unsupported image type " +
+                           cv::typeToString(in.type()) + " (want CV_8UC1, CV_8UC3 or CV_8UC4)");
+  }
+  out = buffer;
+  return Status::Ok();
+}
+
 }  // namespace
 
 // A frame's images through the front end: the processed (binned) pair, and the full-resolution
@@ -173,24 +188,11 @@ Status FrontEnd::State::Rectify(const StereoFrame& frame, const Snapshot& snapsh
   cv::Mat& out_right =
       images.rect_right;  // a view of frame.right or of rect_right; never written to
   if (frame.rectified) {
-    if (factor > 1 && frame.left.type() == CV_8UC1) {
-      out_left = frame.left;  // only read: no copy needed
-    } else if (ToGrey(frame.left, full_out)) {
-      out_left = full_out;
-    } else {
-      return InvalidArgument("frame.left: unsupported image type " +
-                             cv::typeToString(frame.left.type()) +
-                             " (want CV_8UC1, CV_8UC3 or CV_8UC4)");
-    }
-    if (frame.right.type() == CV_8UC1) {
-      out_right = frame.right;  // only read: no copy needed
-    } else if (ToGrey(frame.right, rect_right)) {
-      out_right = rect_right;
-    } else {
-      return InvalidArgument("frame.right: unsupported image type " +
-                             cv::typeToString(frame.right.type()) +
-                             " (want CV_8UC1, CV_8UC3 or CV_8UC4)");
-    }
+    // The left is published: read in place only when binning makes a fresh image of it.
+    Status status = GreyOf(frame.left, factor > 1, "frame.left", full_out, out_left);
+    if (!status.ok()) return status;
+    status = GreyOf(frame.right, true, "frame.right", rect_right, out_right);
+    if (!status.ok()) return status;
   } else {
     Status status = rig.Rectify(frame.left, frame.right, full_out, rect_right);
     if (!status.ok()) return status.error();

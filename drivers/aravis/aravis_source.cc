@@ -13,6 +13,7 @@
 #include <utility>
 
 #include "core/common/thread_name.h"
+#include "drivers/live_source.h"
 
 namespace stevi::drivers {
 namespace {
@@ -23,18 +24,6 @@ constexpr auto kReconnectFirst = std::chrono::milliseconds(250);
 constexpr auto kReconnectMax = std::chrono::milliseconds(1000);
 // Longest single wait of an acquisition thread, so that it notices a stop request promptly.
 constexpr auto kPollSlice = std::chrono::milliseconds(100);
-
-std::string Seconds(Clock::duration d) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.1f s", std::chrono::duration<double>(d).count());
-  return buf;
-}
-
-std::string Millis(int64_t ns) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.1f ms", static_cast<double>(ns) / 1e6);
-  return buf;
-}
 
 }  // namespace
 
@@ -194,7 +183,7 @@ void AravisStereoSource::Impl::Lose(Slot& s, const std::string& reason) {
 
 std::string AravisStereoSource::Impl::LostMessage(const Slot& s) const {
   std::string message = "camera " + s.name + " (" + SideName(s.side) + ") lost " +
-                        Seconds(Clock::now() - s.lost_since) + " ago: " + s.lost_reason;
+                        SecondsText(Clock::now() - s.lost_since) + " ago: " + s.lost_reason;
   if (s.reconnect_attempts == 0) {
     message += "; reopening it";
   } else {
@@ -324,7 +313,7 @@ void AravisStereoSource::Impl::Poll(Slot& s, RunState& r) {
       r.last_buffer = Clock::now();
       return;
     }
-    Lose(s, "no frame for " + Seconds(Clock::now() - r.last_buffer));
+    Lose(s, "no frame for " + SecondsText(Clock::now() - r.last_buffer));
     r.next_attempt = Clock::now() + r.backoff;
   }
 }
@@ -424,13 +413,7 @@ std::string AravisStereoSource::Describe() const {
 
 std::shared_ptr<const geometry::StereoRig> AravisStereoSource::Rig() const { return impl_->rig; }
 
-void AravisStereoSource::Interrupt() {
-  {
-    std::lock_guard lock(impl_->mu);
-    impl_->interrupted = true;
-  }
-  impl_->cv.notify_all();
-}
+void AravisStereoSource::Interrupt() { InterruptWait(impl_->mu, impl_->interrupted, impl_->cv); }
 
 Result<StereoFrame> AravisStereoSource::Next() {
   Impl& m = *impl_;
@@ -440,9 +423,7 @@ Result<StereoFrame> AravisStereoSource::Next() {
   while (true) {
     if (m.interrupted) return Unavailable("camera pair: stopped");
     if (m.latest) {
-      StereoFrame frame = std::move(*m.latest);
-      m.latest.reset();
-      return frame;
+      return *std::exchange(m.latest, std::nullopt);
     }
     for (Impl::Slot& s : m.slots) {
       if (s.lost && !s.lost_reported) {
@@ -473,12 +454,12 @@ Result<StereoFrame> AravisStereoSource::Next() {
   if (left_frames > 0 && right_frames > 0) {
     const int64_t gap = r.last_t_ns - l.last_t_ns;
     if (std::llabs(gap) > 1'000'000'000) {
-      message += "; their capture times differ by " + Seconds(std::chrono::nanoseconds(gap)) +
+      message += "; their capture times differ by " + SecondsText(std::chrono::nanoseconds(gap)) +
                  ": the camera clocks do not share a time base (synchronise them with PTP, or "
                  "pair by host timestamps)";
     } else {
-      message += "; frames do not pair within " + Millis(m.options.PairToleranceNs()) +
-                 " (latest right - left: " + Millis(gap) + ")";
+      message += "; frames do not pair within " + MillisText(m.options.PairToleranceNs()) +
+                 " (latest right - left: " + MillisText(gap) + ")";
     }
   }
   return Unavailable(message);

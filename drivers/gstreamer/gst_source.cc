@@ -16,6 +16,7 @@
 #include "drivers/gstreamer/gst_capture.h"
 #include "drivers/gstreamer/gst_ptr.h"
 #include "drivers/gstreamer/pipelines.h"
+#include "drivers/live_source.h"
 
 namespace stevi::drivers {
 namespace {
@@ -28,18 +29,6 @@ constexpr size_t kFileQueue = 4;
 constexpr int kMaxPending = 4;
 // Pipelines in Describe() are cut after this many characters.
 constexpr size_t kDescribeChars = 60;
-
-std::string Seconds(Clock::duration d) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.1f s", std::chrono::duration<double>(d).count());
-  return buf;
-}
-
-std::string Millis(int64_t ns) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.1f ms", static_cast<double>(ns) / 1e6);
-  return buf;
-}
 
 std::string Cut(const std::string& text) {
   return text.size() <= kDescribeChars ? text : text.substr(0, kDescribeChars) + "...";
@@ -135,9 +124,10 @@ std::vector<std::string> GstOptions::Validate() const {
   const bool rate_ok = std::isfinite(fps) && fps > 0 && fps <= 1000;
   if (layout == GstLayout::kTwo && rate_ok && pair_tolerance_ms > 0 &&
       pair_tolerance_ms * 1e6 > static_cast<double>(FramePeriodNs()) / 2) {
-    problems.push_back(
-        "pair_tolerance_ms: must be at most half the frame period (" + Millis(FramePeriodNs() / 2) +
-        " at fps), else a frame could pair with its partner's neighbour" + Got(pair_tolerance_ms));
+    problems.push_back("pair_tolerance_ms: must be at most half the frame period (" +
+                       MillisText(FramePeriodNs() / 2) +
+                       " at fps), else a frame could pair with its partner's neighbour" +
+                       Got(pair_tolerance_ms));
   }
   if (loop && live) problems.push_back("loop: only for files (live = false)");
   if (timeout.count() <= 0) {
@@ -325,7 +315,7 @@ std::optional<Error> GstStereoSource::Impl::Trouble(bool fresh_only) {
 std::string GstStereoSource::Impl::LostMessage(int i) const {
   const CaptureStatus& s = statuses[i];
   std::string message = names[i] + ": lost (" + s.lost_reason + ") " +
-                        Seconds(Clock::now() - s.lost_since) + " ago; reconnecting";
+                        SecondsText(Clock::now() - s.lost_since) + " ago; reconnecting";
   if (s.reconnect_attempts > 0) message += ", attempt " + std::to_string(s.reconnect_attempts);
   if (!s.reconnect_error.empty()) message += " (last: " + s.reconnect_error + ")";
   return message;
@@ -344,8 +334,8 @@ std::string GstStereoSource::Impl::NoPairMessage(const std::array<uint64_t, 2>& 
   std::string message = std::string("no pair for ") + waited + " (left: " + std::to_string(left) +
                         " frames, right: " + std::to_string(right) + " frames)";
   if (left > 0 && right > 0) {
-    message += "; frames do not pair within " + Millis(options.PairToleranceNs()) +
-               " (latest right - left: " + Millis(last_t_ns[1] - last_t_ns[0]) + ")";
+    message += "; frames do not pair within " + MillisText(options.PairToleranceNs()) +
+               " (latest right - left: " + MillisText(last_t_ns[1] - last_t_ns[0]) + ")";
   }
   return message;
 }
@@ -448,13 +438,7 @@ cv::Size GstStereoSource::ImageSize() const {
   return impl_->view_size.value_or(cv::Size());
 }
 
-void GstStereoSource::Interrupt() {
-  {
-    std::lock_guard lock(impl_->mu);
-    impl_->interrupted = true;
-  }
-  impl_->cv.notify_all();
-}
+void GstStereoSource::Interrupt() { InterruptWait(impl_->mu, impl_->interrupted, impl_->cv); }
 
 Result<StereoFrame> GstStereoSource::Next() {
   Impl& m = *impl_;
@@ -464,9 +448,7 @@ Result<StereoFrame> GstStereoSource::Next() {
   while (true) {
     if (m.interrupted) return Unavailable("gst: stopped");
     if (m.options.live && m.latest) {
-      StereoFrame frame = std::move(*m.latest);
-      m.latest.reset();
-      return frame;
+      return *std::exchange(m.latest, std::nullopt);
     }
     if (!m.options.live && !m.queue.empty()) {
       StereoFrame frame = std::move(m.queue.front());

@@ -54,24 +54,33 @@ void Encoder::PatchU32Length(size_t at) {
   for (int i = 0; i < 4; ++i) out_[at + i] = static_cast<char>((n >> (8 * i)) & 0xFF);
 }
 
-void Encoder::StringMap(const std::map<std::string, std::string>& map) {
+template <class Entries, class Put>
+void Encoder::PrefixedEntries(const Entries& entries, Put put) {
   const size_t at = out_.size();
   U32(0);
-  for (const auto& [key, value] : map) {
-    String(key);
-    String(value);
-  }
+  for (const auto& [key, value] : entries) put(key, value);
   PatchU32Length(at);
 }
 
+void Encoder::StringMap(const std::map<std::string, std::string>& map) {
+  PrefixedEntries(map, [this](std::string_view key, std::string_view value) {
+    String(key);
+    String(value);
+  });
+}
+
 void Encoder::U16U64Map(const std::map<uint16_t, uint64_t>& map) {
-  const size_t at = out_.size();
-  U32(0);
-  for (const auto& [key, value] : map) {
+  PrefixedEntries(map, [this](uint16_t key, uint64_t value) {
     U16(key);
     U64(value);
-  }
-  PatchU32Length(at);
+  });
+}
+
+void Encoder::U64PairArray(const std::vector<std::pair<uint64_t, uint64_t>>& array) {
+  PrefixedEntries(array, [this](uint64_t first, uint64_t second) {
+    U64(first);
+    U64(second);
+  });
 }
 
 size_t Encoder::BeginRecord(Opcode op) {

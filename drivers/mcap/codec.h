@@ -33,6 +33,8 @@ class Encoder {
   void Raw(std::string_view s) { out_.append(s); }
   void StringMap(const std::map<std::string, std::string>& map);
   void U16U64Map(const std::map<uint16_t, uint64_t>& map);
+  // u32 byte length + (u64, u64) entries.
+  void U64PairArray(const std::vector<std::pair<uint64_t, uint64_t>>& array);
   // Starts a record: the opcode and a length to be patched by EndRecord(start).
   size_t BeginRecord(Opcode op);
   void EndRecord(size_t start);
@@ -41,6 +43,9 @@ class Encoder {
   void Le(uint64_t v, int bytes);
   // Patches a u32 byte length written at `at` to cover what follows it.
   void PatchU32Length(size_t at);
+  // u32 byte length + each (key, value) entry as `put` writes it (used in codec.cc only).
+  template <class Entries, class Put>
+  void PrefixedEntries(const Entries& entries, Put put);
   std::string& out_;
 };
 

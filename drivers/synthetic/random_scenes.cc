@@ -114,6 +114,7 @@ void AddPart(Shape& s, ObstaclePart::Shape shape, cv::Vec3d offset, cv::Vec3d si
   s.parts.push_back(p);
 }
 
+// Sets the shape's bounds (lo, hi, extent_m) from its parts.
 void FinishShape(Shape& s) {
   s.lo = cv::Vec3d::all(1e18);
   s.hi = cv::Vec3d::all(-1e18);
@@ -126,14 +127,20 @@ void FinishShape(Shape& s) {
   s.extent_m = std::max({s.hi[0] - s.lo[0], s.hi[1] - s.lo[1], s.hi[2] - s.lo[2]});
 }
 
+// An empty shape of `kind` (parts to be added).
+Shape NewShape(std::string kind, bool standing) {
+  Shape s;
+  s.kind = std::move(kind);
+  s.standing = standing;
+  return s;
+}
+
 constexpr auto kBox = ObstaclePart::Shape::kBox;
 constexpr auto kEllipsoid = ObstaclePart::Shape::kEllipsoid;
 
 // A fixed-wing aircraft: fuselage (box or ellipsoid), wings, tailplane and fin; length in metres.
 Shape Aircraft(Rng& rng, double length, bool standing) {
-  Shape s;
-  s.kind = "aircraft";
-  s.standing = standing;
+  Shape s = NewShape("aircraft", standing);
   s.heading_axis = rng.Chance(0.5) ? 0 : 2;
   s.heading_sign = rng.Chance(0.5) ? 1 : -1;
   const double L = length;
@@ -163,14 +170,12 @@ Shape Aircraft(Rng& rng, double length, bool standing) {
   add(kBox, L * 0.05, wing_y, 0.0, {chord, thick, span});
   add(kBox, -L * 0.42, -D * 0.2, 0.0, {chord * 0.7, thick, span * 0.35});
   add(kBox, -L * 0.42, -D * 0.5 - fin_h * 0.5, 0.0, {chord * 0.9, fin_h, thick});
-  FinishShape(s);
   return s;
 }
 
 // A multirotor: body, two crossed arms and four rotor discs; span in metres.
 Shape Drone(Rng& rng, double span) {
-  Shape s;
-  s.kind = "drone";
+  Shape s = NewShape("drone", false);
   const double W = span;
   AddPart(s, rng.Chance(0.5) ? kEllipsoid : kBox, {0, 0, 0}, {W * 0.3, W * 0.16, W * 0.3});
   AddPart(s, kBox, {0, -W * 0.03, 0}, {W, W * 0.04, W * 0.05});
@@ -180,26 +185,21 @@ Shape Drone(Rng& rng, double span) {
     AddPart(s, kEllipsoid, {x, -W * 0.07, z}, {W * 0.32, W * 0.03, W * 0.32});
   }
   if (rng.Chance(0.5)) AddPart(s, kBox, {0, W * 0.12, 0}, {W * 0.2, W * 0.1, W * 0.12});  // camera
-  FinishShape(s);
   return s;
 }
 
 // A balloon: an ellipsoid envelope, and a basket under the large ones; diameter in metres.
 Shape Balloon(Rng& rng, double diameter) {
-  Shape s;
-  s.kind = "balloon";
+  Shape s = NewShape("balloon", false);
   const double Dm = diameter;
   AddPart(s, kEllipsoid, {0, 0, 0}, {Dm, Dm * rng.Uniform(1.0, 1.25), Dm});
   if (Dm > 5.0) AddPart(s, kBox, {0, Dm * 0.78, 0}, {Dm * 0.12, Dm * 0.1, Dm * 0.12});
-  FinishShape(s);
   return s;
 }
 
 // A tower standing on the ground: three tapering sections and a mast; height in metres.
 Shape Tower(Rng& rng, double height) {
-  Shape s;
-  s.kind = "tower";
-  s.standing = true;
+  Shape s = NewShape("tower", true);
   const double H = height;
   const double wb = H * rng.Uniform(0.05, 0.12);
   const double h1 = H * 0.45, h2 = H * 0.3, h3 = H * 0.12, mast = H * 0.13;
@@ -211,34 +211,27 @@ Shape Tower(Rng& rng, double height) {
   AddPart(s, kBox, {0, y - h3 / 2, 0}, {wb * 0.45, h3, wb * 0.45});
   y -= h3;
   AddPart(s, kBox, {0, y - mast / 2, 0}, {wb * 0.08, mast, wb * 0.08});
-  FinishShape(s);
   return s;
 }
 
 // A pole standing on the ground, with a cross-arm half the time; height in metres.
 Shape Pole(Rng& rng, double height) {
-  Shape s;
-  s.kind = "pole";
-  s.standing = true;
+  Shape s = NewShape("pole", true);
   const double w = rng.Uniform(0.2, 0.5);
   AddPart(s, kBox, {0, -height / 2, 0}, {w, height, w});
   if (rng.Chance(0.5)) AddPart(s, kBox, {0, -height * 0.92, 0}, {w * 8, w * 0.5, w * 0.6});
-  FinishShape(s);
   return s;
 }
 
 // A building standing on the ground, sometimes with a smaller box on its roof; width in metres.
 Shape Building(Rng& rng, double width) {
-  Shape s;
-  s.kind = "building";
-  s.standing = true;
+  Shape s = NewShape("building", true);
   const double W = width, H = width * rng.Uniform(0.3, 0.9), D = width * rng.Uniform(0.5, 1.0);
   AddPart(s, kBox, {0, -H / 2, 0}, {W, H, D});
   if (rng.Chance(0.5)) {
     const double rh = H * rng.Uniform(0.15, 0.35);
     AddPart(s, kBox, {W * rng.Uniform(-0.2, 0.2), -H - rh / 2, 0}, {W * 0.35, rh, D * 0.5});
   }
-  FinishShape(s);
   return s;
 }
 
@@ -274,7 +267,8 @@ std::string PickKind(Rng& rng, const FamilySpec& spec) {
   return spec.kinds.back().first;
 }
 
-Shape MakeShape(Rng& rng, const std::string& kind, const FamilySpec& spec) {
+// The parts of a random obstacle of `kind` (its bounds not yet set).
+Shape ShapeParts(Rng& rng, const std::string& kind, const FamilySpec& spec) {
   const double k = spec.scale;
   if (kind == "aircraft") {
     return Aircraft(rng, rng.LogUniform(6.0, 40.0) * k, rng.Chance(spec.parked));
@@ -286,6 +280,13 @@ Shape MakeShape(Rng& rng, const std::string& kind, const FamilySpec& spec) {
   if (kind == "tower") return Tower(rng, rng.LogUniform(15.0, 80.0) * k);
   if (kind == "pole") return Pole(rng, rng.LogUniform(k < 1.0 ? 3.0 : 6.0, k < 1.0 ? 12.0 : 25.0));
   return Building(rng, rng.LogUniform(8.0, 40.0) * k);
+}
+
+// A random obstacle of `kind`, with its bounds.
+Shape MakeShape(Rng& rng, const std::string& kind, const FamilySpec& spec) {
+  Shape s = ShapeParts(rng, kind, spec);
+  FinishShape(s);
+  return s;
 }
 
 // The sky and ground every family starts from (some families change them).

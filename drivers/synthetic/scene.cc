@@ -307,6 +307,16 @@ SyntheticOptions ScenarioOptions(uint64_t seed, Scene scene) {
   return o;
 }
 
+Scenario MakeScenario(std::string name, uint64_t seed, Scene scene, int frames,
+                      std::string description) {
+  Scenario s;
+  s.name = std::move(name);
+  s.description = std::move(description);
+  s.options = ScenarioOptions(seed, std::move(scene));
+  s.frames = frames;
+  return s;
+}
+
 namespace {
 
 // A grass airfield: a 30 m wide asphalt runway along z centred on x = runway_x_m, from z = 0 to
@@ -381,9 +391,8 @@ Scenario ClearSky() {
   scene.obstacles.push_back(MakeObstacle(4, "drone-2", {1.5, 0.6, 1.5},
                                          Leg({4.0, -7.5, 45.75}, {3.0, -5.0, 24.75}, loop_s), 0.28,
                                          0.45, 0.12));
-  Scenario s;
-  s.name = "clear_sky";
-  s.description =
+  return MakeScenario(
+      "clear_sky", 101, std::move(scene), 80,
       "Camera 100 m above flat textured ground, so the ground (290 m and farther, < 1.5 px of "
       "disparity) stays below the horizon row and every obstacle is against the sky gradient "
       "(all of them above row 190). Four moving obstacles: aircraft-1 (6 x 2 x 2 m) crosses "
@@ -393,10 +402,7 @@ Scenario ClearSky() {
       "1.2 m) circles (radius 5 m around x = 0, z = 22 m) with its front at 16.4..26.4 m "
       "(16..26 px, 31..55 px wide); drone-2 (1.5 x 0.6 x 1.5 m) approaches from 45 m to 24 m "
       "(9.3 -> 17.3 px) while climbing, growing from 25 x 13 to 47 x 25 px. 8 s loop, 80 "
-      "frames. The easy baseline: no clutter behind any obstacle; occlusions between them.";
-  s.options = ScenarioOptions(101, std::move(scene));
-  s.frames = 80;
-  return s;
+      "frames. The easy baseline: no clutter behind any obstacle; occlusions between them.");
 }
 
 Scenario LowOverGround() {
@@ -431,9 +437,8 @@ Scenario LowOverGround() {
   scene.obstacles.push_back(MakeObstacle(3, "aircraft-2", {5.0, 1.5, 2.0},
                                          Leg({-8.0, -11.0, 46.0}, {4.0, -11.0, 46.0}, loop_s), 0.35,
                                          0.4, 0.15));
-  Scenario s;
-  s.name = "low_over_ground";
-  s.description =
+  return MakeScenario(
+      "low_over_ground", 102, std::move(scene), 60,
       "Camera 3 m over a grass airfield, level: the ground fills the lower half (8.8 m deep at "
       "the bottom row, 50 m at row 282), with a 30 m runway along z right of the camera "
       "(centre x = 4 m, asphalt 0.32, white 0.9 edge lines, dashed centreline, threshold bars "
@@ -447,10 +452,7 @@ Scenario LowOverGround() {
       "aircraft-2 (5 x 1.5 x 2 m) at 45 m (9.3 px, rows 58..87) flying right. 6 s loop, 60 "
       "frames. Hard: edges and salient spots of the runway paint, field edges and hill "
       "silhouettes are not obstacles, and the near hill and the ground have obstacle-like "
-      "disparities.";
-  s.options = ScenarioOptions(102, std::move(scene));
-  s.frames = 60;
-  return s;
+      "disparities.");
 }
 
 Scenario SmallFar() {
@@ -463,18 +465,14 @@ Scenario SmallFar() {
   scene.obstacles.push_back(MakeObstacle(2, "drone-near", {1.5, 0.6, 1.5},
                                          Leg({3.0, -0.5, 15.75}, {-3.0, -0.5, 15.75}, loop_s), 0.28,
                                          0.45, 0.1));
-  Scenario s;
-  s.name = "small_far";
-  s.description =
+  return MakeScenario(
+      "small_far", 103, std::move(scene), 60,
       "Camera 40 m over flat textured ground. aircraft-small (1.3 x 0.5 x 0.8 m) at 46 m: "
       "9.1 px of disparity (9.08 px at its back), ~20 x 9 px, rows 145..153, crossing left to "
       "right (u ~265..375) against the sky; drone-near (1.5 x 0.6 x 1.5 m) at 15 m (28 px, "
       "~71..80 x 29 px, rows 203..231, just above the horizon) crossing right to left. 6 s "
       "loop, 60 frames. Hard: the far one is a few pixels across, below typical blob-area "
-      "floors, and has few pixels of disparity for the matcher.";
-  s.options = ScenarioOptions(103, std::move(scene));
-  s.frames = 60;
-  return s;
+      "floors, and has few pixels of disparity for the matcher.");
 }
 
 Scenario ClosePair() {
@@ -489,19 +487,15 @@ Scenario ClosePair() {
   scene.obstacles.push_back(MakeObstacle(2, "drone-near", {1.5, 0.6, 1.5},
                                          Leg({-1.9, -1.50, 20.75}, {-0.1, -1.95, 20.75}, loop_s),
                                          0.28, 0.45, 0.1));
-  Scenario s;
-  s.name = "close_pair";
-  s.description =
+  return MakeScenario(
+      "close_pair", 104, std::move(scene), 60,
       "Camera 40 m over flat textured ground. aircraft-far (5 x 1.5 x 2 m) at 35 m (12 px, "
       "~101 x 35 px with its underside, rows 135..169) and drone-near (1.5 x 0.6 x 1.5 m) at "
       "20 m (21 px, ~53 x 24 px) just below it, both drifting right at ~10 px/s; the drone "
       "climbs, so the gap between the two boxes closes from 7 px (frame 0) to an 8 px overlap "
       "(frame 59, the drone hiding the aircraft's underside). 6 s loop, 60 frames. Hard: edge "
       "closing and blob merging join them into one blob, whose median range is wrong for "
-      "both; the depths differ by 75 %.";
-  s.options = ScenarioOptions(104, std::move(scene));
-  s.frames = 60;
-  return s;
+      "both; the depths differ by 75 %.");
 }
 
 Scenario LowContrast() {
@@ -515,9 +509,8 @@ Scenario LowContrast() {
   scene.obstacles.push_back(MakeObstacle(2, "drone-grey", {1.5, 0.6, 0.4},
                                          Leg({5.0, -6.0, 26.2}, {-5.0, -6.0, 26.2}, loop_s), 0.61,
                                          0.15, 0.1));
-  Scenario s;
-  s.name = "low_contrast";
-  s.description =
+  return MakeScenario(
+      "low_contrast", 105, std::move(scene), 60,
       "Camera 40 m over flat textured ground. aircraft-pale (5 x 1.5 x 0.6 m, albedo 0.80, "
       "contrast 0.15) at 32 m (13.1 px, ~110 x 34 px, rows 115..148) against sky of grey "
       "0.72..0.77 (mean 0.74: +0.06), crossing left to right; drone-grey (1.5 x 0.6 x 0.4 m, "
@@ -525,10 +518,7 @@ Scenario LowContrast() {
       "of ~0.67 (-0.06), crossing right to left. Measured in the image: mean grey 0.05 and "
       "0.065 from the sky beside them, texture standard deviation ~0.055 and ~0.075, enough "
       "for stereo; their outlines barely show (only the darker-shaded underside and side "
-      "faces, 1..4 px). 6 s loop, 60 frames. Hard for intensity and edge extractors.";
-  s.options = ScenarioOptions(105, std::move(scene));
-  s.frames = 60;
-  return s;
+      "faces, 1..4 px). 6 s loop, 60 frames. Hard for intensity and edge extractors.");
 }
 
 Scenario TowerOnGround() {
@@ -546,9 +536,8 @@ Scenario TowerOnGround() {
   scene.obstacles.push_back(MakeObstacle(3, "drone-1", {1.5, 0.6, 1.5},
                                          Leg({6.0, -4.0, 28.75}, {-5.0, -4.0, 28.75}, loop_s), 0.28,
                                          0.45, 0.12));
-  Scenario s;
-  s.name = "tower_on_ground";
-  s.description =
+  return MakeScenario(
+      "tower_on_ground", 106, std::move(scene), 60,
       "Camera 5 m over a grass airfield (runway along z centred on x = 30 m with its paint, "
       "crop fields, and the far ridge of low_over_ground). tower (3 x 15 x 3 m) stands on the "
       "ground at 38 m (11 px, 10.3 px at its back; columns 182..243, rows 56..332: its foot "
@@ -557,10 +546,7 @@ Scenario TowerOnGround() {
       "against the ground (columns 390..526, rows 254..319, its roof seen from above); "
       "drone-1 (1.5 x 0.6 x 1.5 m) at 28 m (15 px, ~40 x 20 px, rows 133..152) flies right to "
       "left and ends in front of the tower (from frame ~46). 6 s loop, 60 frames. Hard: "
-      "obstacles rooted in the ground, whose disparity meets the ground's at their feet.";
-  s.options = ScenarioOptions(106, std::move(scene));
-  s.frames = 60;
-  return s;
+      "obstacles rooted in the ground, whose disparity meets the ground's at their feet.");
 }
 
 }  // namespace
@@ -579,14 +565,7 @@ Scenario FlightScenario() {
 }
 
 std::vector<Scenario> EvaluationScenarios() {
-  std::vector<Scenario> scenarios;
-  scenarios.push_back(ClearSky());
-  scenarios.push_back(LowOverGround());
-  scenarios.push_back(SmallFar());
-  scenarios.push_back(ClosePair());
-  scenarios.push_back(LowContrast());
-  scenarios.push_back(TowerOnGround());
-  return scenarios;
+  return {ClearSky(), LowOverGround(), SmallFar(), ClosePair(), LowContrast(), TowerOnGround()};
 }
 
 }  // namespace stevi::drivers

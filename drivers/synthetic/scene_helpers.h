@@ -40,4 +40,9 @@ Path Circle(cv::Vec3d centre, double radius_m, double period_s, double phase_rad
 // 10 fps), pixel noise of 2 grey levels, `seed` and `scene`.
 SyntheticOptions ScenarioOptions(uint64_t seed, Scene scene);
 
+// An evaluation scenario: `name`, `frames` long, with ScenarioOptions(seed, scene) and the
+// `description` of what is in it and what makes it hard.
+Scenario MakeScenario(std::string name, uint64_t seed, Scene scene, int frames,
+                      std::string description);
+
 }  // namespace stevi::drivers

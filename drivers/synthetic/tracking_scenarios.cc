@@ -5,6 +5,7 @@
 // detection stays clean: these scenes test the tracker, not the detectors. Every obstacle's front
 // face is at 52 m or nearer (>= 8 px of disparity) while it is in view. Paths never wrap within
 // the scenario (each Leg's period is the scenario's length or longer).
+#include <string>
 #include <utility>
 
 #include "drivers/synthetic/scene_helpers.h"
@@ -50,9 +51,8 @@ Scenario CrossingOcclusion() {
   scene.obstacles.push_back(MakeObstacle(4, "drone-c", {2.0, 0.8, 2.0},
                                          Straight({-18.0, -3.54, 46.0}, {3.9, 0.0, 0.0}), 0.25,
                                          0.45, 0.12));
-  Scenario s;
-  s.name = "crossing_occlusion";
-  s.description =
+  return MakeScenario(
+      "crossing_occlusion", 201, std::move(scene), 90,
       "Camera 100 m above flat ground, every obstacle against the sky. A crossing: aircraft-a "
       "(5 x 1.5 x 2 m, front face at 30 m, 14 px of disparity, ~120 x 44 px, rows 61..104) flies "
       "left to right at 2 m/s (u 52..584) and aircraft-b (6 x 2 x 2 m, front at 48 m, 8.75 px, "
@@ -64,10 +64,7 @@ Scenario CrossingOcclusion() {
       "it: partly hidden at frames 37..41, fully hidden at 42..51 (10 frames), partly hidden at "
       "52..56, then in the clear again. 9 s, 90 frames. Hard: tracks must coast through both "
       "occlusions and keep their ids, and the crossing obstacles must not swap ids; the partly "
-      "hidden frames move the visible centroid differently from the obstacle.";
-  s.options = ScenarioOptions(201, std::move(scene));
-  s.frames = 90;
-  return s;
+      "hidden frames move the visible centroid differently from the obstacle.");
 }
 
 Scenario EntriesExits() {
@@ -96,9 +93,8 @@ Scenario EntriesExits() {
   scene.obstacles.push_back(MakeObstacle(5, "drone-3", {2.0, 0.8, 2.0},
                                          Straight({38.7, -7.0, 39.0}, {-3.5, 0.0, 0.0}), 0.25, 0.45,
                                          0.12));
-  Scenario s;
-  s.name = "entries_exits";
-  s.description =
+  return MakeScenario(
+      "entries_exits", 202, std::move(scene), 90,
       "Camera 100 m above flat ground, every obstacle against the sky, each in its own band of "
       "rows (no two boxes ever overlap). Four entries and three exits at the image sides: "
       "aircraft-1 (5 x 1.5 x 2 m, front at 32 m, 13.1 px, ~115 x 42 px) flies left to right at "
@@ -109,49 +105,45 @@ Scenario EntriesExits() {
       "16 px) enters from the left at 43 and drone-3 (2 x 0.8 x 2 m, 38 m, 11 px, ~48 x 21 px) "
       "from the right at 56, both in view at the end. 9 s, 90 frames. Hard: obstacles cut by "
       "the image border (their centroids lag), and tracks that must end with their obstacle and "
-      "never come back under an old id.";
-  s.options = ScenarioOptions(202, std::move(scene));
-  s.frames = 90;
-  return s;
+      "never come back under an old id.");
+}
+
+// The sky scene of head_on and departing: one drone (2 x 1 x 2 m) flying in 6 s between its far
+// point (front face at 50 m, 8.4 px) and its near point (12.6 m, 33 px), at 6.33 m/s, with a
+// lateral drift of 0.17 m/s and 0.13 m/s; the straight line misses the camera by 2.4 m.
+Scene HeadOnScene(std::string name, bool approaching) {
+  const cv::Vec3d far(3.5, -2.0, 51.0);
+  const cv::Vec3d near(2.5, -1.2, 13.0);
+  const double length_s = 6.0;
+  Scene scene = SkyScene();
+  scene.obstacles.push_back(MakeObstacle(
+      1, std::move(name), {2.0, 1.0, 2.0},
+      approaching ? Leg(far, near, length_s) : Leg(near, far, length_s), 0.25, 0.45, 0.12));
+  return scene;
 }
 
 Scenario HeadOn() {
-  Scene scene = SkyScene();
-  // Front face from 50 m (8.4 px) to 12.6 m at frame 59 (33 px): closing at 6.33 m/s, drifting
-  // 0.17 m/s left and 0.13 m/s down; the straight line misses the camera by 2.4 m.
-  scene.obstacles.push_back(MakeObstacle(1, "drone-head-on", {2.0, 1.0, 2.0},
-                                         Leg({3.5, -2.0, 51.0}, {2.5, -1.2, 13.0}, 6.0), 0.25, 0.45,
-                                         0.12));
-  Scenario s;
-  s.name = "head_on";
-  s.description =
+  // Closing: left and down.
+  Scene scene = HeadOnScene("drone-head-on", true);
+  return MakeScenario(
+      "head_on", 203, std::move(scene), 60,
       "Camera 100 m above flat ground, the obstacle against the sky. drone-head-on (2 x 1 x 2 m) "
       "flies nearly straight at the camera: its front face from 50 m (8.4 px of disparity, "
       "30 x 15 px at u 354..383, v 205..219) to 12.6 m at frame 59 (33 px, 122 x 60 px), "
       "closing at 6.33 m/s with a lateral drift of (-0.17, +0.13) m/s: the straight line passes "
       "the camera at 2.4 m (the closest approach, 7.9 s after frame 0). 6 s, 60 frames. Hard: "
       "range noise that grows with the range squared (0.1 px of disparity is 0.6 m at 50 m), a "
-      "box that grows 4 times, and time to collision from a depth velocity.";
-  s.options = ScenarioOptions(203, std::move(scene));
-  s.frames = 60;
-  return s;
+      "box that grows 4 times, and time to collision from a depth velocity.");
 }
 
 Scenario Departing() {
-  Scene scene = SkyScene();
-  // head_on played backwards: from 12.6 m out to 50 m, receding at 6.33 m/s.
-  scene.obstacles.push_back(MakeObstacle(1, "drone-departing", {2.0, 1.0, 2.0},
-                                         Leg({2.5, -1.2, 13.0}, {3.5, -2.0, 51.0}, 6.0), 0.25, 0.45,
-                                         0.12));
-  Scenario s;
-  s.name = "departing";
-  s.description =
+  // head_on played backwards: from 12.6 m out to 50 m.
+  Scene scene = HeadOnScene("drone-departing", false);
+  return MakeScenario(
+      "departing", 204, std::move(scene), 60,
       "head_on backwards: drone-departing (2 x 1 x 2 m) flies straight away from the camera, its "
       "front face from 12.6 m (33 px of disparity) to 50 m (8.4 px) in 6 s, receding at 6.33 m/s: "
-      "a diverging obstacle, for the autopilot consumer to stay CLEAR on. 60 frames.";
-  s.options = ScenarioOptions(204, std::move(scene));
-  s.frames = 60;
-  return s;
+      "a diverging obstacle, for the autopilot consumer to stay CLEAR on. 60 frames.");
 }
 
 // Camera 12 m above the ground, as on the user's airfield: the ground fills the image below the
@@ -175,9 +167,8 @@ Scenario Crossing() {
   scene.obstacles.push_back(MakeObstacle(2, "aircraft-far", {10.0, 2.0, 3.0},
                                          Straight({15.714, -3.6, 51.5}, {-3.9286, 0.0, 0.0}), 0.6,
                                          0.4, 0.25));
-  Scenario s;
-  s.name = "crossing";
-  s.description =
+  return MakeScenario(
+      "crossing", 205, std::move(scene), static_cast<int>(length_s * 10),
       "Camera 12 m above the ground (ground below the horizon). Two aircraft-like boxes (10 x 2 x "
       "3 m) cross in the image on nearly the same rows: aircraft-near (front face at 40 m, "
       "10.5 px of disparity, ~175 x 35 px) flies left to right (u 100 -> 540) and aircraft-far "
@@ -186,10 +177,7 @@ Scenario Crossing() {
       "covered for ~3. Depth ratio 1.25: inside the old fixed depth gate (1.3), so only the "
       "depths' own uncertainties tell the two apart. 8 s, 80 frames. Hard: the far blob falls "
       "into pieces while cut, some pieces take the near one's disparity, and the two must keep "
-      "their ids.";
-  s.options = ScenarioOptions(205, std::move(scene));
-  s.frames = static_cast<int>(length_s * 10);
-  return s;
+      "their ids.");
 }
 
 Scenario Occlusion() {
@@ -204,32 +192,21 @@ Scenario Occlusion() {
   scene.obstacles.push_back(MakeObstacle(2, "aircraft-c", {6.0, 1.2, 2.0},
                                          Straight({-16.714, -1.8, 46.0}, {7.7143, 0.0, 0.0}), 0.3,
                                          0.45, 0.15));
-  Scenario s;
-  s.name = "occlusion";
-  s.description =
+  return MakeScenario(
+      "occlusion", 206, std::move(scene), 45,
       "Camera 12 m above the ground. A billboard (5 x 4 x 0.5 m, front face at 25 m, 16.8 px, "
       "columns 250..390, rows 142..254) floats in front of the horizon; aircraft-c (6 x 1.2 x 2 m, "
       "front at 45 m, 9.3 px, ~93 x 19 px, rows 200..218) flies left to right behind it at "
       "12 px per frame: partly hidden at frames 12..19 (its box shrinks from the right), wholly "
       "hidden at 20..23, partly hidden at 24..35 (growing from the left), then in the clear. "
       "4.5 s, 45 frames. Hard: the track must coast through the occlusion and take the "
-      "re-emerging aircraft back under its old id while its box is a sliver of the full size.";
-  s.options = ScenarioOptions(206, std::move(scene));
-  s.frames = 45;
-  return s;
+      "re-emerging aircraft back under its old id while its box is a sliver of the full size.");
 }
 
 }  // namespace
 
 std::vector<Scenario> TrackingScenarios() {
-  std::vector<Scenario> scenarios;
-  scenarios.push_back(CrossingOcclusion());
-  scenarios.push_back(EntriesExits());
-  scenarios.push_back(HeadOn());
-  scenarios.push_back(Departing());
-  scenarios.push_back(Crossing());
-  scenarios.push_back(Occlusion());
-  return scenarios;
+  return {CrossingOcclusion(), EntriesExits(), HeadOn(), Departing(), Crossing(), Occlusion()};
 }
 
 }  // namespace stevi::drivers

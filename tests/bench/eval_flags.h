@@ -1,6 +1,7 @@
 // The flags the evaluation tools (stevi-eval, stevi-eval-tracking) share.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -11,6 +12,7 @@
 
 #include "core/common/flags.h"
 #include "core/pipeline/config.h"
+#include "drivers/synthetic/synthetic_source.h"
 #include "tests/bench/bench_flags.h"
 
 namespace stevi::bench {
@@ -49,6 +51,19 @@ inline void ApplySettingFlags(const EvalFlags& flags, pipeline::PipelineConfig& 
   if (problems.empty()) return;
   for (const std::string& p : problems) std::fprintf(stderr, "--set %s\n", p.c_str());
   std::exit(2);
+}
+
+// What is wrong with --scenario `name` among `scenarios`: empty when no name was given or it names
+// one of them, else the problem, listing their names.
+inline std::string UnknownScenario(const std::vector<drivers::Scenario>& scenarios,
+                                   const std::string& name) {
+  if (name.empty() || std::any_of(scenarios.begin(), scenarios.end(),
+                                  [&](const drivers::Scenario& sc) { return sc.name == name; })) {
+    return "";
+  }
+  std::string names;
+  for (const drivers::Scenario& sc : scenarios) names += " " + sc.name;
+  return "unknown scenario '" + name + "' (one of:" + names + ")";
 }
 
 // The ranges of the numeric flags.

@@ -212,12 +212,9 @@ int main(int argc, char** argv) {
   demo.description = "the server's default scene (20 s loop)";
   demo.frames = 200;
   scenarios.insert(scenarios.begin(), demo);
-  if (!only_scenario.empty() &&
-      std::none_of(scenarios.begin(), scenarios.end(),
-                   [&](const drivers::Scenario& sc) { return sc.name == only_scenario; })) {
-    std::string names;
-    for (const drivers::Scenario& sc : scenarios) names += " " + sc.name;
-    return usage("unknown scenario '" + only_scenario + "' (one of:" + names + ")");
+  if (const std::string problem = bench::UnknownScenario(scenarios, only_scenario);
+      !problem.empty()) {
+    return usage(problem);
   }
   std::vector<Variant> variants = Variants();
   for (Variant& v : variants) bench::ApplySettingFlags(flags, v.config);

@@ -189,12 +189,9 @@ int main(int argc, char** argv) {
   const std::string& only_algorithm = flags.algorithm;
 
   const std::vector<drivers::Scenario> scenarios = drivers::TrackingScenarios();
-  if (!only_scenario.empty() &&
-      std::none_of(scenarios.begin(), scenarios.end(),
-                   [&](const drivers::Scenario& sc) { return sc.name == only_scenario; })) {
-    std::string names;
-    for (const drivers::Scenario& sc : scenarios) names += " " + sc.name;
-    return usage("unknown scenario '" + only_scenario + "' (one of:" + names + ")");
+  if (const std::string problem = bench::UnknownScenario(scenarios, only_scenario);
+      !problem.empty()) {
+    return usage(problem);
   }
   if (!only_algorithm.empty() && !pipeline::AlgorithmFromName(only_algorithm)) {
     return usage("unknown algorithm '" + only_algorithm + "'");

@@ -1,4 +1,5 @@
 #include "tests/bench/naive_baseline.h"
+#include "tests/testing/measured_detection.h"
 
 #include <algorithm>
 #include <cmath>
@@ -79,23 +80,8 @@ std::vector<detection::Detection> MovingTargets::Detections(int64_t frame, doubl
     const double u = target.u0 + kRadiusPx * std::cos(angle) + centroid_noise(rng_);
     const double v = target.v0 + kRadiusPx * std::sin(angle) + centroid_noise(rng_);
     const double d = fb / target.z_m + disparity_noise(rng_);
-    const double z = fb / d;
-    detection::Detection det;
-    det.centroid_px = cv::Point2d(u, v);
-    det.disparity_px = d;
-    det.depth_m = z;
-    det.position_cam_m =
-        cv::Vec3d((u - camera_.cx) * z / camera_.f_px, (v - camera_.cy) * z / camera_.f_px, z);
-    det.range_m = cv::norm(det.position_cam_m);
-    det.range_sigma_m = z * z / fb * 0.25 * det.range_m / z;
-    const double w = camera_.f_px * target.width_m / z;
-    const double h = camera_.f_px * target.height_m / z;
-    det.bbox =
-        cv::Rect(static_cast<int>(std::lround(u - w / 2)), static_cast<int>(std::lround(v - h / 2)),
-                 static_cast<int>(std::lround(w)), static_cast<int>(std::lround(h)));
-    det.area_px = static_cast<int>(std::lround(w * h));
-    det.valid_disparities = det.area_px;
-    det.perimeter_px = 2 * (w + h);
+    detection::Detection det = testing::MeasuredDetection(camera_, u, v, d, 0.25);
+    testing::SetObstacleBox(det, camera_, target.width_m, target.height_m);
     det.score = 1.0;
     det.extractor = "bench";
     out.push_back(std::move(det));

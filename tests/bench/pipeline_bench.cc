@@ -39,6 +39,7 @@
 #include "core/tracking/tracker.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/bench/naive_baseline.h"
+#include "tests/testing/stereo_bm.h"
 
 namespace {
 
@@ -164,13 +165,7 @@ void BM_BlockMatchingCore(benchmark::State& state) {
   stereo::SadBlockMatcherParams p = stereo::SadParamsFor(o);
   if (state.range(0) == 0) {
     bench::SingleThreadScope one_thread;
-    cv::Ptr<cv::StereoBM> bm = cv::StereoBM::create(p.num_disparities, p.block_size);
-    bm->setPreFilterCap(p.prefilter_cap);
-    bm->setMinDisparity(p.min_disparity);
-    bm->setTextureThreshold(p.texture_threshold);
-    bm->setUniquenessRatio(p.uniqueness_ratio);
-    bm->setSpeckleWindowSize(p.speckle_window_size);
-    bm->setSpeckleRange(p.speckle_range);
+    cv::Ptr<cv::StereoBM> bm = testing::StereoBMFor(p);
     for (auto _ : state) bm->compute(left, right, out);
     state.SetLabel("cv::StereoBM, 1 thread");
     return;

@@ -39,6 +39,7 @@
 #include "tests/bench/bench_flags.h"
 #include "tests/testing/data.h"
 #include "tests/testing/gst_testing.h"
+#include "tests/testing/synthetic_calibration.h"
 
 namespace {
 
@@ -67,12 +68,7 @@ bool Prepare(Setup& s) {
     s.frames.push_back(whole);
   }
   s.calibration = s.dir + "/calibration.yaml";
-  return geometry::SaveCalibrationYaml(
-             geometry::IdealCalibration(cv::Size(options.width, options.height), options.f_px,
-                                        options.baseline_m, options.width / 2.0,
-                                        options.height / 2.0),
-             s.calibration)
-      .ok();
+  return geometry::SaveCalibrationYaml(testing::SyntheticCalibration(options), s.calibration).ok();
 }
 
 // The video of `variant` at `fps`: the server plays a file at the file's own rate, so each rate

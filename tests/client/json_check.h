@@ -168,29 +168,34 @@ class JsonParser {
     return Fail("unterminated string");
   }
 
-  std::optional<Json> Array(int depth) {
-    ++pos_;
+  // The elements of an array or an object, separated by commas up to `close`; `element` reads one
+  // into the container, or returns nullopt when it fails (having said why).
+  template <class Element>
+  std::optional<Json> Elements(Json::Kind kind, std::string_view close, Element element) {
+    ++pos_;  // the opening bracket
     Json v;
-    v.kind = Json::Kind::kArray;
+    v.kind = kind;
     SkipSpace();
-    if (Eat("]")) return v;
+    if (Eat(close)) return v;
     while (true) {
-      std::optional<Json> item = Value(depth + 1);
-      if (!item) return std::nullopt;
-      v.items.push_back(std::move(*item));
+      if (!element(v).has_value()) return std::nullopt;
       SkipSpace();
-      if (Eat("]")) return v;
-      if (!Eat(",")) return Fail("expected , or ]");
+      if (Eat(close)) return v;
+      if (!Eat(",")) return Fail("expected , or " + std::string(close));
     }
   }
 
+  std::optional<Json> Array(int depth) {
+    return Elements(Json::Kind::kArray, "]", [&](Json& v) -> std::optional<bool> {
+      std::optional<Json> item = Value(depth + 1);
+      if (!item) return std::nullopt;
+      v.items.push_back(std::move(*item));
+      return true;
+    });
+  }
+
   std::optional<Json> Object(int depth) {
-    ++pos_;
-    Json v;
-    v.kind = Json::Kind::kObject;
-    SkipSpace();
-    if (Eat("}")) return v;
-    while (true) {
+    return Elements(Json::Kind::kObject, "}", [&](Json& v) -> std::optional<bool> {
       SkipSpace();
       if (pos_ >= s_.size() || s_[pos_] != '"') return Fail("expected a key");
       std::optional<std::string> key = String();
@@ -201,10 +206,8 @@ class JsonParser {
       std::optional<Json> value = Value(depth + 1);
       if (!value) return std::nullopt;
       v.members.emplace_back(std::move(*key), std::move(*value));
-      SkipSpace();
-      if (Eat("}")) return v;
-      if (!Eat(",")) return Fail("expected , or }");
-    }
+      return true;
+    });
   }
 
   std::string_view s_;

@@ -14,25 +14,15 @@
 // pixels than the header announced is reported, not just a decoded size that differs.
 #include <cstddef>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <span>
 #include <string>
 
 #include "core/calibration/image_header.h"
+#include "tests/fuzz/require.h"
 
 namespace calibration = stevi::calibration;
 
-namespace {
-
-// A broken invariant: says which, then aborts (the fuzzer keeps the input).
-void Require(bool ok, int line = __builtin_LINE()) {
-  if (ok) return;
-  std::fprintf(stderr, "invariant broken at %s:%d\n", __FILE__, line);
-  std::abort();
-}
-
-}  // namespace
+using stevi::fuzz::Require;
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size == 0) return 0;

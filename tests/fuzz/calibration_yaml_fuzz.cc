@@ -13,25 +13,19 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <optional>
 #include <string>
 
 #include "core/calibration/report.h"
 #include "core/geometry/calibration_io.h"
+#include "tests/fuzz/require.h"
 
 namespace calibration = stevi::calibration;
 namespace geometry = stevi::geometry;
 
 namespace {
 
-// A broken invariant: says which, then aborts (the fuzzer keeps the input).
-void Require(bool ok, int line = __builtin_LINE()) {
-  if (ok) return;
-  std::fprintf(stderr, "invariant broken at %s:%d\n", __FILE__, line);
-  std::abort();
-}
+using stevi::fuzz::Require;
 
 // ---- Calibration ------------------------------------------------------------------------------
 

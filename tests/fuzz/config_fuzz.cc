@@ -16,7 +16,6 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
-#include <cstdlib>
 #include <string>
 #include <vector>
 
@@ -27,18 +26,14 @@
 
 #include "server/app_config.h"
 #include "server/convert.h"
+#include "tests/fuzz/require.h"
 
 namespace v1 = stevi::v1;
 namespace server = stevi::server;
 
 namespace {
 
-// A broken invariant: says which, then aborts (the fuzzer keeps the input).
-void Require(bool ok, int line = __builtin_LINE()) {
-  if (ok) return;
-  std::fprintf(stderr, "invariant broken at %s:%d\n", __FILE__, line);
-  std::abort();
-}
+using stevi::fuzz::Require;
 
 bool Equal(const google::protobuf::Message& a, const google::protobuf::Message& b) {
   google::protobuf::util::DefaultFieldComparator comparator;

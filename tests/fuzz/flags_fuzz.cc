@@ -12,21 +12,19 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <cstdlib>
 #include <string>
 #include <vector>
 
 #include "core/common/flags.h"
 #include "server/app_config.h"
 #include "server/server_flags.h"
+#include "tests/fuzz/require.h"
 
 namespace flags = stevi::flags;
 
 namespace {
 
-void Require(bool ok) {
-  if (!ok) std::abort();
-}
+using stevi::fuzz::Require;
 
 std::vector<std::string> Split(const uint8_t* data, size_t size) {
   std::vector<std::string> args(1);

@@ -24,7 +24,6 @@
 //     (RFC 6455 7.4) and at most 125 bytes; after it the server sends nothing and takes nothing.
 #include <cstddef>
 #include <cstdint>
-#include <cstdlib>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -34,6 +33,7 @@
 #include <vector>
 
 #include "client/station/foxglove_server.h"
+#include "tests/fuzz/require.h"
 
 namespace st = stevi::station;
 using Json = nlohmann::json;
@@ -42,9 +42,7 @@ namespace {
 
 constexpr size_t kMaxChannels = 16;
 
-void Require(bool ok) {
-  if (!ok) std::abort();
-}
+using stevi::fuzz::Require;
 
 bool SendableCloseCode(unsigned code) {
   return (code >= 1000 && code <= 1003) || (code >= 1007 && code <= 1014) ||

@@ -15,21 +15,19 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <cstdlib>
 #include <span>
 #include <vector>
 
 #include "client/mavlink/translate.h"
 #include "client/mavlink/codec.h"
 #include "client/mavlink/messages.h"
+#include "tests/fuzz/require.h"
 
 namespace mav = stevi::client::mavlink;
 
 namespace {
 
-void Require(bool ok) {
-  if (!ok) std::abort();
-}
+using stevi::fuzz::Require;
 
 template <class T>
 void RoundTrip(const mav::Frame& frame) {

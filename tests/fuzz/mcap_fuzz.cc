@@ -13,23 +13,17 @@
 //   - nothing throws out.
 #include <cstddef>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <string>
 #include <vector>
 
 #include "drivers/mcap/mcap.h"
+#include "tests/fuzz/require.h"
 
 namespace mcap = stevi::mcap;
 
 namespace {
 
-// A broken invariant: says which, then aborts (the fuzzer keeps the input).
-void Require(bool ok, int line = __builtin_LINE()) {
-  if (ok) return;
-  std::fprintf(stderr, "invariant broken at %s:%d\n", __FILE__, line);
-  std::abort();
-}
+using stevi::fuzz::Require;
 
 // What one ReadAll() gave: the messages, or the error's text.
 struct Pass {

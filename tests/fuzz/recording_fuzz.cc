@@ -32,17 +32,13 @@
 #include "client/advisory/flight_export.h"
 #include "drivers/mcap/mcap_reader.h"
 #include "drivers/recording/recording_reader.h"
+#include "tests/fuzz/require.h"
 
 namespace drivers = stevi::drivers;
 
 namespace {
 
-// A broken invariant: says which, then aborts (the fuzzer keeps the input).
-void Require(bool ok, int line = __builtin_LINE()) {
-  if (ok) return;
-  std::fprintf(stderr, "invariant broken at %s:%d\n", __FILE__, line);
-  std::abort();
-}
+using stevi::fuzz::Require;
 
 // This process's folder, removed at exit (never destroyed, so the exit handler can name it).
 const std::string& Folder() {

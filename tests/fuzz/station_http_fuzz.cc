@@ -35,6 +35,7 @@
 #include <string_view>
 
 #include "client/station/station.h"
+#include "tests/fuzz/require.h"
 
 namespace st = stevi::station;
 
@@ -45,9 +46,7 @@ constexpr char kSite[] =
     R"({"type":"FeatureCollection","features":[{"type":"Feature","properties":{"name":"pad"},)"
     R"("geometry":{"type":"Point","coordinates":[10.4,43.7]}}]})";
 
-void Require(bool ok) {
-  if (!ok) std::abort();
-}
+using stevi::fuzz::Require;
 
 struct Stations {
   std::unique_ptr<st::Station> plain, guarded;

@@ -17,6 +17,7 @@
 #include "core/geometry/calibration_io.h"
 #include "server/runtime/engine.h"
 #include "server/server.h"
+#include "tests/server/loopback_client.h"
 #include "tests/testing/data.h"
 #include "tests/testing/sanitized.h"
 
@@ -88,10 +89,8 @@ class CalibrationServiceTest : public ::testing::Test {
     Result<std::unique_ptr<Server>> server = Server::Start(ChessboardConfig(data_dir_));
     ASSERT_TRUE(server.ok()) << server.error().message;
     server_ = std::move(server).value();
-    client::ClientOptions options;
-    options.address = "127.0.0.1:" + std::to_string(server_->port());
-    options.timeout = std::chrono::seconds(20);
-    client_ = std::make_unique<client::Client>(options);
+    client_ = std::make_unique<client::Client>(
+        testing::LoopbackOptions(*server_, std::chrono::seconds(20)));
   }
 
   std::string ActiveCalibrationId() {

@@ -25,6 +25,7 @@
 #include "tests/server/truth_check.h"
 #include "tests/testing/data.h"
 #include "tests/testing/subprocess.h"
+#include "tests/testing/synthetic_calibration.h"
 
 namespace stevi {
 namespace {
@@ -621,12 +622,9 @@ TEST(SteviProcess, ImageSequenceDepthWithinTwoPercent) {
     ASSERT_TRUE(cv::imwrite(dir + name, frame.right));
     truth_per_frame.push_back(truth.obstacles);
   }
-  ASSERT_TRUE(
-      geometry::SaveCalibrationYaml(
-          geometry::IdealCalibration(cv::Size(options.width, options.height), options.f_px,
-                                     options.baseline_m, options.width / 2.0, options.height / 2.0),
-          dir + "/calibration.yaml")
-          .ok());
+  ASSERT_TRUE(geometry::SaveCalibrationYaml(testing::SyntheticCalibration(options),
+                                            dir + "/calibration.yaml")
+                  .ok());
 
   const testing::RunResult r = testing::Run(
       {BinaryPath("stevi-process"), "--source", "images", "--left", dir + "/left_%03d.png",

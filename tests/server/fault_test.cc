@@ -15,7 +15,6 @@
 #include <atomic>
 #include <climits>
 #include <cmath>
-#include <condition_variable>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -299,32 +298,16 @@ TEST_F(FaultTest, ClientsCancellingMidStream) {
         // random number of frames (1..3).
         std::unique_ptr<client::Client> c = testing::MakeClient(address);
         const uint64_t k = 1 + rng() % 3;
-        std::mutex mu;
-        std::condition_variable cv;
-        uint64_t got = 0;
-        bool ended = false;
+        testing::StreamCount count;
         grpc::Status status;
         std::thread streaming([&] {
           status = c->StreamTracks([&](const v1::TrackFrame&) {
-            {
-              std::lock_guard lock(mu);
-              ++got;
-            }
-            cv.notify_all();
+            count.Add();
             return true;
           });
-          {
-            std::lock_guard lock(mu);
-            ended = true;
-          }
-          cv.notify_all();
+          count.End();
         });
-        bool reached;
-        {
-          std::unique_lock lock(mu);
-          cv.wait_for(lock, 30s, [&] { return got >= k || ended; });
-          reached = got >= k;
-        }
+        const bool reached = count.WaitFor(k, 30s) >= k;
         c->Cancel();
         streaming.join();
         if (!reached) fail("library cycle: no " + std::to_string(k) + " frames within 30 s");
@@ -338,35 +321,20 @@ TEST_F(FaultTest, ClientsCancellingMidStream) {
         grpc::ClientContext context;
         context.set_deadline(std::chrono::system_clock::now() + 30s);
         const uint64_t k = 1 + rng() % 3;
-        std::mutex mu;
-        std::condition_variable cv;
-        uint64_t got = 0;
-        bool ended = false;
+        testing::StreamCount count;
         grpc::Status status;
         std::thread reading([&] {
           std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader =
               stub->StreamTracks(&context, v1::StreamTracksRequest());
           v1::TrackFrame frame;
-          while (reader->Read(&frame)) {
-            {
-              std::lock_guard lock(mu);
-              ++got;
-            }
-            cv.notify_all();
-          }
+          while (reader->Read(&frame)) count.Add();
           status = reader->Finish();
-          {
-            std::lock_guard lock(mu);
-            ended = true;
-          }
-          cv.notify_all();
+          count.End();
         });
-        {
-          std::unique_lock lock(mu);
-          cv.wait_for(lock, 30s, [&] { return got >= k || ended; });
-        }
+        count.WaitFor(k, 30s);
         context.TryCancel();
         reading.join();
+        const uint64_t got = count.frames();
         if (got < k) fail("raw cycle: only " + std::to_string(got) + " frames");
         if (status.error_code() != grpc::StatusCode::CANCELLED) {
           fail("raw cycle: " + client::StatusCodeName(status.error_code()) + " " +

@@ -20,6 +20,7 @@
 #include "tests/server/server_process.h"
 #include "tests/testing/gst_testing.h"
 #include "tests/testing/sanitized.h"
+#include "tests/testing/synthetic_calibration.h"
 #include "tests/testing/truth_match.h"
 
 namespace stevi {
@@ -73,12 +74,9 @@ void WriteFramesAndVideos(const std::string& dir) {
     ASSERT_TRUE(cv::imwrite(dir + name, side_by_side[k]));
   }
   ASSERT_NO_FATAL_FAILURE(testing::WriteMjpegAvi(dir + "/flight.avi", side_by_side, kFps, 100));
-  ASSERT_TRUE(
-      geometry::SaveCalibrationYaml(
-          geometry::IdealCalibration(cv::Size(options.width, options.height), options.f_px,
-                                     options.baseline_m, options.width / 2.0, options.height / 2.0),
-          dir + "/calibration.yaml")
-          .ok());
+  ASSERT_TRUE(geometry::SaveCalibrationYaml(testing::SyntheticCalibration(options),
+                                            dir + "/calibration.yaml")
+                  .ok());
 }
 
 std::vector<v1::TrackFrame> Process(const std::vector<std::string>& source_args) {

@@ -1,6 +1,7 @@
-// Helpers shared by the server's load, churn and fault tests (load_test.cc, fault_test.cc):
-// resident memory, bounded streaming over a raw stub, bounded waits on GetStatus, raw TCP
-// sockets, and the "nothing is lost" snapshot (active pipeline config + calibration list).
+// Helpers shared by the server's load, churn, fault and shutdown tests (load_test.cc,
+// fault_test.cc, shutdown_test.cc): resident memory, bounded streaming over a raw stub, a stream's
+// frames counted across threads, bounded waits on GetStatus, raw TCP sockets, and the "nothing is
+// lost" snapshot (active pipeline config + calibration list).
 #pragma once
 
 #include <arpa/inet.h>
@@ -13,11 +14,13 @@
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
+#include <condition_variable>
 #include <cstdint>
 #include <fstream>
 #include <functional>
 #include <iterator>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -71,6 +74,53 @@ inline std::unique_ptr<client::Client> MakeClient(
   options.timeout = timeout;
   return std::make_unique<client::Client>(options);
 }
+
+// The frames a stream delivered, counted on the thread reading it and awaited on others, and its
+// final status once it ended.
+class StreamCount {
+ public:
+  // A frame came.
+  void Add() {
+    {
+      std::lock_guard lock(mu_);
+      ++frames_;
+    }
+    cv_.notify_all();
+  }
+  // The stream ended with `status`.
+  void End(const grpc::Status& status = grpc::Status::OK) {
+    {
+      std::lock_guard lock(mu_);
+      status_ = status;
+      ended_ = true;
+    }
+    cv_.notify_all();
+  }
+  // Waits at most `timeout` for `k` frames or the end; returns the frames counted by then.
+  uint64_t WaitFor(uint64_t k, std::chrono::milliseconds timeout) {
+    std::unique_lock lock(mu_);
+    cv_.wait_for(lock, timeout, [&] { return frames_ >= k || ended_; });
+    return frames_;
+  }
+  // The frames counted so far.
+  uint64_t frames() {
+    std::lock_guard lock(mu_);
+    return frames_;
+  }
+  // The final status once the stream ended; nullopt when it did not within `timeout`.
+  std::optional<grpc::Status> WaitForEnd(std::chrono::milliseconds timeout) {
+    std::unique_lock lock(mu_);
+    if (!cv_.wait_for(lock, timeout, [&] { return ended_; })) return std::nullopt;
+    return status_;
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  uint64_t frames_ = 0;
+  bool ended_ = false;
+  grpc::Status status_;
+};
 
 // A channel of its own (no subchannel shared with other channels of this process): every such
 // channel opens its own TCP connection.

@@ -33,6 +33,7 @@
 #include "drivers/synthetic/scenarios.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/server/server_process.h"
+#include "tests/server/truth_check.h"
 #include "tests/testing/sanitized.h"
 #include "tests/testing/subprocess.h"
 #include "tests/testing/test_autopilot.h"
@@ -269,12 +270,8 @@ TEST_F(MavlinkBridgeTest, TheAutopilotsPosesGeoreferenceTheFramesAndObstaclesRea
       obstacles.push_back(&o);
     }
     for (const auto& [d, k] : testing::MatchByIoU(boxes, truth_boxes, 0.3)) {
-      geo::VehiclePose pose;
-      pose.state = pose_;
-      geo::PointInCam point;
-      const cv::Vec3d& p = obstacles[k]->position_cam_m;
-      point.position_m = Eigen::Vector3d(p[0], p[1], p[2]);
-      const Result<geo::GeoPoint> expected = georeferencer.Georeference(pose, point);
+      const Result<geo::GeoPoint> expected =
+          testing::TruthGeodetic(georeferencer, pose_, *obstacles[k]);
       ASSERT_TRUE(expected.ok());
       const v1::Geodetic& got = tracks[d]->geodetic();
       const double error = std::hypot((got.lat_deg() - expected->lat_deg) * 111132.0,

@@ -22,12 +22,14 @@
 #include "core/geo/georeferencer.h"
 #include "server/runtime/pose_source.h"
 #include "server/service.h"
+#include "tests/server/loopback_client.h"
 #include "tests/server/truth_check.h"
 #include "tests/testing/data.h"
 #include "tests/testing/sanitized.h"
 #include "tests/testing/status_matchers.h"
 
 using stevi::testing::IsError;
+using stevi::testing::LoopbackOptions;
 
 namespace stevi::server {
 namespace {
@@ -43,14 +45,6 @@ v1::ServerConfig TestConfig() {
   config.mutable_source()->set_fps(kFps);
   config.set_data_dir(testing::MakeTempDir("stevi-server-test"));
   return config;
-}
-
-// Options for a client of `server` on loopback.
-client::ClientOptions LoopbackOptions(const Server& server, std::chrono::seconds timeout) {
-  client::ClientOptions options;
-  options.address = "127.0.0.1:" + std::to_string(server.port());
-  options.timeout = timeout;
-  return options;
 }
 
 // The next n frames of a stream (fails the test when the stream fails).
@@ -73,10 +67,7 @@ class ServerTest : public ::testing::Test {
     Result<std::unique_ptr<Server>> server = Server::Start(TestConfig());
     ASSERT_TRUE(server.ok()) << server.error().message;
     server_ = std::move(server).value();
-    client::ClientOptions options;
-    options.address = "127.0.0.1:" + std::to_string(server_->port());
-    options.timeout = std::chrono::seconds(20);
-    client_ = std::make_unique<client::Client>(options);
+    client_ = std::make_unique<client::Client>(LoopbackOptions(*server_, std::chrono::seconds(20)));
   }
 
   std::vector<v1::TrackFrame> Collect(client::Client& c, uint64_t n) { return CollectFrames(c, n); }
@@ -429,12 +420,9 @@ TEST_F(ServerTest, TracksCarryGeodeticPositionsMatchingTheTruth) {
       // model: their blobs' centroids are not their faces' centres, so only the aircraft and
       // drones (whole in view) are compared.
       if (obstacles[k]->name == "tower" || obstacles[k]->name == "hangar") continue;
-      geo::VehiclePose pose;
-      pose.state = rig;
-      geo::PointInCam point;
+      const Result<geo::GeoPoint> expected =
+          testing::TruthGeodetic(georeferencer, rig, *obstacles[k]);
       const cv::Vec3d& p = obstacles[k]->position_cam_m;
-      point.position_m = Eigen::Vector3d(p[0], p[1], p[2]);
-      Result<geo::GeoPoint> expected = georeferencer.Georeference(pose, point);
       ASSERT_TRUE(expected.ok());
       const v1::Geodetic& got = tracks[d]->geodetic();
       const double north = (got.lat_deg() - expected->lat_deg) * 111132.0;

@@ -7,8 +7,6 @@
 #include <gtest/gtest.h>
 
 #include <csignal>
-#include <condition_variable>
-#include <mutex>
 #include <regex>
 
 #include <google/protobuf/unknown_field_set.h>
@@ -39,39 +37,24 @@ class Watcher {
       std::unique_ptr<grpc::ClientReader<v1::TrackFrame>> reader =
           stub->StreamTracks(&context, v1::StreamTracksRequest());
       v1::TrackFrame frame;
-      while (reader->Read(&frame)) {
-        std::lock_guard lock(mu_);
-        ++frames_;
-        cv_.notify_all();
-      }
-      const grpc::Status status = reader->Finish();
-      std::lock_guard lock(mu_);
-      status_ = status;
-      ended_ = true;
-      cv_.notify_all();
+      while (reader->Read(&frame)) count_.Add();
+      count_.End(reader->Finish());
     });
   }
   ~Watcher() {
     if (thread_.joinable()) thread_.join();
   }
 
-  bool WaitForFrames(int n, std::chrono::seconds timeout) {
-    std::unique_lock lock(mu_);
-    return cv_.wait_for(lock, timeout, [&] { return frames_ >= n || ended_; }) && frames_ >= n;
+  bool WaitForFrames(uint64_t n, std::chrono::seconds timeout) {
+    return count_.WaitFor(n, timeout) >= n;
   }
   // The final status once the stream ended (bounded).
   std::optional<grpc::Status> WaitForEnd(std::chrono::seconds timeout) {
-    std::unique_lock lock(mu_);
-    if (!cv_.wait_for(lock, timeout, [&] { return ended_; })) return std::nullopt;
-    return status_;
+    return count_.WaitForEnd(timeout);
   }
 
  private:
-  std::mutex mu_;
-  std::condition_variable cv_;
-  int frames_ = 0;
-  bool ended_ = false;
-  grpc::Status status_;
+  testing::StreamCount count_;
   std::thread thread_;
 };
 

@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "core/common/error.h"
+#include "core/geo/georeferencer.h"
 #include "drivers/synthetic/synthetic_source.h"
 #include "stevi/v1/obstacle_service.pb.h"
 #include "tests/testing/truth_match.h"
@@ -40,6 +42,19 @@ struct DepthCheck {
     return total > 0 ? static_cast<double>(majority) / total : 0;
   }
 };
+
+// Where `georeferencer` puts truth obstacle `o` (its centre in the cam frame) seen from `state`:
+// the geodetic point a track of it should carry.
+inline Result<geo::GeoPoint> TruthGeodetic(const geo::Georeferencer& georeferencer,
+                                           const geo::VehicleState& state,
+                                           const drivers::ObstacleTruth& o) {
+  geo::VehiclePose pose;
+  pose.state = state;
+  geo::PointInCam point;
+  const cv::Vec3d& p = o.position_cam_m;
+  point.position_m = Eigen::Vector3d(p[0], p[1], p[2]);
+  return georeferencer.Georeference(pose, point);
+}
 
 // Obstacles smaller than min_visible_px in the image are not expected. Only tracks detected in this
 // frame take part (COASTING ones carry a prediction, not a measurement).

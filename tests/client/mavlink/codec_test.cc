@@ -36,6 +36,16 @@ uint16_t ReferenceCrc(std::string_view text, uint16_t crc = 0xFFFF) {
   return ReferenceCrc(std::span<const uint8_t>(data, text.size()), crc);
 }
 
+// Completes a frame whose header is in `out`: the payload, then the reference checksum of all but
+// the magic byte and of the CRC_EXTRA, little-endian (the same in MAVLink 1 and 2).
+void AppendPayloadAndChecksum(Bytes& out, const Bytes& payload, uint8_t crc_extra) {
+  out.insert(out.end(), payload.begin(), payload.end());
+  uint16_t crc = ReferenceCrc(std::span<const uint8_t>(out).subspan(1));
+  crc = ReferenceCrc(std::span<const uint8_t>(&crc_extra, 1), crc);
+  out.push_back(static_cast<uint8_t>(crc & 0xFF));
+  out.push_back(static_cast<uint8_t>(crc >> 8));
+}
+
 // A frame built by the test alone (the reference checksum, the CRC_EXTRA given): for the cases
 // the encoder does not write (MAVLink 1, flags, untrimmed or over-long payloads, unknown ids).
 Bytes ReferenceFrameV2(uint8_t incompat, uint8_t compat, uint8_t seq, uint8_t sysid, uint8_t compid,
@@ -50,22 +60,14 @@ Bytes ReferenceFrameV2(uint8_t incompat, uint8_t compat, uint8_t seq, uint8_t sy
                static_cast<uint8_t>(msgid),
                static_cast<uint8_t>(msgid >> 8),
                static_cast<uint8_t>(msgid >> 16)};
-  out.insert(out.end(), payload.begin(), payload.end());
-  uint16_t crc = ReferenceCrc(std::span<const uint8_t>(out).subspan(1));
-  crc = ReferenceCrc(std::span<const uint8_t>(&crc_extra, 1), crc);
-  out.push_back(static_cast<uint8_t>(crc & 0xFF));
-  out.push_back(static_cast<uint8_t>(crc >> 8));
+  AppendPayloadAndChecksum(out, payload, crc_extra);
   return out;
 }
 
 Bytes ReferenceFrameV1(uint8_t seq, uint8_t sysid, uint8_t compid, uint8_t msgid,
                        const Bytes& payload, uint8_t crc_extra) {
   Bytes out = {0xFE, static_cast<uint8_t>(payload.size()), seq, sysid, compid, msgid};
-  out.insert(out.end(), payload.begin(), payload.end());
-  uint16_t crc = ReferenceCrc(std::span<const uint8_t>(out).subspan(1));
-  crc = ReferenceCrc(std::span<const uint8_t>(&crc_extra, 1), crc);
-  out.push_back(static_cast<uint8_t>(crc & 0xFF));
-  out.push_back(static_cast<uint8_t>(crc >> 8));
+  AppendPayloadAndChecksum(out, payload, crc_extra);
   return out;
 }
 

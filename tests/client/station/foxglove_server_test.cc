@@ -188,6 +188,15 @@ class SubscriptionLog {
   size_t next_ = 0;
 };
 
+// A server whose subscription listener reports to `log`, which must outlive it (Stop() calls the
+// listener).
+std::unique_ptr<FoxgloveServer> StartServer(SubscriptionLog& log,
+                                            FoxgloveServerOptions options = {}) {
+  std::unique_ptr<FoxgloveServer> server = StartServer(std::move(options));
+  server->SetSubscriptionListener(log.Listener());
+  return server;
+}
+
 // Polls `condition` until it holds or the deadline passes (for server state that sends nothing,
 // such as a freed client slot).
 bool Eventually(const std::function<bool()>& condition) {
@@ -386,8 +395,7 @@ TEST(FileDescriptorSetFor, ListsEveryDependencyOnceBeforeItsImporters) {
 
 TEST(FoxgloveServer, SendsMessageDataOnlyToSubscribers) {
   SubscriptionLog log;  // outlives the server, whose Stop() calls the listener
-  std::unique_ptr<FoxgloveServer> server = StartServer();
-  server->SetSubscriptionListener(log.Listener());
+  std::unique_ptr<FoxgloveServer> server = StartServer(log);
   const uint32_t images =
       server->AddChannel(Spec("/rig1/image", foxglove::CompressedImage::descriptor(), true));
   const uint32_t tracks = server->AddChannel(Spec("/rig1/tracks", v1::TrackFrame::descriptor()));
@@ -441,8 +449,7 @@ TEST(FoxgloveServer, SendsMessageDataOnlyToSubscribers) {
 
 TEST(FoxgloveServer, StopsSendingAfterUnsubscribe) {
   SubscriptionLog log;  // outlives the server, whose Stop() calls the listener
-  std::unique_ptr<FoxgloveServer> server = StartServer();
-  server->SetSubscriptionListener(log.Listener());
+  std::unique_ptr<FoxgloveServer> server = StartServer(log);
   const uint32_t a = server->AddChannel(Spec("/a", v1::TrackFrame::descriptor()));
   const uint32_t b = server->AddChannel(Spec("/b", v1::TrackFrame::descriptor()));
   std::unique_ptr<WsClient> client = ConnectAndGreet(*server, true);
@@ -477,8 +484,7 @@ TEST(FoxgloveServer, StopsSendingAfterUnsubscribe) {
 
 TEST(FoxgloveServer, TellsTheListenerAboutFirstAndLastSubscribersOnly) {
   SubscriptionLog log;  // outlives the server, whose Stop() calls the listener
-  std::unique_ptr<FoxgloveServer> server = StartServer();
-  server->SetSubscriptionListener(log.Listener());
+  std::unique_ptr<FoxgloveServer> server = StartServer(log);
   const uint32_t a = server->AddChannel(Spec("/a", v1::TrackFrame::descriptor()));
   const uint32_t sync1 = server->AddChannel(Spec("/sync1", v1::TrackFrame::descriptor()));
   const uint32_t sync2 = server->AddChannel(Spec("/sync2", v1::TrackFrame::descriptor()));
@@ -505,8 +511,7 @@ TEST(FoxgloveServer, TellsTheListenerAboutFirstAndLastSubscribersOnly) {
 
 TEST(FoxgloveServer, AdvertisesAddedChannelsAndUnadvertisesRemovedOnes) {
   SubscriptionLog log;  // outlives the server, whose Stop() calls the listener
-  std::unique_ptr<FoxgloveServer> server = StartServer();
-  server->SetSubscriptionListener(log.Listener());
+  std::unique_ptr<FoxgloveServer> server = StartServer(log);
   std::unique_ptr<WsClient> client = ConnectAndGreet(*server, false);
 
   const uint32_t id = server->AddChannel(Spec("/rig2/scene", foxglove::SceneUpdate::descriptor()));
@@ -547,8 +552,7 @@ TEST(FoxgloveServer, SendStatusReachesEveryClient) {
 
 TEST(FoxgloveServer, WarnsAboutBadMessagesAndKeepsTheConnection) {
   SubscriptionLog log;  // outlives the server, whose Stop() calls the listener
-  std::unique_ptr<FoxgloveServer> server = StartServer();
-  server->SetSubscriptionListener(log.Listener());
+  std::unique_ptr<FoxgloveServer> server = StartServer(log);
   const uint32_t a = server->AddChannel(Spec("/a", v1::TrackFrame::descriptor()));
   const uint32_t b = server->AddChannel(Spec("/b", v1::TrackFrame::descriptor()));
   std::unique_ptr<WsClient> client = ConnectAndGreet(*server, true);
@@ -772,8 +776,7 @@ TEST(FoxgloveServer, SlowClientDropsLossyMessagesFirstAndDoesNotStallOthers) {
   options.queue_messages = 32;
   options.queue_bytes = 1 << 20;
   SubscriptionLog log;  // outlives the server, whose Stop() calls the listener
-  std::unique_ptr<FoxgloveServer> server = StartServer(options);
-  server->SetSubscriptionListener(log.Listener());
+  std::unique_ptr<FoxgloveServer> server = StartServer(log, options);
   const uint32_t images =
       server->AddChannel(Spec("/image", foxglove::CompressedImage::descriptor(), true));
   const uint32_t tracks = server->AddChannel(Spec("/tracks", v1::TrackFrame::descriptor()));
@@ -933,8 +936,7 @@ TEST(FoxgloveServer, StopClosesEveryClientAndJoins) {
   FoxgloveServerOptions options;
   options.queue_messages = 2;
   SubscriptionLog log;  // outlives the server, whose Stop() calls the listener
-  std::unique_ptr<FoxgloveServer> server = StartServer(options);
-  server->SetSubscriptionListener(log.Listener());
+  std::unique_ptr<FoxgloveServer> server = StartServer(log, options);
   const uint32_t images =
       server->AddChannel(Spec("/image", foxglove::CompressedImage::descriptor(), true));
   std::unique_ptr<WsClient> reader = ConnectAndGreet(*server, true);

@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/calib3d.hpp>
 
+#include "tests/core/geometry/calibration_fixtures.h"
 #include "tests/testing/data.h"
 #include "tests/testing/status_matchers.h"
 
@@ -26,18 +27,12 @@ using ::testing::IsEmpty;
 
 namespace fs = std::filesystem;
 
-// A raw rig whose baseline is 10 cm + i mm, with its rectification terms.
+// The raw rig of the geometry tests with the left focal length 520 + i px and the baseline
+// 10 cm + i mm, with its rectification terms.
 geometry::StereoCalibration MakeCalibration(int i) {
-  geometry::StereoCalibration c;
-  c.image_size = cv::Size(640, 480);
-  c.M1 = cv::Matx33d(520 + i, 0, 318.5, 0, 522, 244.0, 0, 0, 1);
-  c.M2 = cv::Matx33d(515, 0, 325.0, 0, 516, 238.5, 0, 0, 1);
-  c.D1 = (cv::Mat_<double>(1, 5) << -0.12, 0.05, 0.001, -0.0005, 0.0);
-  c.D2 = (cv::Mat_<double>(1, 5) << -0.10, 0.03, -0.0008, 0.0006, 0.0);
-  cv::Matx33d r;
-  cv::Rodrigues(cv::Vec3d(0.01, -0.02, 0.005), r);
-  c.R = r;
-  c.T = cv::Vec3d(-0.1 - 0.001 * i, 0.002, -0.001);
+  geometry::StereoCalibration c = geometry::fixtures::RawCalibration();
+  c.M1(0, 0) += i;
+  c.T[0] -= 0.001 * i;
   cv::Mat R1, R2, P1, P2, Q;
   cv::stereoRectify(cv::Mat(c.M1), c.D1, cv::Mat(c.M2), c.D2, c.image_size, cv::Mat(c.R),
                     cv::Mat(c.T), R1, R2, P1, P2, Q, cv::CALIB_ZERO_DISPARITY, 0);

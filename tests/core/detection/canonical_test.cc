@@ -15,6 +15,7 @@
 #include "core/stereo/disparity.h"
 #include "core/stereo/matcher.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/core/detection/disparity_fixtures.h"
 #include "tests/testing/truth_match.h"
 
 namespace stevi::detection {
@@ -24,21 +25,7 @@ using geometry::RangeOptions;
 using geometry::StereoRig;
 using stereo::DisparityMap;
 
-constexpr double kF = 700.0;
-constexpr double kB = 0.6;
-
-StereoRig TestRig() { return StereoRig::Ideal(cv::Size(640, 480), kF, kB, 320.0, 240.0); }
-
-DisparityMap EmptyMap(cv::Size size) {
-  DisparityMap map;
-  map.fixed = cv::Mat1s(size, DisparityMap::kInvalid);
-  map.num_disparities = 64;
-  return map;
-}
-
-void Paint(DisparityMap& map, const cv::Rect& r, double disparity_px) {
-  map.fixed(r).setTo(cv::Scalar(std::lround(disparity_px * DisparityMap::kScale)));
-}
+using namespace fixtures;  // kF, kB, TestRig, EmptyMap, Paint
 
 // The detection whose box overlaps `r` most, if any overlaps.
 std::optional<Detection> Overlapping(const std::vector<Detection>& detections, const cv::Rect& r) {

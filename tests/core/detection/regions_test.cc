@@ -14,6 +14,7 @@
 #include "core/stereo/disparity.h"
 #include "core/stereo/matcher.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/core/detection/disparity_fixtures.h"
 
 namespace stevi::detection {
 namespace {
@@ -22,21 +23,7 @@ using geometry::RangeOptions;
 using geometry::StereoRig;
 using stereo::DisparityMap;
 
-constexpr double kF = 700.0;
-constexpr double kB = 0.6;
-
-StereoRig TestRig() { return StereoRig::Ideal(cv::Size(640, 480), kF, kB, 320.0, 240.0); }
-
-DisparityMap EmptyMap(cv::Size size) {
-  DisparityMap map;
-  map.fixed = cv::Mat1s(size, DisparityMap::kInvalid);
-  map.num_disparities = 64;
-  return map;
-}
-
-void Paint(DisparityMap& map, const cv::Rect& r, double disparity_px) {
-  map.fixed(r).setTo(cv::Scalar(std::lround(disparity_px * DisparityMap::kScale)));
-}
+using namespace fixtures;  // kF, kB, TestRig, EmptyMap, Paint
 
 // Hypotheses of an appearance mask over a map, without a ground model.
 std::vector<Detection> Hypotheses(const cv::Mat1b& appearance, const DisparityMap& map,

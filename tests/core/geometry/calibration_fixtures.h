@@ -1,5 +1,5 @@
 // The calibrations and calibration YAML that the core/geometry tests share (calibration_io_test,
-// stereo_rig_test).
+// stereo_rig_test); the calibration store's test (core/calibration/store_test) varies the raw rig.
 #pragma once
 
 #include <fstream>

@@ -19,6 +19,7 @@
 
 #include "drivers/synthetic/synthetic_source.h"
 #include "tests/testing/data.h"
+#include "tests/testing/stereo_bm.h"
 
 namespace stevi::stereo {
 namespace {
@@ -45,15 +46,7 @@ std::string Describe(const SadBlockMatcherParams& p) {
 std::optional<cv::Mat> Reference(const cv::Mat& left, const cv::Mat& right,
                                  const SadBlockMatcherParams& p) {
   cv::setNumThreads(1);
-  cv::Ptr<cv::StereoBM> bm = cv::StereoBM::create(p.num_disparities, p.block_size);
-  bm->setPreFilterType(cv::StereoBM::PREFILTER_XSOBEL);
-  bm->setPreFilterCap(p.prefilter_cap);
-  bm->setMinDisparity(p.min_disparity);
-  bm->setTextureThreshold(p.texture_threshold);
-  bm->setUniquenessRatio(p.uniqueness_ratio);
-  bm->setSpeckleWindowSize(p.speckle_window_size);
-  bm->setSpeckleRange(p.speckle_range);
-  bm->setDisp12MaxDiff(-1);
+  cv::Ptr<cv::StereoBM> bm = testing::StereoBMFor(p);
   cv::Mat out(left.size(), CV_16SC1, cv::Scalar(Unmatched(p)));
   try {
     bm->compute(left, right, out);

@@ -13,6 +13,7 @@
 #include "core/stereo/disparity.h"
 #include "core/stereo/matcher.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/core/stereo/synthetic_sky.h"
 
 namespace stevi::stereo {
 namespace {
@@ -264,14 +265,7 @@ TEST(DenseMatcher, FlatNoiseIsNotConfident) {
 // The synthetic rig's sky (noise sigma 2): unmatched or low confidence, while the obstacles keep
 // confident, correct disparities.
 TEST(DenseMatcher, SyntheticSkyIsNotConfident) {
-  const drivers::SyntheticRenderer renderer{drivers::SyntheticOptions{}};
-  drivers::FrameTruth truth;
-  const StereoFrame frame = renderer.Render(0, &truth);
-  cv::Mat1b near_scene;
-  cv::dilate(truth.object_id != -1, near_scene,
-             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(17, 17)));
-  const cv::Mat1b open_sky = (truth.object_id == -1) & ~near_scene;
-  const cv::Mat1b obstacles = truth.object_id > 0;
+  const auto [frame, truth, open_sky, obstacles] = fixtures::DefaultSkyScene();
   ASSERT_GT(cv::countNonZero(open_sky), 50000);
   DenseMatcher matcher(DenseMatcherOptions{});
   const DisparityMap map = matcher.Compute(frame.left, frame.right);

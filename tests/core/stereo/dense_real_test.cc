@@ -115,6 +115,19 @@ DisparityMap Dense(const RealPair& pair, int num, DenseCues* cues = nullptr) {
   return map;
 }
 
+// Frame 0 of the random scene `family` / `seed` through the default dense matcher: the map, with
+// the scene's exact truth in `truth` and the matcher's cues in `cues`.
+DisparityMap DenseOnRandomScene(const std::string& family, uint64_t seed,
+                                drivers::FrameTruth& truth, DenseCues* cues = nullptr) {
+  const drivers::Scenario scenario = drivers::RandomScenario(family, seed);
+  drivers::SyntheticRenderer renderer(scenario.options);
+  const StereoFrame frame = renderer.Render(0, &truth);
+  DenseMatcher matcher({});
+  DisparityMap map = matcher.Compute(frame.left, frame.right);
+  if (cues != nullptr) *cues = matcher.last_cues();
+  return map;
+}
+
 // Pixels evaluated, and bad at > threshold px counting an unmatched pixel as bad.
 struct BadCount {
   long evaluated = 0, bad = 0, matched = 0;
@@ -294,12 +307,8 @@ TEST(DenseSynthetic, ConfidenceIsCalibratedOnTheSyntheticTestSplit) {
   double sky = 0, sky_trusted = 0;
   for (const std::string& family : drivers::RandomSceneFamilies()) {
     for (uint64_t seed = 1001; seed <= 1006; ++seed) {
-      const drivers::Scenario scenario = drivers::RandomScenario(family, seed);
-      drivers::SyntheticRenderer renderer(scenario.options);
       drivers::FrameTruth truth;
-      const StereoFrame frame = renderer.Render(0, &truth);
-      DenseMatcher matcher({});
-      const DisparityMap map = matcher.Compute(frame.left, frame.right);
+      const DisparityMap map = DenseOnRandomScene(family, seed, truth);
       for (int y = 0; y < map.fixed.rows; y += 2) {
         for (int x = 0; x < map.fixed.cols; x += 2) {
           const std::optional<float> d = map.At(x, y);
@@ -355,13 +364,10 @@ TEST_F(DenseReal, DISABLED_FitConfidence) {
   // truth, the sky's (0) included: flat noisy skies and clouds, which the real pairs lack.
   for (const std::string& family : drivers::RandomSceneFamilies()) {
     for (uint64_t seed = 1; seed <= 12; ++seed) {
-      const drivers::Scenario scenario = drivers::RandomScenario(family, seed);
-      drivers::SyntheticRenderer renderer(scenario.options);
       drivers::FrameTruth truth;
-      const StereoFrame frame = renderer.Render(0, &truth);
-      DenseMatcher matcher({});
-      const DisparityMap map = matcher.Compute(frame.left, frame.right);
-      add(map, matcher.last_cues(), truth.disparity_px, cv::Mat1b(map.fixed.size(), uint8_t{1}), 4);
+      DenseCues cues;
+      const DisparityMap map = DenseOnRandomScene(family, seed, truth, &cues);
+      add(map, cues, truth.disparity_px, cv::Mat1b(map.fixed.size(), uint8_t{1}), 4);
     }
   }
   std::printf("samples: %zu real, %zu synthetic\n", real, labels.size() - real);

@@ -12,6 +12,7 @@
 
 #include "core/stereo/disparity.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/core/stereo/synthetic_sky.h"
 
 namespace stevi::stereo {
 namespace {
@@ -458,16 +459,9 @@ TEST(MakeMatcher, SemiGlobalTextureGateRemovesMatchesOnFlatNoise) {
 // detector turns into ~100 spurious blobs per frame; with the default gate none is left, and the
 // obstacles keep their matches.
 TEST(MakeMatcher, SemiGlobalTextureGateClearsTheSyntheticSky) {
-  const drivers::SyntheticRenderer renderer{drivers::SyntheticOptions{}};
-  drivers::FrameTruth truth;
-  const StereoFrame frame = renderer.Render(0, &truth);
   // Open sky: sky pixels more than 8 px from anything else (next to an obstacle's silhouette,
   // SGBM and any window-based gate give the sky the obstacle's disparity).
-  cv::Mat1b near_scene;
-  cv::dilate(truth.object_id != -1, near_scene,
-             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(17, 17)));
-  const cv::Mat1b open_sky = (truth.object_id == -1) & ~near_scene;
-  const cv::Mat1b obstacles = truth.object_id > 0;
+  const auto [frame, truth, open_sky, obstacles] = fixtures::DefaultSkyScene();
   ASSERT_GT(cv::countNonZero(open_sky), 50000);
   ASSERT_GT(cv::countNonZero(obstacles), 20000);
 

@@ -20,6 +20,7 @@
 #include <gtest/gtest.h>
 
 #include "core/tracking/tracker.h"
+#include "tests/testing/measured_detection.h"
 
 namespace stevi::tracking {
 namespace {
@@ -134,15 +135,7 @@ detection::Detection Detect(const View& view, std::mt19937& rng) {
   const Eigen::Vector2d uv = Project(kCamera, view.centre_cam);
   const double u = uv.x() + centroid(rng), v = uv.y() + centroid(rng);
   const double d = kFB / view.centre_cam.z() + disparity(rng);
-  const double z = kFB / d;
-  detection::Detection det;
-  det.centroid_px = cv::Point2d(u, v);
-  det.disparity_px = d;
-  det.depth_m = z;
-  det.position_cam_m =
-      cv::Vec3d((u - kCamera.cx) * z / kCamera.f_px, (v - kCamera.cy) * z / kCamera.f_px, z);
-  det.range_m = cv::norm(det.position_cam_m);
-  det.range_sigma_m = z * z / kFB * kDisparitySigmaPx * det.range_m / z;
+  detection::Detection det = testing::MeasuredDetection(kCamera, u, v, d, kDisparitySigmaPx);
   det.bbox = view.box;
   det.area_px = view.box.area();
   det.valid_disparities = det.area_px;

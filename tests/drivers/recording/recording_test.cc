@@ -28,6 +28,7 @@
 #include "drivers/recording/recording_reader.h"
 #include "drivers/recording/replay_source.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/drivers/recording/scaled_synthetic.h"
 #include "tests/testing/data.h"
 #include "tests/testing/image_match.h"
 #include "tests/testing/status_matchers.h"
@@ -45,11 +46,7 @@ using Clock = std::chrono::steady_clock;
 using testing::ImagesIdentical;
 
 SyntheticOptions SmallSynthetic(int width = 160, int height = 120) {
-  SyntheticOptions o;
-  o.width = width;
-  o.height = height;
-  o.f_px = 700.0 * width / 640.0;
-  return o;
+  return fixtures::ScaledSynthetic(width, height);
 }
 
 // A colour pair from a grey one: three different channels, so that a swapped or dropped channel

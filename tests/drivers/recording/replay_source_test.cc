@@ -14,6 +14,7 @@
 #include "core/geometry/calibration_io.h"
 #include "drivers/recording/recorder.h"
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/drivers/recording/scaled_synthetic.h"
 #include "tests/testing/data.h"
 #include "tests/testing/image_match.h"
 #include "tests/testing/status_matchers.h"
@@ -42,11 +43,7 @@ using testing::ImagesIdentical;
 }
 
 SyntheticOptions SmallSynthetic(int width = 64, int height = 48) {
-  SyntheticOptions o;
-  o.width = width;
-  o.height = height;
-  o.f_px = 700.0 * width / 640.0;
-  return o;
+  return fixtures::ScaledSynthetic(width, height);
 }
 
 geo::VehicleState State(int k) {

@@ -14,31 +14,20 @@
 #include <opencv2/core.hpp>
 
 #include "tests/testing/truth_match.h"
+#include "tests/drivers/synthetic/frame_hash.h"
 
 namespace stevi::drivers {
 namespace {
 
-uint64_t Fnv1a(uint64_t h, const cv::Mat& m) {
-  const cv::Mat c = m.isContinuous() ? m : m.clone();
-  const auto* p = c.ptr<uint8_t>();
-  const size_t n = c.total() * c.elemSize();
-  for (size_t i = 0; i < n; ++i) {
-    h ^= p[i];
-    h *= 0x100000001B3ull;
-  }
-  return h;
-}
+using fixtures::HashFrame;
+using fixtures::kFnvOffset;
 
 // Hash of frame `index`: both images and the truth maps.
 uint64_t FrameHash(const Scenario& s, int64_t index, FrameTruth* truth_out = nullptr) {
   const SyntheticRenderer renderer(s.options);
   FrameTruth truth;
   const StereoFrame f = renderer.Render(index, &truth);
-  uint64_t h = 0xCBF29CE484222325ull;
-  h = Fnv1a(h, f.left);
-  h = Fnv1a(h, f.right);
-  h = Fnv1a(h, truth.disparity_px);
-  h = Fnv1a(h, truth.object_id);
+  const uint64_t h = HashFrame(kFnvOffset, f, truth);
   if (truth_out != nullptr) *truth_out = truth;
   return h;
 }

@@ -17,6 +17,7 @@
 #include <opencv2/core/utility.hpp>
 
 #include "drivers/synthetic/synthetic_source.h"
+#include "tests/drivers/synthetic/frame_hash.h"
 
 namespace stevi::drivers {
 namespace {
@@ -36,17 +37,8 @@ Scenario Get(const std::string& name) {
   return Scenario{};
 }
 
-// FNV-1a over the bytes of a matrix.
-uint64_t Fnv1a(uint64_t h, const cv::Mat& m) {
-  const cv::Mat c = m.isContinuous() ? m : m.clone();
-  const auto* p = c.ptr<uint8_t>();
-  const size_t n = c.total() * c.elemSize();
-  for (size_t i = 0; i < n; ++i) {
-    h ^= p[i];
-    h *= 0x100000001B3ull;
-  }
-  return h;
-}
+using fixtures::HashFrame;
+using fixtures::kFnvOffset;
 
 // The disparity of the flat ground on row v (0 above the horizon), as the renderer stores it.
 float GroundDisparity(double camera_height_m, int v) {
@@ -385,11 +377,7 @@ TEST(DefaultScene, RendersAsBeforeTheTerrainFeatures) {
   for (const auto& [index, hash] : expected) {
     FrameTruth truth;
     const StereoFrame f = renderer.Render(index, &truth);
-    uint64_t h = 0xCBF29CE484222325ull;
-    h = Fnv1a(h, f.left);
-    h = Fnv1a(h, f.right);
-    h = Fnv1a(h, truth.disparity_px);
-    h = Fnv1a(h, truth.object_id);
+    const uint64_t h = HashFrame(kFnvOffset, f, truth);
     EXPECT_EQ(h, hash) << "frame " << index;
   }
 }
@@ -515,14 +503,11 @@ TEST(EveryScenario, RendersAsBeforeTheRendererExtensions) {
   all.push_back(FlightScenario());
   for (const Scenario& s : all) {
     const SyntheticRenderer renderer(s.options);
-    uint64_t h = 0xCBF29CE484222325ull;
+    uint64_t h = kFnvOffset;
     for (int64_t index : {0, 7}) {
       FrameTruth truth;
       const StereoFrame f = renderer.Render(index, &truth);
-      h = Fnv1a(h, f.left);
-      h = Fnv1a(h, f.right);
-      h = Fnv1a(h, truth.disparity_px);
-      h = Fnv1a(h, truth.object_id);
+      h = HashFrame(h, f, truth);
     }
     const auto it = expected.find(s.name);
     if (it == expected.end()) {
