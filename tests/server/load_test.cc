@@ -44,8 +44,13 @@ constexpr auto kLoadDuration = 60s;  // all 32 streaming, after the warm-up
 // The slow client's time per frame: well over the pipeline's period. Under ThreadSanitizer the
 // pipeline managed 3.4 fps of the 4 asked, and a client taking 300 ms kept up with it.
 constexpr auto kSlowConsumerDelay = kSanitized ? 1000ms : 300ms;
-constexpr uint64_t kWarmupFrames = 60;        // per normal client before the load is measured
-constexpr uint64_t kRateWindowFrames = 60;    // frames of one rate measurement (5 s at 12 fps)
+// Per normal client before the load is measured, and the frames of one rate measurement (5 s at
+// 12 fps). Under a sanitizer fewer, and more time for them: in one ThreadSanitizer run
+// (2026-11-29) the server gave under 2 fps, and 120 frames did not come within 60 s. The rates
+// are not compared there (below), only the streams' flow and their ends.
+constexpr uint64_t kWarmupFrames = kSanitized ? 20 : 60;
+constexpr uint64_t kRateWindowFrames = kSanitized ? 20 : 60;
+constexpr auto kRateTimeout = kSanitized ? 180s : 60s;
 constexpr double kRateTolerance = 0.10;       // 32-client rate within 10 % of the 1-client rate
 constexpr long kLoadRssBoundKiB = 10 * 1024;  // growth between warm-up and end
 constexpr int kChurnCycles = 1000;
@@ -178,13 +183,13 @@ TEST(ServerLoad, ThirtyTwoClientsForAMinuteOneSlow) {
   ASSERT_TRUE(events.WaitUntil(Clock::now() + 30s, [&] { return logs[0]->count.load() >= 12; }))
       << "no frames with one client";
   const std::optional<double> rate_one =
-      MeasureRate(*control, *logs[0], events, 2 * kRateWindowFrames, 60s);
+      MeasureRate(*control, *logs[0], events, 2 * kRateWindowFrames, kRateTimeout);
   ASSERT_TRUE(rate_one.has_value()) << "the reference client stopped receiving";
 
   // 2. 31 more, the last one slow; warm-up until every normal client has kWarmupFrames frames and
   // the slow one a few.
   for (int i = 1; i < kClients; ++i) start_client(i);
-  const bool warm = events.WaitUntil(Clock::now() + 60s, [&] {
+  const bool warm = events.WaitUntil(Clock::now() + kRateTimeout, [&] {
     for (int i = 0; i < kClients; ++i) {
       if (logs[i]->ended.load()) return true;
       if (logs[i]->count.load() < (i == slow ? 10 : kWarmupFrames)) return false;
@@ -195,7 +200,8 @@ TEST(ServerLoad, ThirtyTwoClientsForAMinuteOneSlow) {
     ASSERT_FALSE(logs[i]->ended.load())
         << "client " << i << " ended: " << logs[i]->status.error_message();
   }
-  ASSERT_TRUE(warm) << "the 32 clients did not all get going within 60 s";
+  ASSERT_TRUE(warm) << "the 32 clients did not all get going within " << kRateTimeout.count()
+                    << " s";
   const Clock::time_point warm_at = Clock::now();
   v1::GetStatusResponse status;
   ASSERT_TRUE(control->GetStatus(&status).ok());
@@ -205,7 +211,7 @@ TEST(ServerLoad, ThirtyTwoClientsForAMinuteOneSlow) {
 
   // 3. The rate near the start of the load.
   const std::optional<double> rate_start =
-      MeasureRate(*control, *logs[0], events, kRateWindowFrames, 60s);
+      MeasureRate(*control, *logs[0], events, kRateWindowFrames, kRateTimeout);
   ASSERT_TRUE(rate_start.has_value()) << "client 0 stopped receiving under load";
 
   // 4. The load goes on for kLoadDuration after the warm-up (ending early only if a client's
@@ -221,9 +227,10 @@ TEST(ServerLoad, ThirtyTwoClientsForAMinuteOneSlow) {
       std::chrono::milliseconds(static_cast<int64_t>(1000.0 * kRateWindowFrames / kFps));
   EXPECT_FALSE(events.WaitUntil(end_window_at, any_ended)) << "a stream ended during the load";
   const std::optional<double> rate_end =
-      MeasureRate(*control, *logs[0], events, kRateWindowFrames, 60s);
+      MeasureRate(*control, *logs[0], events, kRateWindowFrames, kRateTimeout);
   ASSERT_TRUE(rate_end.has_value()) << "client 0 stopped receiving under load";
   const double load_s = Seconds(Clock::now() - warm_at);
+  const double delivered_fps = kSanitized ? std::min(*rate_start, *rate_end) : kFps;
   const double cores_used = (testing::ProcessCpuSeconds() - cpu_before) / load_s;
   const long rss_after = ResidentKiB();
   const uint64_t slow_told = logs[slow]->last_dropped.load();
@@ -265,8 +272,11 @@ TEST(ServerLoad, ThirtyTwoClientsForAMinuteOneSlow) {
     EXPECT_EQ(gaps, 0) << "client " << i << " missed frames";
     EXPECT_EQ(log.dropped.empty() ? 0 : log.dropped.back(), 0u)
         << "client " << i << " was told it lost frames";
-    // The normal clients were all connected for the whole load: at least load_s * fps * 0.9.
-    EXPECT_GE(static_cast<double>(log.frame_ids.size()), 0.9 * load_s * kFps) << "client " << i;
+    // The normal clients were all connected for the whole load: at least load_s * fps * 0.9, at
+    // the camera's rate; under a sanitizer at the rate the reference client measured (the
+    // instrumented server does not keep the camera's: under 2 of 4 fps in one TSan run).
+    EXPECT_GE(static_cast<double>(log.frame_ids.size()), 0.9 * load_s * delivered_fps)
+        << "client " << i;
   }
 
   // The slow client: its losses are counted and reported to it, matching its gaps exactly.
