@@ -420,28 +420,15 @@ std::string ServerCommandLine::Usage(const std::string& about) const {
   return out;
 }
 
-namespace {
-
-// `text` in a Markdown table's cell: its '|' escaped, or the cell would end there.
-std::string Cell(const std::string& text) {
-  std::string out;
-  for (char c : text) {
-    if (c == '|') out += '\\';
-    out += c;
-  }
-  return out;
-}
-
-}  // namespace
-
 std::string FlagTableMarkdown() {
   std::string out = "| flag | config field | default | valid | meaning |\n|---|---|---|---|---|\n";
   for (const SettingFlag& flag : SettingFlags()) {
     std::string paths;
     for (const std::string& p : flag.paths) paths += (paths.empty() ? "" : ", ") + ("`" + p + "`");
     const std::string head = flag.flag + (flag.metavar.empty() ? "" : " " + flag.metavar);
-    out += "| `--" + Cell(head) + "` | " + paths + " | " + flag.default_value + " | " +
-           Cell(Valid(flag)) + " | " + Cell(std::string(flag.field.doc())) + " |\n";
+    out += "| `--" + fields::MarkdownCell(head) + "` | " + paths + " | " + flag.default_value +
+           " | " + fields::MarkdownCell(Valid(flag)) + " | " +
+           fields::MarkdownCell(std::string(flag.field.doc())) + " |\n";
   }
   return out;
 }

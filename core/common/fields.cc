@@ -52,24 +52,20 @@ std::string Field::Problem(double value) const {
   return std::string(name_) + ": must be " + Describe(/*with_unit=*/true) + Got(value);
 }
 
-namespace {
-
-std::string Escaped(const std::string& cell) {
+std::string MarkdownCell(const std::string& text) {
   std::string out;
-  for (char c : cell) {
+  for (char c : text) {
     if (c == '|') out += '\\';
     out += c;
   }
   return out;
 }
 
-}  // namespace
-
 std::string MarkdownTable(const std::vector<Row>& rows) {
   std::string out = "| field | default | unit | valid | meaning |\n|---|---|---|---|---|\n";
   for (const Row& r : rows) {
-    out += "| `" + r.path + "` | " + Escaped(r.value) + " | " + Escaped(r.unit) + " | " +
-           Escaped(r.valid) + " | " + Escaped(r.doc) + " |\n";
+    out += "| `" + r.path + "` | " + MarkdownCell(r.value) + " | " + MarkdownCell(r.unit) + " | " +
+           MarkdownCell(r.valid) + " | " + MarkdownCell(r.doc) + " |\n";
   }
   return out;
 }

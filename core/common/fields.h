@@ -392,5 +392,7 @@ std::optional<std::string> Assign(S& s, std::string_view path, std::string_view 
 
 // The rows as a Markdown table (path, default, unit, valid values, meaning).
 std::string MarkdownTable(const std::vector<Row>& rows);
+// `text` for a Markdown table's cell: each '|' escaped, or the cell would end there.
+std::string MarkdownCell(const std::string& text);
 
 }  // namespace stevi::fields
