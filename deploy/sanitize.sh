@@ -31,10 +31,12 @@ jobs="$(nproc)"
 
 # -O1 -g1: the sanitizers' usual level. Line tables are all a report's stack needs, and the build
 # takes much less time than with -O2 and full debug information.
+build_start=$(date +%s)
 cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSTEVI_BUILD_TESTS=ON \
   -DSTEVI_BUILD_BENCHMARKS=OFF -DSTEVI_WERROR=OFF "-DSTEVI_SANITIZE=$flags" \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG"
 cmake --build "$build_dir" -j"$jobs"
+echo "sanitize.sh $kind: the build took $(( $(date +%s) - build_start )) s"
 
 export ASAN_OPTIONS="halt_on_error=1:detect_leaks=1:strict_init_order=1:detect_stack_use_after_return=1"
 export LSAN_OPTIONS="suppressions=$supp/lsan.supp:print_suppressions=0"

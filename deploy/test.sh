@@ -11,11 +11,21 @@ cd "$(dirname "$0")/.."
 build_dir="${STEVI_BUILD_DIR:-build}"
 jobs="$(nproc)"
 
-bash deploy/install-deps.sh
-bash deploy/check-code.sh --format-only
-cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSTEVI_BUILD_TESTS=ON \
-  -DSTEVI_BUILD_BENCHMARKS=ON -DSTEVI_WERROR=ON -DCMAKE_EXPORT_COMPILE_COMMANDS=ON
-cmake --build "$build_dir" -j"$jobs"
-bash deploy/check-code.sh "$build_dir"
-ctest --test-dir "$build_dir" --output-on-failure -j"$jobs"
-bash deploy/sanitize.sh address
+# Each stage says how long it took, so that a slow CI run shows where its time went.
+stage() {
+  local name="$1" start
+  shift
+  start=$(date +%s)
+  "$@"
+  echo "test.sh: $name took $(( $(date +%s) - start )) s"
+}
+
+stage "install-deps" bash deploy/install-deps.sh
+stage "format check" bash deploy/check-code.sh --format-only
+stage "configure" cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+  -DSTEVI_BUILD_TESTS=ON -DSTEVI_BUILD_BENCHMARKS=ON -DSTEVI_WERROR=ON \
+  -DCMAKE_EXPORT_COMPILE_COMMANDS=ON
+stage "build" cmake --build "$build_dir" -j"$jobs"
+stage "code checks" bash deploy/check-code.sh "$build_dir"
+stage "tests" ctest --test-dir "$build_dir" --output-on-failure -j"$jobs"
+stage "sanitized build and tests" bash deploy/sanitize.sh address

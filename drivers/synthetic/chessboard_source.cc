@@ -56,14 +56,25 @@ std::string ChessboardSource::Describe() const {
   return out.str();
 }
 
-const cv::Affine3d& ChessboardSource::PoseAt(int64_t index) const {
+size_t ChessboardSource::PoseIndexAt(int64_t index) const {
   const int64_t step = (index < 0 ? 0 : index) / options_.hold_frames;
-  return poses_[static_cast<size_t>(step % static_cast<int64_t>(poses_.size()))];
+  return static_cast<size_t>(step % static_cast<int64_t>(poses_.size()));
+}
+
+const cv::Affine3d& ChessboardSource::PoseAt(int64_t index) const {
+  return poses_[PoseIndexAt(index)];
 }
 
 Result<StereoFrame> ChessboardSource::Next() {
   const int64_t index = next_index_++;
-  calibration::RenderedPair pair = renderer_.Render(PoseAt(index));
+  // One rendering per pose (the board holds each for hold_frames frames); every frame gets its
+  // own copy, which the noise below and the frame's consumers may write to.
+  const size_t pose = PoseIndexAt(index);
+  if (rendered_pose_ != pose) {
+    rendered_ = renderer_.Render(poses_[pose]);
+    rendered_pose_ = pose;
+  }
+  calibration::RenderedPair pair{rendered_.left.clone(), rendered_.right.clone()};
   if (options_.noise_sigma > 0) {
     // Deterministic per frame and view.
     for (int view = 0; view < 2; ++view) {

@@ -64,12 +64,17 @@ class ChessboardSource : public StereoSource {
  private:
   ChessboardSource(ChessboardSourceOptions options, calibration::ChessboardRenderer renderer,
                    std::vector<cv::Affine3d> poses);
+  // The index in poses_ of the pose held at frame `index`.
+  size_t PoseIndexAt(int64_t index) const;
 
   ChessboardSourceOptions options_;
   calibration::ChessboardRenderer renderer_;
   std::vector<cv::Affine3d> poses_;
   std::shared_ptr<const geometry::StereoRig> rig_;
   int64_t next_index_ = 0;
+  // The last pose rendered (its index in poses_) and its images, reused while the board holds it.
+  size_t rendered_pose_ = SIZE_MAX;
+  calibration::RenderedPair rendered_;
 };
 
 }  // namespace stevi::drivers

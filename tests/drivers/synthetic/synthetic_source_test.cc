@@ -14,6 +14,8 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/geometry/calibration_io.h"
+#include "drivers/synthetic/chessboard_source.h"
 #include "tests/testing/truth_match.h"
 #include "tests/testing/status_matchers.h"
 
@@ -805,6 +807,63 @@ TEST(SensorEffects, VerticalMisalignmentMovesTheRightImageBySubPixelAmounts) {
     const double measured = best_s + 0.01 * 0.5 * (em - ep) / (em - 2 * best + ep);
     EXPECT_NEAR(measured, shift, 0.02) << "shift " << shift;
   }
+}
+
+}  // namespace
+}  // namespace stevi::drivers
+
+namespace stevi::drivers {
+namespace {
+
+// The chessboard scene renders each pose once and hands every frame its own copy: the frames of a
+// held pose are the renderer's image of that pose (noise aside), the next pose's differ, and
+// writing to one frame leaves the next untouched.
+ChessboardSourceOptions SmallBoardScene(int hold_frames) {
+  ChessboardSourceOptions options;
+  options.width = 320;
+  options.height = 240;
+  options.f_px = 350;
+  options.hold_frames = hold_frames;
+  return options;
+}
+
+TEST(ChessboardSource, EveryFrameIsThePoseItHoldsAndItsOwnCopy) {
+  ChessboardSourceOptions options = SmallBoardScene(3);
+  options.poses = 2;
+  options.noise_sigma = 0;
+  Result<std::unique_ptr<ChessboardSource>> source = ChessboardSource::Open(options);
+  ASSERT_TRUE(source.ok()) << source.error().message;
+  const cv::Size size(options.width, options.height);
+  Result<calibration::ChessboardRenderer> renderer = calibration::ChessboardRenderer::Create(
+      geometry::IdealCalibration(size, options.f_px, options.baseline_m, options.width / 2.0,
+                                 options.height / 2.0),
+      options.board, size);
+  ASSERT_TRUE(renderer.ok()) << renderer.error().message;
+  for (int64_t i = 0; i < 8; ++i) {
+    Result<StereoFrame> frame = (*source)->Next();
+    ASSERT_TRUE(frame.ok()) << frame.error().message;
+    const calibration::RenderedPair truth = renderer->Render((*source)->PoseAt(i));
+    EXPECT_EQ(cv::norm(frame->left, truth.left, cv::NORM_INF), 0) << "frame " << i;
+    EXPECT_EQ(cv::norm(frame->right, truth.right, cv::NORM_INF), 0) << "frame " << i;
+    if (i == 2) {
+      const calibration::RenderedPair next = renderer->Render((*source)->PoseAt(3));
+      EXPECT_GT(cv::norm(truth.left, next.left, cv::NORM_L1), 0) << "the poses differ";
+    }
+    frame->left.setTo(0);  // the consumer writes to its frame: the next frame must not see it
+    frame->right.setTo(0);
+  }
+}
+
+// With noise, the frames of one pose differ from each other (noise drawn per frame).
+TEST(ChessboardSource, NoiseIsDrawnAnewForEachFrameOfAHeldPose) {
+  Result<std::unique_ptr<ChessboardSource>> source = ChessboardSource::Open(SmallBoardScene(5));
+  ASSERT_TRUE(source.ok()) << source.error().message;
+  Result<StereoFrame> a = (*source)->Next();
+  Result<StereoFrame> b = (*source)->Next();
+  ASSERT_TRUE(a.ok() && b.ok());
+  const double mean_abs = cv::norm(a->left, b->left, cv::NORM_L1) / a->left.total();
+  EXPECT_GT(mean_abs, 0.5) << "noise_sigma 2: two draws differ by about 2.3 grey levels a pixel";
+  EXPECT_LT(mean_abs, 4.0);
 }
 
 }  // namespace
