@@ -6,6 +6,7 @@
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <opencv2/imgcodecs.hpp>
 
 #include "core/common/thread_name.h"
 #include "drivers/synthetic/scenarios.h"
@@ -63,9 +64,18 @@ void ConfigureTransport(const ServerOptions& options, grpc::ServerBuilder& build
   builder.SetMaxSendMessageSize(max_message);
 }
 
+// OpenCV builds its table of image codecs on first use, behind a function-local static whose
+// fast path ThreadSanitizer cannot see inside the uninstrumented library: a calibration worker
+// decoding an uploaded image read what the thread that first encoded an image had written while
+// building the table (one report, in server/calibration_test). Building it here, before any of
+// the server's threads exist, orders it before them all, and takes the one-time cost (GDAL's
+// loading among it) off the first calibration or preview.
+void LoadImageCodecs() { (void)cv::haveImageWriter(".png"); }
+
 }  // namespace
 
 Result<std::unique_ptr<Server>> Server::Start(const v1::ServerConfig& config) {
+  LoadImageCodecs();
   std::vector<std::string> problems = ValidateServerConfig(config);
   Result<pipeline::PipelineConfig> pipeline_config = BuildPipelineConfig(config.pipeline());
   if (!pipeline_config.ok()) problems.push_back(pipeline_config.error().message);
